@@ -1,0 +1,136 @@
+"""Builds the C++ core into the cffi extension ``app._headway_core``.
+
+The C++ sources under ``csrc/`` are compiled to objects in ``build/obj`` (only those whose source or
+included headers changed, two at a time), then cffi links them with a small stub generated from the
+declarations in ``csrc/include/headway.h``. Run directly (``python -m app._build_core``) for an
+incremental rebuild, or through setup.py's ``cffi_modules`` when pip builds a wheel.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import sysconfig
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import cffi
+
+ROOT = Path(__file__).resolve().parent.parent
+CSRC = ROOT / "csrc"
+HEADER = CSRC / "include" / "headway.h"
+BUILD = ROOT / "build"
+OBJ = BUILD / "obj"
+MODULE = "app._headway_core"
+CXXFLAGS = ["-std=c++17", "-O2", "-fPIC", "-Wall", "-Wextra", "-Wno-unused-parameter", "-g0"]
+
+
+def pkg_config(*args: str) -> list[str]:
+    try:
+        out = subprocess.run(["pkg-config", *args, "opencv4"], check=True, capture_output=True, text=True).stdout
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise SystemExit(
+            "pkg-config cannot find opencv4: install Debian's libopencv-dev (./headway.sh does it)"
+        ) from exc
+    return out.split()
+
+
+def cdef_text() -> str:
+    """The plain declarations between the HW_CDEF markers (cffi cannot parse #ifdef / extern "C")."""
+    text = HEADER.read_text()
+    m = re.search(r"/\* HW_CDEF_BEGIN \*/(.*)/\* HW_CDEF_END \*/", text, re.S)
+    if not m:
+        raise SystemExit(f"{HEADER}: HW_CDEF_BEGIN/HW_CDEF_END markers missing")
+    return m.group(1)
+
+
+def sources() -> list[Path]:
+    return sorted(CSRC.rglob("*.cpp"))
+
+
+def object_of(src: Path) -> Path:
+    return OBJ / (str(src.relative_to(CSRC)).replace(os.sep, "__") + ".o")
+
+
+def is_stale(src: Path, obj: Path) -> bool:
+    """An object is stale if missing or older than its source or any header it included last time."""
+    if not obj.exists():
+        return True
+    t = obj.stat().st_mtime
+    dep = obj.with_suffix(".d")
+    if not dep.exists():
+        return True
+    deps = dep.read_text().replace("\\\n", " ").split(":", 1)[-1].split()
+    return any(not Path(d).exists() or Path(d).stat().st_mtime > t for d in deps + [str(src)])
+
+
+def compile_objects(jobs: int = 2) -> list[Path]:
+    OBJ.mkdir(parents=True, exist_ok=True)
+    cflags = pkg_config("--cflags") + ["-I/usr/include/eigen3", f"-I{CSRC}"]
+    srcs = sources()
+    stale = [s for s in srcs if is_stale(s, object_of(s))]
+
+    def build(src: Path) -> tuple[Path, str]:
+        obj = object_of(src)
+        cmd = ["g++", *CXXFLAGS, *cflags, "-MMD", "-MF", str(obj.with_suffix(".d")), "-c", str(src), "-o", str(obj)]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode != 0:
+            obj.unlink(missing_ok=True)
+        return src, (r.stderr if r.returncode != 0 else "")
+
+    failed = []
+    if stale:
+        print(f"compiling {len(stale)} of {len(srcs)} C++ sources", file=sys.stderr)
+        with ThreadPoolExecutor(max_workers=jobs) as pool:
+            for src, err in pool.map(build, stale):
+                if err:
+                    failed.append(f"{src.relative_to(ROOT)}:\n{err}")
+    if failed:
+        raise SystemExit("C++ build failed:\n" + "\n".join(failed))
+    return [object_of(s) for s in srcs]
+
+
+def make_ffibuilder(objects: list[Path]) -> cffi.FFI:
+    ffi = cffi.FFI()
+    ffi.cdef(cdef_text())
+    libs = [a[2:] for a in pkg_config("--libs") if a.startswith("-l")]
+    libdirs = [a[2:] for a in pkg_config("--libs") if a.startswith("-L")]
+    ffi.set_source(
+        MODULE,
+        '#include "include/headway.h"',
+        source_extension=".cpp",
+        include_dirs=[str(CSRC)],
+        extra_objects=[str(o) for o in objects],
+        libraries=libs + ["stdc++"],
+        library_dirs=libdirs,
+        extra_compile_args=["-O2", "-g0"],
+    )
+    return ffi
+
+
+def module_path() -> Path:
+    return ROOT / "app" / ("_headway_core" + sysconfig.get_config_var("EXT_SUFFIX"))
+
+
+def build_inplace(jobs: int = 2) -> Path:
+    """Incremental build; returns the extension path. Links only when an object or the header changed."""
+    objects = compile_objects(jobs)
+    target = module_path()
+    newest = max([o.stat().st_mtime for o in objects] + [HEADER.stat().st_mtime, Path(__file__).stat().st_mtime])
+    if target.exists() and target.stat().st_mtime >= newest:
+        return target
+    tmp = BUILD / "cffi"
+    built = Path(make_ffibuilder(objects).compile(tmpdir=str(tmp), verbose=False))
+    shutil.copy2(built, target)
+    return target
+
+
+# setup.py's cffi_modules imports this file and takes `ffibuilder`; building the objects here keeps a
+# wheel build working the same way as the incremental build.
+if os.environ.get("HEADWAY_CFFI_SETUP") == "1":
+    ffibuilder = make_ffibuilder(compile_objects())
+
+if __name__ == "__main__":
+    print(build_inplace())

@@ -1,0 +1,222 @@
+"""Vehicle inputs from the car's own bus: ego speed, yaw rate, brake, turn signals.
+
+Each input is mapped in the configuration to a DBC file, a message and one or more signals (the
+``vehicle`` section, see ``config_schema``), converted to SI units. A ``VehicleState`` snapshot gives
+every input's value, age and stale flag on the bus clock. An input that is stale (no frame for
+``stale_after_s``) or never arrived has value ``None``: consumers are told "not available", never a
+guessed or held value. Stale inputs are reported as health faults once the start-up grace period
+(the same ``stale_after_s``) has passed.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Optional
+
+import can
+
+from .config_schema import INPUTS
+from .database import DbcError, load_dbc
+from .parser import CanParser
+
+UNIT_TO_SI = {"m/s": 1.0, "mps": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704,
+              "rad/s": 1.0, "deg/s": math.pi / 180, "degree/s": math.pi / 180, "°/s": math.pi / 180}
+COMBINE = {"mean": lambda v: sum(v) / len(v), "min": min, "max": max, "first": lambda v: v[0]}
+RX_ERRORS = ("wrong_length", "bad_checksum", "counter_jump", "decode_error")
+
+
+class VehicleInputError(ValueError):
+    """A vehicle-input mapping that cannot be used; the message names the configuration key."""
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    name: str
+    dbc: str
+    message: str
+    signals: tuple[str, ...]
+    combine: str = "mean"
+    factor: float = 1.0            # unit conversion to SI times the configured scale
+    offset: float = 0.0
+    true_value: Optional[int] = None  # flags: raw value meaning on; None = any non-zero
+    stale_after_s: float = 0.5
+
+    @property
+    def is_flag(self) -> bool:
+        return INPUTS[self.name][0] == "flag"
+
+
+@dataclass(frozen=True)
+class InputValue:
+    value: Any                     # SI number or bool; None unless configured and fresh
+    age_s: Optional[float]         # since the last accepted frame; None if never
+    stale: bool                    # configured but missing or too old
+    configured: bool
+
+    @property
+    def available(self) -> bool:
+        return self.value is not None
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    t_s: float
+    inputs: Mapping[str, InputValue]
+    faults: frozenset[str] = field(default_factory=frozenset)
+
+    def _v(self, name: str) -> Any:
+        iv = self.inputs.get(name)
+        return iv.value if iv else None
+
+    @property
+    def speed_mps(self) -> Optional[float]:
+        return self._v("speed")
+
+    @property
+    def yaw_rate_rps(self) -> Optional[float]:
+        return self._v("yaw_rate")
+
+    @property
+    def brake(self) -> Optional[bool]:
+        return self._v("brake")
+
+    @property
+    def turn_left(self) -> Optional[bool]:
+        return self._v("turn_left")
+
+    @property
+    def turn_right(self) -> Optional[bool]:
+        return self._v("turn_right")
+
+
+def _close(word: str, options: Iterable[str]) -> str:
+    m = difflib.get_close_matches(word, list(options), n=1)
+    return f" (did you mean {m[0]}?)" if m else ""
+
+
+def specs_from_config(vehicle: Mapping[str, Any]) -> list[InputSpec]:
+    """The configured inputs of a validated ``vehicle`` section, each checked against its DBC."""
+    specs, dbs = [], {}
+    for name, (kind, _si, _units, _stale, _what) in INPUTS.items():
+        message = vehicle.get(f"{name}_message", "")
+        if not message:
+            continue
+        key = f"vehicle.{name}"
+        dbc = vehicle.get(f"{name}_dbc") or vehicle.get("dbc", "")
+        if not dbc:
+            raise VehicleInputError(f"{key}_message is set but neither {key}_dbc nor vehicle.dbc names a DBC file")
+        if dbc not in dbs:
+            try:
+                dbs[dbc] = load_dbc(dbc, strict=False)
+            except DbcError as exc:
+                raise VehicleInputError(f"{key}_dbc / vehicle.dbc: {exc}") from None
+        db = dbs[dbc]
+        try:
+            msg = db.get_message_by_name(message)
+        except KeyError:
+            raise VehicleInputError(f"{key}_message: {message} is not in {dbc}"
+                                    f"{_close(message, (m.name for m in db.messages))}") from None
+        signals = tuple(s.strip() for s in vehicle.get(f"{name}_signals", "").split(",") if s.strip())
+        if not signals:
+            raise VehicleInputError(f"{key}_signals: give the signal name(s) of {message}")
+        names = {s.name: s for s in msg.signals}
+        for s in signals:
+            if s not in names:
+                raise VehicleInputError(f"{key}_signals: {s} is not a signal of {message} in {dbc}{_close(s, names)}")
+        factor, offset, true_value = 1.0, 0.0, None
+        if kind == "number":
+            unit = vehicle.get(f"{name}_unit", "dbc")
+            if unit == "dbc":
+                units = {(names[s].unit or "").strip() for s in signals}
+                if len(units) != 1 or next(iter(units)).lower() not in UNIT_TO_SI:
+                    raise VehicleInputError(f"{key}_unit: the DBC gives {sorted(units)} for {', '.join(signals)}; "
+                                            f"set {name}_unit to one of {INPUTS[name][2].replace('|', ', ')}")
+                unit = next(iter(units)).lower()
+            factor = UNIT_TO_SI[unit] * float(vehicle.get(f"{name}_scale", 1.0))
+            offset = float(vehicle.get(f"{name}_offset", 0.0))
+        else:
+            tv = int(vehicle.get(f"{name}_true_value", -1))
+            true_value = None if tv < 0 else tv
+        specs.append(InputSpec(name, str(dbc), message, signals, vehicle.get(f"{name}_combine", "mean"),
+                               factor, offset, true_value, float(vehicle.get(f"{name}_stale_after_s", _stale))))
+    return specs
+
+
+class VehicleInput:
+    """Feed it every frame of the vehicle bus (``on_message``); ask ``snapshot(now)`` per camera frame.
+
+    Times are on the bus clock: a frame's timestamp (or the ``t_s`` given with it) and ``now`` must
+    come from the same clock (the replay clock in replay, the receive clock live).
+    """
+
+    def __init__(self, specs: Iterable[InputSpec], channel: Optional[str] = None, error_hold_s: float = 1.0,
+                 databases: Optional[Mapping[str, Any]] = None):
+        self.specs = {s.name: s for s in specs}
+        self.error_hold_s = error_hold_s
+        self._parsers: dict[str, CanParser] = {}
+        for dbc in sorted({s.dbc for s in self.specs.values()}):
+            db = (databases or {}).get(dbc) or load_dbc(dbc, strict=False)
+            mine = [s for s in self.specs.values() if s.dbc == dbc]
+            timeouts = {}
+            for s in mine:
+                timeouts[s.message] = min(timeouts.get(s.message, math.inf), s.stale_after_s)
+            # A car's counters and checksums follow the maker's own rules: not checked here.
+            self._parsers[dbc] = CanParser(db, sorted(timeouts), timeouts, checksum=None, check_counter=False,
+                                           channel=channel or None)
+        self.start_s: Optional[float] = None
+        self._errors_seen = 0
+        self._last_error_s: Optional[float] = None
+
+    @classmethod
+    def from_config(cls, vehicle: Mapping[str, Any]) -> "VehicleInput":
+        return cls(specs_from_config(vehicle), vehicle.get("channel") or None, float(vehicle.get("error_hold_s", 1.0)))
+
+    def on_message(self, msg: can.Message, t_s: Optional[float] = None) -> None:
+        t = msg.timestamp if t_s is None else t_s
+        if self.start_s is None:
+            self.start_s = t
+        for p in self._parsers.values():
+            p.update(msg, t)
+
+    def _read(self, spec: InputSpec, now: float) -> InputValue:
+        p = self._parsers[spec.dbc]
+        age = p.age_s(spec.message, spec.signals[0], now)
+        for s in spec.signals[1:]:
+            a = p.age_s(spec.message, s, now)
+            age = None if a is None or age is None else max(age, a)
+        stale = age is None or age > spec.stale_after_s
+        value = None
+        if not stale:
+            raw = [p.value(spec.message, s) for s in spec.signals]
+            if all(isinstance(v, (int, float)) for v in raw):
+                x = COMBINE[spec.combine](raw)
+                if spec.is_flag:
+                    value = bool(x != 0) if spec.true_value is None else bool(x == spec.true_value)
+                else:
+                    value = x * spec.factor + spec.offset
+        return InputValue(value, age, stale, True)
+
+    def snapshot(self, now_s: float) -> VehicleState:
+        if self.start_s is None:
+            self.start_s = now_s
+        inputs = {name: InputValue(None, None, False, False) for name in INPUTS}
+        faults = set()
+        for name, spec in self.specs.items():
+            iv = self._read(spec, now_s)
+            inputs[name] = iv
+            past_grace = now_s - self.start_s >= spec.stale_after_s
+            if iv.stale and past_grace:
+                faults.add("ego_speed_stale" if name == "speed" else "vehicle_input_stale")
+        if "speed" not in self.specs:
+            faults.add("ego_speed_stale")  # FCW cannot run without it: say so from the start
+        errors = sum(p.drops[r] for p in self._parsers.values() for r in RX_ERRORS)
+        if errors > self._errors_seen:
+            self._errors_seen, self._last_error_s = errors, now_s
+        if self._last_error_s is not None and now_s - self._last_error_s < self.error_hold_s:
+            faults.add("can_rx_error")
+        return VehicleState(now_s, inputs, frozenset(faults))
+
+    def stats(self) -> dict[str, Any]:
+        return {Path(dbc).name: p.stats() for dbc, p in self._parsers.items()}

@@ -1,0 +1,144 @@
+"""`headway`: the command line. Each subcommand lives in its own module; this file only parses
+arguments and turns every expected failure into one clear line on stderr and a non-zero exit."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def _cmd_sim(args) -> int:
+    from app.sim import load_scenario, write_scenario
+
+    sc = load_scenario(args.scenario)
+    from tqdm import tqdm
+
+    with tqdm(total=None, desc=sc.name, unit="frame", file=sys.stderr, disable=not sys.stderr.isatty(),
+              leave=False) as bar:
+        def progress(i, n):
+            bar.total = n
+            bar.update(1)
+
+        info = write_scenario(sc, args.out, video=args.video, progress=progress)
+    print(f"{sc.name}: {info.get('n_frames')} frames -> {args.out}")
+    return 0
+
+
+def _cmd_replay(args) -> int:
+    from app.replay import replay
+
+    s = replay(args.source, config_path=args.config, fps=args.fps, out_video=args.out_video,
+               tracks_path=args.tracks)
+    print(s.text())
+    return 0
+
+
+def _cmd_config(args) -> int:
+    from app import config as configuration
+
+    if args.action == "default":
+        print(configuration.default_yaml())
+        return 0
+    cfg = configuration.load(args.file)
+    from app.core import Pipeline
+
+    Pipeline(configuration.core_sections(cfg)).close()  # the core checks its sections too
+    print(f"{args.file}: ok")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="headway", description="Camera-based vehicle detection, tracking and "
+                                                            "forward-collision warning.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("demo", help="render the built-in scenario, run the full pipeline, write ./headway-demo/")
+    s.add_argument("--out", default="headway-demo", help="output folder (default ./headway-demo)")
+    s.add_argument("--scenario", default=None, help=argparse.SUPPRESS)
+    s.add_argument("--config", default=None, help=argparse.SUPPRESS)
+
+    s = sub.add_parser("sim", help="render a synthetic scenario: frames, ground truth, ego-speed CAN log")
+    s.add_argument("scenario", help="scenario name (see app/sim/scenarios) or a scenario YAML file")
+    s.add_argument("--out", required=True, help="output folder")
+    s.add_argument("--video", action="store_true", help="write video.mp4 instead of a PNG per frame")
+
+    s = sub.add_parser("replay", help="run a video file, an image folder or a scenario through the pipeline")
+    s.add_argument("source", help="video file, image folder (give --fps) or scenario")
+    s.add_argument("--config", help="configuration YAML (default: built-in defaults)")
+    s.add_argument("--fps", type=float, help="frame rate of an image folder")
+    s.add_argument("--out-video", help="write an annotated video here (.mp4)")
+    s.add_argument("--tracks", help="write the tracks here (.jsonl, one line per frame)")
+
+    s = sub.add_parser("detect", help="single-image vehicle detection to JSON")
+    s.add_argument("images", nargs="+", help="image files")
+    s.add_argument("--out", required=True, help="output JSON file")
+    s.add_argument("--config", help="configuration YAML")
+
+    s = sub.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM")
+    s.add_argument("--config", help="configuration YAML (source: and camera: sections)")
+    s.add_argument("--tracks", help="also write the tracks here (.jsonl)")
+
+    s = sub.add_parser("bench", help="per-stage median and p99 ms per frame")
+    s.add_argument("--scenario", default="dense_traffic", help="scenario whose frames are timed")
+    s.add_argument("--preset", help="pipeline preset (default: the configuration's)")
+    s.add_argument("--width", type=int, default=640)
+    s.add_argument("--height", type=int, default=480)
+    s.add_argument("--repeats", type=int, default=3, help="passes over the scenario")
+    s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+    s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
+    cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
+    c = cs.add_parser("check", help="validate FILE; prints what is wrong and exits 2")
+    c.add_argument("file")
+    cs.add_parser("default", help="print the default configuration with every key documented")
+    return p
+
+
+def _dispatch(args) -> int:
+    if args.command == "demo":
+        from app import demo
+
+        if args.scenario is None:
+            args.scenario = demo.DEMO_SCENARIO
+        return demo.main(args)
+    if args.command == "sim":
+        return _cmd_sim(args)
+    if args.command == "replay":
+        return _cmd_replay(args)
+    if args.command == "detect":
+        from app import detect_images
+
+        return detect_images.main(args)
+    if args.command == "run":
+        from app import run_live
+
+        return run_live.main(args)
+    if args.command == "bench":
+        from app import bench
+
+        return bench.main(args)
+    if args.command == "config":
+        return _cmd_config(args)
+    raise AssertionError(args.command)
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    from app.config import ConfigFileError
+    from app.core import ConfigError, CoreError
+
+    try:
+        return _dispatch(args)
+    except (ConfigFileError, ConfigError) as exc:
+        print(f"headway: configuration error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    except (CoreError, OSError, RuntimeError, ValueError) as exc:
+        # every expected failure (bad source, scenario, image, ...) as one line
+        print(f"headway: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,185 @@
+"""The configuration: one YAML file, validated against one registry of keys.
+
+The core's sections (camera, pipeline, lanes, ...) are described by the core itself
+(``core_schema()``: every key with type, range, default and the reason for the default, declared next
+to the field it sets in C++). The supervisor's own sections are declared below in the same form. A
+configuration file gives only the keys it changes; everything else takes the default. Unknown keys,
+wrong types and out-of-range values are rejected with a message that names the file and the key.
+"""
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any, Optional, Union
+
+import yaml
+
+from app.core import core_schema
+from app.fcw import FCW_SCHEMA
+
+
+class ConfigFileError(ValueError):
+    """A configuration that cannot be used; the message names the file and the key."""
+
+
+def _key(default: Any, doc: str, min: Any = None, max: Any = None, choices: Optional[str] = None,
+         type: Optional[str] = None) -> dict:
+    t = type or {bool: "bool", int: "int", float: "float", str: "str"}[default.__class__]
+    d = {"default": default, "type": t, "doc": doc}
+    if min is not None:
+        d["min"], d["max"] = min, max
+    if choices:
+        d["choices"] = choices
+    return d
+
+
+# The supervisor's sections. Units in the names or first word of each doc.
+SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
+    "source": {
+        "kind": _key("v4l2", "where frames come from in `headway run`", choices="v4l2|firewire|video|folder"),
+        "device": _key("/dev/video0", "V4L2 device path, or its index as a number string such as '0'"),
+        "index": _key(0, "FireWire: index of the camera on the bus (when guid is empty)", 0, 63),
+        "guid": _key("", "FireWire: the camera's GUID in hex; empty = use index"),
+        "fps": _key(30.0, "frames/s asked of the camera; for a folder, the rate its images were taken at",
+                    0.1, 1000.0),
+        "pixel_format": _key("", "V4L2 FOURCC such as YUYV, MJPG or GREY; empty = the driver's default"),
+        "path": _key("", "video file or image folder for kind video/folder"),
+        "wait_for_device": _key(True, "start even if the camera is not there yet and keep reconnecting "
+                                      "(the service must come up with the car; the camera fault says why)"),
+    },
+    "fcw": FCW_SCHEMA,
+}
+
+
+def schema() -> dict[str, dict[str, dict]]:
+    """Every key of the configuration: {section: {key: {default, type, min, max, choices, doc}}}."""
+    s = core_schema()
+    s.update(copy.deepcopy(SUPERVISOR_SCHEMA))
+    return s
+
+
+def defaults() -> dict[str, dict[str, Any]]:
+    return {sec: {k: d["default"] for k, d in keys.items()} for sec, keys in schema().items()}
+
+
+def _check_value(path: str, value: Any, spec: dict) -> Any:
+    t = spec["type"]
+    if t == "bool":
+        if not isinstance(value, bool):
+            raise ConfigFileError(f"{path}: expected true or false, got {value!r}")
+        return value
+    if t == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigFileError(f"{path}: expected an integer, got {value!r}")
+    elif t == "float":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigFileError(f"{path}: expected a number, got {value!r}")
+        value = float(value)
+    elif t == "str":
+        if isinstance(value, int) and not isinstance(value, bool) and path.endswith("source.device"):
+            value = str(value)  # `device: 0` means /dev/video0 by index
+        if not isinstance(value, str):
+            raise ConfigFileError(f"{path}: expected a string, got {value!r}")
+        if "choices" in spec and value not in spec["choices"].split("|"):
+            raise ConfigFileError(f"{path}: {value!r} is not one of {spec['choices'].replace('|', ', ')}")
+        return value
+    if "min" in spec and not (spec["min"] <= value <= spec["max"]):
+        raise ConfigFileError(f"{path}: {value!r} is outside [{spec['min']}, {spec['max']}]")
+    return value
+
+
+def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[str, Any]]:
+    """Defaults updated with `overrides` (a partial configuration), every key checked."""
+    if overrides is None:
+        overrides = {}
+    if not isinstance(overrides, dict):
+        raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
+    sch = schema()
+    cfg = defaults()
+    for sec, values in overrides.items():
+        if sec not in sch:
+            raise ConfigFileError(f"{origin}: {sec}: unknown section (known: {', '.join(sorted(sch))})")
+        if values is None:
+            continue
+        if not isinstance(values, dict):
+            raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
+        for key, value in values.items():
+            if key not in sch[sec]:
+                raise ConfigFileError(f"{origin}: {sec}.{key}: unknown key (known: {', '.join(sorted(sch[sec]))})")
+            cfg[sec][key] = _check_value(f"{origin}: {sec}.{key}", value, sch[sec][key])
+    return cfg
+
+
+def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = None) -> dict[str, dict[str, Any]]:
+    """Loads a configuration file (None = defaults), then applies `overrides` (same shape)."""
+    data: dict = {}
+    origin = "configuration"
+    if path is not None:
+        origin = str(path)
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigFileError(f"{origin}: no such file")
+        try:
+            data = yaml.safe_load(p.read_text()) or {}
+        except yaml.YAMLError as exc:
+            raise ConfigFileError(f"{origin}: not valid YAML: {exc}".replace("\n", " ")) from None
+        if not isinstance(data, dict):
+            raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
+    merged = copy.deepcopy(data)
+    for sec, values in (overrides or {}).items():
+        merged.setdefault(sec, {})
+        merged[sec] = {**(merged[sec] or {}), **values}
+    return validate(merged, origin)
+
+
+def core_sections(cfg: dict) -> dict:
+    """The part of a validated configuration that the C++ core takes."""
+    return {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
+
+
+def source_spec(cfg: dict) -> dict:
+    """The core's source description for the configured live or recorded source."""
+    src, cam = cfg["source"], cfg["camera"]
+    kind = src["kind"]
+    if kind in ("video", "folder"):
+        if not src["path"]:
+            raise ConfigFileError(f"source.path: required for source.kind {kind}")
+        spec = {"kind": kind, "path": src["path"]}
+        if kind == "folder":
+            spec["fps"] = src["fps"]
+        return spec
+    spec = {"kind": kind, "width": cam["width"], "height": cam["height"], "fps": src["fps"],
+            "wait_for_device": src["wait_for_device"]}
+    if kind == "v4l2":
+        spec["device"] = int(src["device"]) if src["device"].isdigit() else src["device"]
+        if src["pixel_format"]:
+            spec["pixel_format"] = src["pixel_format"]
+    else:
+        spec["index"] = src["index"]
+        if src["guid"]:
+            spec["guid"] = src["guid"]
+    return spec
+
+
+def scaled_camera(camera: dict, width: int, height: int) -> dict:
+    """The camera keys for frames of another size than configured, same field of view: intrinsics scale
+    with the image (used when a recording's size differs from a camera that was not calibrated for it)."""
+    sx, sy = width / camera["width"], height / camera["height"]
+    cam = dict(camera)
+    cam.update(width=width, height=height, fx=camera["fx"] * sx, fy=camera["fy"] * sy,
+               cx=camera["cx"] * sx, cy=camera["cy"] * sy)
+    return cam
+
+
+def default_yaml() -> str:
+    """The documented default configuration, every key with its reason (for `headway config default`)."""
+    lines = ["# Headway configuration. Give only the keys you change; the rest are these defaults.", ""]
+    for sec, keys in schema().items():
+        lines.append(f"{sec}:")
+        for key, spec in keys.items():
+            rng = f" [{spec['min']}, {spec['max']}]" if "min" in spec else ""
+            ch = f" one of {spec['choices'].replace('|', ', ')}" if "choices" in spec else ""
+            lines.append(f"  # {spec['doc']}{rng}{ch}")
+            lines.append(f"  {key}: {yaml.safe_dump(spec['default'], default_flow_style=True).strip().removesuffix('...').strip()}")
+        lines.append("")
+    return "\n".join(lines)

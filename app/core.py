@@ -1,0 +1,323 @@
+"""The Python side of the door to the C++ core: the only module that touches cffi.
+
+`Pipeline` wraps one ``hw_pipeline``. Calls into the core release the GIL (cffi does so for every
+call), so ``pop()`` waits without stalling other Python threads, and the core's real-time thread
+never calls back into Python. A running pipeline is stopped at interpreter exit, because a C++ thread
+still running while the interpreter tears down aborts the process.
+"""
+from __future__ import annotations
+
+import atexit
+import json
+import math
+import weakref
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+import numpy as np
+
+try:
+    from app._headway_core import ffi, lib
+except ImportError as exc:  # pragma: no cover - only without a build
+    raise ImportError(
+        "the C++ core is not built: run ./headway.sh (or python -m app._build_core in the venv)"
+    ) from exc
+
+
+class CoreError(RuntimeError):
+    """Base of every error the core reports; ``code`` is the hw_status."""
+
+    code = lib.HW_ERR_INTERNAL
+
+
+class InvalidArgument(CoreError, ValueError):
+    code = lib.HW_ERR_INVALID_ARGUMENT
+
+
+class ConfigError(CoreError, ValueError):
+    code = lib.HW_ERR_CONFIG
+
+
+class SourceError(CoreError):
+    code = lib.HW_ERR_SOURCE
+
+
+class StateError(CoreError):
+    code = lib.HW_ERR_STATE
+
+
+class EndOfStream(CoreError):
+    code = lib.HW_ERR_END_OF_STREAM
+
+
+_ERRORS = {cls.code: cls for cls in (InvalidArgument, ConfigError, SourceError, StateError, EndOfStream)}
+
+SOURCE_STATES = {
+    lib.HW_SOURCE_IDLE: "idle",
+    lib.HW_SOURCE_RUNNING: "running",
+    lib.HW_SOURCE_RECONNECTING: "reconnecting",
+    lib.HW_SOURCE_ENDED: "ended",
+    lib.HW_SOURCE_FAILED: "failed",
+}
+
+EVENTS = {
+    lib.HW_EVENT_DECODE_ERROR: "decode_error",
+    lib.HW_EVENT_SOURCE_LOST: "source_lost",
+    lib.HW_EVENT_RECONNECTED: "reconnected",
+    lib.HW_EVENT_SIZE_CHANGED: "size_changed",
+}
+
+
+def _check(status: int) -> None:
+    if status != lib.HW_OK:
+        msg = ffi.string(lib.hw_last_error()).decode("utf-8", "replace")
+        raise _ERRORS.get(status, CoreError)(msg or ffi.string(lib.hw_error_message(status)).decode())
+
+
+def _opt(x: float) -> Optional[float]:
+    """NaN means "not available" in the core; None in Python."""
+    x = float(x)
+    return None if math.isnan(x) else x
+
+
+@dataclass
+class Track:
+    id: int
+    confirmed: bool
+    age_frames: int
+    box: tuple[float, float, float, float]  # left, top, right, bottom (px)
+    confidence: float
+    vx_px_s: Optional[float]
+    vy_px_s: Optional[float]
+    range_m: Optional[float]
+    range_sigma_m: Optional[float]
+    lateral_m: Optional[float]
+    range_rate_mps: Optional[float]
+    ttc_s: Optional[float]
+    ttc_scale_s: Optional[float]
+    lane_index: Optional[int]
+    in_path: Optional[bool]
+
+
+@dataclass
+class Lane:
+    x_bottom: float
+    y_bottom: float
+    x_top: float
+    y_top: float
+    position: int  # -2 outer left, -1 ego left, +1 ego right, +2 outer right
+    observed: bool
+
+
+@dataclass
+class FrameResult:
+    frame: int
+    t: float
+    t_done: float
+    width: int
+    height: int
+    events: list[str]
+    full_detection: bool
+    tracks: list[Track]
+    lanes: list[Lane]
+    vanishing_point: Optional[tuple[float, float]]
+    horizon_row: Optional[float]
+    lead_id: Optional[int]
+    fcw_level: int
+    stages: dict[str, float] = field(default_factory=dict)
+    total_ms: float = 0.0
+
+
+def _result(r: Any) -> FrameResult:
+    tracks = []
+    for i in range(r.n_tracks):
+        t = r.tracks[i]
+        tracks.append(
+            Track(
+                id=int(t.id),
+                confirmed=bool(t.confirmed),
+                age_frames=int(t.age_frames),
+                box=(float(t.left), float(t.top), float(t.right), float(t.bottom)),
+                confidence=float(t.confidence),
+                vx_px_s=_opt(t.vx_px_s),
+                vy_px_s=_opt(t.vy_px_s),
+                range_m=_opt(t.range_m),
+                range_sigma_m=_opt(t.range_sigma_m),
+                lateral_m=_opt(t.lateral_m),
+                range_rate_mps=_opt(t.range_rate_mps),
+                ttc_s=_opt(t.ttc_s),
+                ttc_scale_s=_opt(t.ttc_scale_s),
+                lane_index=None if t.lane_index == -1000 else int(t.lane_index),
+                in_path=None if t.in_path < 0 else bool(t.in_path),
+            )
+        )
+    lanes = [
+        Lane(float(l.x_bottom), float(l.y_bottom), float(l.x_top), float(l.y_top), int(l.position), bool(l.observed))
+        for l in (r.lanes[i] for i in range(r.n_lanes))
+    ]
+    vp = None if math.isnan(r.vanishing_x) else (float(r.vanishing_x), float(r.vanishing_y))
+    stages = {ffi.string(r.stages[i].name).decode(): float(r.stages[i].ms) for i in range(r.n_stages)}
+    return FrameResult(
+        frame=int(r.frame_number),
+        t=float(r.t_capture_s),
+        t_done=float(r.t_done_s),
+        width=int(r.width),
+        height=int(r.height),
+        events=[name for bit, name in EVENTS.items() if r.events & bit],
+        full_detection=bool(r.full_detection),
+        tracks=tracks,
+        lanes=lanes,
+        vanishing_point=vp,
+        horizon_row=_opt(r.horizon_row),
+        lead_id=None if r.lead_id < 0 else int(r.lead_id),
+        fcw_level=int(r.fcw_level),
+        stages=stages,
+        total_ms=float(r.total_ms),
+    )
+
+
+def abi_version() -> int:
+    return int(lib.hw_abi_version())
+
+
+def monotonic_s() -> float:
+    """The core's monotonic clock (the clock of live capture timestamps and ``t_done``)."""
+    return float(lib.hw_monotonic_s())
+
+
+def _config_json(p: Any) -> dict:
+    needed = ffi.new("int32_t *")
+    lib.hw_pipeline_config(p, ffi.NULL, 0, needed)  # asks for the size only
+    buf = ffi.new("char[]", int(needed[0]))
+    _check(lib.hw_pipeline_config(p, buf, len(buf), needed))
+    return json.loads(ffi.string(buf).decode())
+
+
+def core_schema() -> dict:
+    """Every key the core knows: {section: {key: {default, type, min, max, doc}}}."""
+    return _config_json(ffi.NULL)
+
+
+_live: "weakref.WeakSet[Pipeline]" = weakref.WeakSet()
+
+
+@atexit.register
+def _stop_all() -> None:
+    for p in list(_live):
+        p.close()
+
+
+def _as_gray(image: np.ndarray, what: str) -> np.ndarray:
+    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 2:
+        shape = getattr(image, "shape", None)
+        dtype = getattr(image, "dtype", type(image).__name__)
+        raise InvalidArgument(f"{what}: expected an 8-bit gray image (uint8, HxW), got {dtype} {shape}")
+    return np.ascontiguousarray(image)
+
+
+class Pipeline:
+    """One configured pipeline: offline ``process()``, or a real-time loop over a frame source."""
+
+    def __init__(self, config: Optional[dict] = None):
+        out = ffi.new("hw_pipeline **")
+        _check(lib.hw_pipeline_create(json.dumps(config or {}).encode(), out))
+        self._p = ffi.gc(out[0], lib.hw_pipeline_destroy)
+        self._res = ffi.new("hw_frame_result *")  # reused: one result buffer per pipeline
+        _live.add(self)
+
+    @property
+    def config(self) -> dict:
+        """The effective configuration of the core (every key, with the value in use)."""
+        return _config_json(self._handle())
+
+    def _handle(self) -> Any:
+        if self._p is None:
+            raise StateError("the pipeline is closed")
+        return self._p
+
+    def process(self, gray: np.ndarray, t_s: float) -> FrameResult:
+        """Run one frame through the same code as the real-time loop (tracking state advances)."""
+        g = _as_gray(gray, "process()")
+        _check(lib.hw_pipeline_process(self._handle(), ffi.from_buffer(g), g.shape[1], g.shape[0], g.strides[0],
+                                       float(t_s), self._res))
+        return _result(self._res)
+
+    def run_stage(self, stage: str, gray: np.ndarray) -> FrameResult:
+        """Single-image units ("lanes", "hypotheses", "detect"); tracking state is untouched."""
+        g = _as_gray(gray, "run_stage()")
+        _check(lib.hw_pipeline_run_stage(self._handle(), stage.encode(), ffi.from_buffer(g), g.shape[1], g.shape[0],
+                                         g.strides[0], self._res))
+        return _result(self._res)
+
+    def reset(self) -> None:
+        _check(lib.hw_pipeline_reset(self._handle()))
+
+    def set_ego_motion(self, speed_mps: Optional[float], yaw_rate_rps: Optional[float] = None) -> None:
+        """The car's speed and yaw rate (left positive) from the bus; None = not available."""
+        nan = float("nan")
+        _check(lib.hw_pipeline_set_ego_motion(self._handle(), nan if speed_mps is None else float(speed_mps),
+                                              nan if yaw_rate_rps is None else float(yaw_rate_rps)))
+
+    def start(self, source: dict) -> None:
+        """Open the source (SourceError if it cannot be) and start the real-time thread."""
+        _check(lib.hw_pipeline_start(self._handle(), json.dumps(source).encode()))
+
+    def stop(self) -> None:
+        if self._p is not None:
+            _check(lib.hw_pipeline_stop(self._p))
+
+    def pop(self, timeout_s: float = 1.0) -> Optional[FrameResult]:
+        """Next result, or None on timeout. Raises EndOfStream once the source ended and all was popped."""
+        status = lib.hw_pipeline_pop(self._handle(), int(max(0.0, timeout_s) * 1000), self._res)
+        if status == lib.HW_ERR_TIMEOUT:
+            return None
+        _check(status)
+        return _result(self._res)
+
+    def push(self, image: np.ndarray, t_s: float) -> None:
+        """Hand one frame (uint8 gray HxW or BGR HxWx3) to a pipeline started with {"kind": "push"}."""
+        if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim not in (2, 3):
+            raise InvalidArgument(
+                f"push(): expected a uint8 image HxW or HxWx3, got {getattr(image, 'dtype', type(image).__name__)} "
+                f"{getattr(image, 'shape', None)}"
+            )
+        img = np.ascontiguousarray(image)
+        channels = 1 if img.ndim == 2 else img.shape[2]
+        _check(lib.hw_pipeline_push(self._handle(), ffi.from_buffer(img), img.shape[1], img.shape[0], channels,
+                                    img.strides[0], float(t_s)))
+
+    def push_end(self) -> None:
+        _check(lib.hw_pipeline_push_end(self._handle()))
+
+    def health(self) -> dict:
+        h = ffi.new("hw_health *")
+        _check(lib.hw_pipeline_health(self._handle(), h))
+        return {
+            "running": bool(h.running),
+            "source_state": SOURCE_STATES.get(int(h.source_state), "unknown"),
+            "frames_captured": int(h.frames_captured),
+            "frames_processed": int(h.frames_processed),
+            "results_dropped": int(h.results_dropped),
+            "frames_pushed_dropped": int(h.frames_pushed_dropped),
+            "decode_errors": int(h.decode_errors),
+            "source_losses": int(h.source_losses),
+            "reconnects": int(h.reconnects),
+            "last_frame_t_s": _opt(h.last_frame_t_s),
+            "last_progress_s": _opt(h.last_progress_s),
+            "last_total_ms": _opt(h.last_total_ms),
+            "queue_depth": int(h.queue_depth),
+            "queue_capacity": int(h.queue_capacity),
+        }
+
+    def close(self) -> None:
+        """Stop the loop and free the core's pipeline. Safe to call twice."""
+        if self._p is not None:
+            lib.hw_pipeline_stop(self._p)
+            p, self._p = self._p, None
+            ffi.release(p)  # runs hw_pipeline_destroy now instead of at garbage collection
+
+    def __enter__(self) -> "Pipeline":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,1 @@
+"""Evaluation tools: metrics against ground truth."""

@@ -1,0 +1,47 @@
+"""Developer entry point: ``python -m app.sim list | render NAME OUT [--video] | time NAME``.
+
+The product CLI (``headway``) wraps the same public functions; this one exists so the
+simulator can be used and timed on its own.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from . import ScenarioError, list_scenarios, load_scenario, render, write_scenario
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m app.sim", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="names of the shipped scenarios")
+    p_render = sub.add_parser("render", help="write frames (or a video), truth.jsonl and the CAN log")
+    p_render.add_argument("scenario", help="shipped name or path to a YAML file")
+    p_render.add_argument("out_dir")
+    p_render.add_argument("--video", action="store_true", help="write video.mp4 instead of PNG frames")
+    p_time = sub.add_parser("time", help="mean render time per frame (image + truth, no file output)")
+    p_time.add_argument("scenario", nargs="*", help="default: every shipped scenario")
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "list":
+            print("\n".join(list_scenarios()))
+        elif args.command == "render":
+            summary = write_scenario(load_scenario(args.scenario), args.out_dir, video=args.video,
+                                     progress=lambda i, n: print(f"\r{i}/{n}", end="", file=sys.stderr))
+            print(file=sys.stderr)
+            print(f"{summary['n_frames']} frames -> {summary['out_dir']}")
+        else:
+            for name in args.scenario or list_scenarios():
+                scenario = load_scenario(name)
+                start = time.perf_counter()
+                n = sum(1 for _ in render(scenario))
+                print(f"{name:24s} {n:4d} frames  {1e3 * (time.perf_counter() - start) / n:6.2f} ms/frame")
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

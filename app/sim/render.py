@@ -1,0 +1,72 @@
+"""One gray frame of the scenario world, composed back to front.
+
+Order: sky and the road plane (with cast shadows), then what stands outside the road
+(clutter, bridge pillars, guardrails), then vehicles and the bridge deck far to near, then
+sensor noise. The painter's order of the vehicles is the one the ground truth's id buffer uses.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from .camera import Camera
+from .road import Ground, Sky
+from .scenario import Scenario
+from .scenery import Scenery
+from .truth import depth_order
+from .vehicles import VehiclePainter
+from .world import WorldState
+
+_NOISE_MARGIN = 64  # the noise tile is this much larger than a frame; each frame takes a random window
+
+
+class Renderer:
+    """Draws frames of one scenario for one camera; all randomness comes from the scenario seed."""
+
+    def __init__(self, scenario: Scenario, camera: Camera, max_odometer_m: float):
+        seed = scenario.seed
+        # Separate streams per part, so adding clutter does not change the asphalt of a seed.
+        self.ground = Ground(scenario, np.random.default_rng([seed, 1]))
+        self.sky = Sky(scenario, np.random.default_rng([seed, 2]))
+        self.scenery = Scenery(scenario, np.random.default_rng([seed, 3]), max_odometer_m)
+        self.vehicles = VehiclePainter(scenario)
+        self.seed = seed
+        sigma = scenario.lighting.noise_sigma
+        shape = (camera.height + _NOISE_MARGIN, camera.width + _NOISE_MARGIN)
+        noise = np.random.default_rng([seed, 4]).normal(0.0, sigma, shape)
+        self.noise = np.round(noise).astype(np.int16) if sigma > 0 else None
+
+    def draw(self, state: WorldState, camera: Camera, frame_index: int) -> np.ndarray:
+        odometer_m = state.ego_odometer_m
+        r0 = int(np.clip(math.floor(camera.horizon_row) + 1, 0, camera.height))
+        vehicles = depth_order(state)
+        shadows = self.scenery.shadow(odometer_m) + [self.vehicles.shadow(v, camera.lateral_m) for v in vehicles]
+        parts = []
+        if r0 > 0:
+            parts.append(self.sky.draw(camera, r0))
+        if r0 < camera.height:
+            parts.append(self.ground.draw(camera, odometer_m, shadows, r0))
+        image = np.vstack(parts) if len(parts) > 1 else parts[0]
+        image = np.clip(image, 0.0, 255.0, out=image).astype(np.uint8)
+
+        self.scenery.draw_roadside(image, camera, odometer_m)
+        items = [(v.z_m, v) for v in vehicles]
+        deck_z = self.scenery.deck_z(odometer_m)
+        if deck_z is not None:
+            items.append((deck_z, None))
+        for _, vehicle in sorted(items, key=lambda item: -item[0]):
+            if vehicle is None:
+                self.scenery.draw_deck(image, camera, odometer_m)
+            else:
+                light = self.scenery.light_at(vehicle.z_m, odometer_m)
+                self.vehicles.draw(image, camera, vehicle, light)
+        return self._add_noise(image, frame_index)
+
+    def _add_noise(self, image: np.ndarray, frame_index: int) -> np.ndarray:
+        if self.noise is None:
+            return image
+        dy, dx = np.random.default_rng([self.seed, 5, frame_index]).integers(0, _NOISE_MARGIN, size=2)
+        window = self.noise[dy:dy + image.shape[0], dx:dx + image.shape[1]]
+        return cv2.add(image, window, dtype=cv2.CV_8U)

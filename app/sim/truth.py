@@ -1,0 +1,87 @@
+"""Per-frame ground truth: what a perfect detector and range estimator would report.
+
+The 2D box is the bounding box of the projected rear face (a fronto-parallel rectangle
+standing on the road at ``z_m``), so its bottom is the image row of the road point under the
+rear face: exactly what the flat-road range formula inverts. Visibility uses an id buffer
+filled far-to-near like the renderer's painter's order.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .camera import Camera
+from .polygons import fill, project_quads, rect_xy
+from .world import VehicleState, WorldState
+
+MIN_RANGE_M = 0.5  # vehicles whose rear face is closer are not reported
+DRAW_RANGE_M = 0.3  # ... nor drawn (the rear face is then beside or behind the camera)
+
+
+def rear_face(vehicle: VehicleState) -> np.ndarray:
+    """World corners (4, 3) of the rear face."""
+    half = 0.5 * vehicle.spec.width_m
+    return rect_xy(vehicle.x_m - half, vehicle.x_m + half, 0.0, vehicle.spec.height_m, vehicle.z_m)
+
+
+def depth_order(state: WorldState) -> list[VehicleState]:
+    """Drawable vehicles far to near (painter's order)."""
+    return sorted((v for v in state.vehicles if v.z_m > DRAW_RANGE_M), key=lambda v: -v.z_m)
+
+
+def frame_truth(state: WorldState, camera: Camera, ego_front_m: float, lane_width_m: float) -> list[dict]:
+    """Truth records of the vehicles visible in this frame, nearest first."""
+    ordered = []
+    ids = np.zeros((camera.height, camera.width), np.uint16)
+    boxes, alone = [], []
+    for vehicle in depth_order(state):
+        corners = rear_face(vehicle)
+        u, v = camera.project(corners)
+        if not np.isfinite(u).all():  # beside a strongly yawed camera: partly behind it
+            continue
+        ordered.append(vehicle)
+        index = len(ordered)
+        boxes.append((float(u.min()), float(v.min()), float(u.max()), float(v.max())))
+        fill(ids, project_quads(camera, corners[None]), index, antialias=False)
+        alone.append(_count(ids, boxes[-1], index))  # its pixels before nearer vehicles cover some
+    records = []
+    for index, (vehicle, box, n_alone) in enumerate(zip(ordered, boxes, alone), start=1):
+        clipped = _clip(box, camera)
+        if vehicle.z_m <= MIN_RANGE_M or clipped is None:
+            continue
+        full_area = (box[2] - box[0]) * (box[3] - box[1])
+        in_image = (clipped[2] - clipped[0]) * (clipped[3] - clipped[1]) / full_area
+        unoccluded = _count(ids, box, index) / n_alone if n_alone else 1.0
+        closing_mps = -vehicle.relative_speed_mps
+        gap_m = vehicle.z_m - ego_front_m
+        records.append({
+            "id": vehicle.spec.id,
+            "kind": vehicle.spec.kind,
+            "box": list(box),
+            "box_clipped": list(clipped),
+            "visible_fraction": float(min(1.0, in_image * unoccluded)),
+            "lateral_m": vehicle.x_m - camera.lateral_m,
+            "longitudinal_m": vehicle.z_m,
+            "relative_speed_mps": vehicle.relative_speed_mps,
+            "ttc_s": gap_m / closing_mps if closing_mps > 0 else None,
+            "lane": int(np.round(vehicle.x_m / lane_width_m)),
+            "width_m": vehicle.spec.width_m,
+            "height_m": vehicle.spec.height_m,
+            "speed_mps": vehicle.speed_mps,
+        })
+    return records[::-1]
+
+
+def _clip(box: tuple[float, float, float, float], camera: Camera) -> tuple[float, ...] | None:
+    """Box clipped to the pixel centres of the image; None when nothing of it is inside."""
+    l, t = max(box[0], 0.0), max(box[1], 0.0)
+    r, b = min(box[2], camera.width - 1.0), min(box[3], camera.height - 1.0)
+    return (l, t, r, b) if r > l and b > t else None
+
+
+def _count(ids: np.ndarray, box: tuple[float, float, float, float], index: int) -> int:
+    h, w = ids.shape
+    l, t = max(0, int(np.floor(box[0]))), max(0, int(np.floor(box[1])))
+    r, b = min(w, int(np.ceil(box[2])) + 1), min(h, int(np.ceil(box[3])) + 1)
+    if r <= l or b <= t:
+        return 0
+    return int(np.count_nonzero(ids[t:b, l:r] == index))

@@ -1,0 +1,51 @@
+"""The tracks file: one JSON object per frame, the record of what Headway saw.
+
+{"frame", "t", "tracks": [{"id", "box": [l,t,r,b], "range_m", "lateral_m", "range_rate_mps", "ttc_s",
+"ttc_scale_s", "in_path"}], "lead_id", "fcw"} with null where a value is not available. Only confirmed
+tracks are written: they are what the rest of the system acts on.
+"""
+from __future__ import annotations
+
+import json
+from typing import IO, Optional
+
+from app.core import FrameResult
+
+FCW_NAMES = {0: "none", 1: "prewarning", 2: "warning"}
+
+
+def _r(x: Optional[float], nd: int = 2) -> Optional[float]:
+    return None if x is None else round(x, nd)
+
+
+def frame_record(r: FrameResult, fcw_level: Optional[int] = None) -> dict:
+    tracks = [
+        {
+            "id": t.id,
+            "box": [round(v, 1) for v in t.box],
+            "range_m": _r(t.range_m),
+            "lateral_m": _r(t.lateral_m),
+            "range_rate_mps": _r(t.range_rate_mps),
+            "ttc_s": _r(t.ttc_s),
+            "ttc_scale_s": _r(t.ttc_scale_s),
+            "in_path": t.in_path,
+        }
+        for t in r.tracks
+        if t.confirmed
+    ]
+    level = r.fcw_level if fcw_level is None else fcw_level
+    return {"frame": r.frame, "t": round(r.t, 6), "tracks": tracks, "lead_id": r.lead_id,
+            "fcw": FCW_NAMES.get(level, "none")}
+
+
+class TracksWriter:
+    """Writes one line per frame and flushes it, so a run that is stopped keeps what it recorded."""
+
+    def __init__(self, stream: IO[str]):
+        self._f = stream
+        self.lines = 0
+
+    def write(self, r: FrameResult, fcw_level: Optional[int] = None) -> None:
+        self._f.write(json.dumps(frame_record(r, fcw_level), separators=(",", ":")) + "\n")
+        self._f.flush()
+        self.lines += 1

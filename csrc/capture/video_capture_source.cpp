@@ -1,0 +1,124 @@
+#include "capture/video_capture_source.hpp"
+
+#include "core/errors.hpp"
+#include "core/stopwatch.hpp"
+
+#include <filesystem>
+
+namespace hw {
+
+namespace fs = std::filesystem;
+
+// ---------------------------------------------------------------- live cameras
+
+CameraSource::CameraSource(CameraSpec spec, SourceSize size) : spec_(std::move(spec)), size_(size) {}
+
+std::string CameraSource::describe() const {
+    const char *bus = spec_.api == cv::CAP_FIREWIRE ? "FireWire camera " : "V4L2 camera ";
+    if (!spec_.guid.empty()) return bus + std::string("GUID ") + spec_.guid;
+    if (!spec_.device.empty()) return bus + spec_.device;
+    return bus + std::to_string(spec_.index);
+}
+
+bool CameraSource::try_open() {
+    cap_.release();
+    if (spec_.api == cv::CAP_FIREWIRE && !spec_.guid.empty()) {
+        // libdc1394 cameras are opened by index; find the index whose GUID matches.
+        const unsigned long long want = std::stoull(spec_.guid, nullptr, 16);
+        for (int i = 0; i < 16; ++i) {
+            cv::VideoCapture c(i, cv::CAP_FIREWIRE);
+            if (!c.isOpened()) break;
+            if ((unsigned long long)c.get(cv::CAP_PROP_GUID) == want) {
+                cap_ = std::move(c);
+                break;
+            }
+        }
+    } else if (!spec_.device.empty()) {
+        if (!fs::exists(spec_.device)) return false;
+        cap_.open(spec_.device, spec_.api);
+    } else {
+        cap_.open(spec_.index, spec_.api);
+    }
+    if (!cap_.isOpened()) return false;
+    if (spec_.pixel_format.size() == 4) {
+        const auto &f = spec_.pixel_format;
+        cap_.set(cv::CAP_PROP_FOURCC, cv::VideoWriter::fourcc(f[0], f[1], f[2], f[3]));
+    }
+    cap_.set(cv::CAP_PROP_FRAME_WIDTH, spec_.width);
+    cap_.set(cv::CAP_PROP_FRAME_HEIGHT, spec_.height);
+    if (spec_.fps > 0) cap_.set(cv::CAP_PROP_FPS, spec_.fps);
+    return true;
+}
+
+void CameraSource::open_or_throw() {
+    if (!try_open()) {
+        std::string hint = spec_.api == cv::CAP_FIREWIRE
+                               ? "check that the camera is connected and that the user may open /dev/fw*"
+                               : "check that the camera is plugged in, that the device exists (ls /dev/video*) "
+                                 "and that the user is in the 'video' group";
+        throw SourceError(describe() + ": cannot open: " + hint);
+    }
+}
+
+bool CameraSource::reopen() { return try_open(); }
+
+ReadStatus CameraSource::read(Frame &out) {
+    if (!cap_.isOpened() || !cap_.read(bgr_) || bgr_.empty()) return ReadStatus::Lost;
+    const double t = monotonic_s();
+    if (bgr_.cols != size_.width || bgr_.rows != size_.height) return ReadStatus::SizeChanged;
+    out.gray = to_gray(bgr_).clone();
+    out.t_s = t;
+    out.number = next_number_++;
+    return ReadStatus::Ok;
+}
+
+// ---------------------------------------------------------------- video files
+
+VideoFileSource::VideoFileSource(const std::string &path, SourceSize size) : path_(path), size_(size) {
+    std::error_code ec;
+    if (!fs::exists(path, ec)) throw SourceError("video " + path + ": no such file");
+    if (fs::is_directory(path, ec))
+        throw SourceError("video " + path + ": is a folder; use an image-folder source (kind: folder) for it");
+    // FFmpeg would play a single still image as a one-frame video; that is almost always a mistake.
+    if (is_image_file_name(path))
+        throw SourceError("video " + path + ": is a still image; play a folder of images (kind: folder) or use `headway detect`");
+    cap_.open(path, cv::CAP_FFMPEG);
+    if (!cap_.isOpened())
+        throw SourceError("video " + path + ": cannot be opened as a video (not a video file, or a codec FFmpeg lacks)");
+    fps_ = cap_.get(cv::CAP_PROP_FPS);
+    if (!(fps_ > 0 && fps_ < 1000)) fps_ = 30.0;
+    frame_count_ = int64_t(cap_.get(cv::CAP_PROP_FRAME_COUNT));
+    if (!cap_.read(bgr_) || bgr_.empty())
+        throw SourceError("video " + path + ": no frame could be decoded (empty or corrupt file)");
+    if (bgr_.cols != size_.width || bgr_.rows != size_.height)
+        throw SourceError("video " + path + ": frames are " + std::to_string(bgr_.cols) + "x" +
+                          std::to_string(bgr_.rows) + " but camera.width/camera.height say " +
+                          std::to_string(size_.width) + "x" + std::to_string(size_.height));
+}
+
+ReadStatus VideoFileSource::read(Frame &out) {
+    // The constructor already decoded frame 0 into bgr_.
+    if (next_number_ > 0) {
+        if (!cap_.read(bgr_) || bgr_.empty()) {
+            // A read that fails before the container's frame count is a damaged or truncated file:
+            // skip forward once, then call it the end.
+            if (frame_count_ > 0 && next_number_ < frame_count_ - 1 && cap_.grab()) {
+                ++next_number_;
+                return ReadStatus::DecodeError;
+            }
+            return ReadStatus::End;
+        }
+    }
+    if (bgr_.cols != size_.width || bgr_.rows != size_.height) {
+        ++next_number_;
+        return ReadStatus::SizeChanged;
+    }
+    out.gray = to_gray(bgr_).clone();
+    // Media time from the frame number and the container rate: monotonic even where the container's
+    // own timestamps are missing or jump.
+    out.t_s = double(next_number_) / fps_;
+    out.number = next_number_++;
+    return ReadStatus::Ok;
+}
+
+} // namespace hw

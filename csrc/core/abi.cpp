@@ -1,0 +1,331 @@
+// abi.cpp - the door: implements headway.h. Every entry point runs inside guard(), which turns any
+// exception into a status code and a per-thread message, so nothing from C++ reaches the caller.
+#include "include/headway.h"
+
+#include "capture/push_source.hpp"
+#include "core/config.hpp"
+#include "core/errors.hpp"
+#include "core/pipeline.hpp"
+#include "core/realtime_loop.hpp"
+#include "core/stopwatch.hpp"
+
+#include <opencv2/core.hpp>
+#include <opencv2/core/utils/logger.hpp>
+
+#include <cstring>
+#include <memory>
+#include <mutex>
+#include <string>
+
+struct hw_pipeline {
+    hw::Config config;
+    std::unique_ptr<hw::Pipeline> pipeline;
+    std::unique_ptr<hw::ResultQueue<hw::FrameOutput>> results;
+    std::unique_ptr<hw::RealtimeLoop> loop;  // set while started (kept after stop for health)
+    std::mutex mu;                           // serialises start/stop/process against each other
+    int64_t offline_frames = 0;              // frame numbers for process()
+};
+
+namespace {
+
+thread_local std::string g_last_error;
+
+int fail(int code, const std::string &msg) {
+    g_last_error = msg;
+    return code;
+}
+
+template <class Fn> int guard(Fn &&fn) {
+    try {
+        g_last_error.clear();
+        return fn();
+    } catch (const hw::ConfigError &e) {
+        return fail(HW_ERR_CONFIG, e.what());
+    } catch (const hw::SourceError &e) {
+        return fail(HW_ERR_SOURCE, e.what());
+    } catch (const hw::StateError &e) {
+        return fail(HW_ERR_STATE, e.what());
+    } catch (const std::invalid_argument &e) {
+        return fail(HW_ERR_INVALID_ARGUMENT, e.what());
+    } catch (const cv::Exception &e) {
+        return fail(HW_ERR_INTERNAL, std::string("OpenCV: ") + e.what());
+    } catch (const std::exception &e) {
+        return fail(HW_ERR_INTERNAL, e.what());
+    } catch (...) {
+        return fail(HW_ERR_INTERNAL, "unknown exception in the core");
+    }
+}
+
+void require(const void *p, const char *what) {
+    if (!p) throw std::invalid_argument(std::string(what) + " is NULL");
+}
+
+void copy_name(char (&dst)[HW_STAGE_NAME_LEN], const std::string &src) {
+    std::strncpy(dst, src.c_str(), HW_STAGE_NAME_LEN - 1);
+    dst[HW_STAGE_NAME_LEN - 1] = '\0';
+}
+
+void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
+    std::memset(r, 0, sizeof(*r));
+    r->frame_number = o.frame_number;
+    r->t_capture_s = o.t_capture_s;
+    r->t_done_s = o.t_done_s;
+    r->width = o.width;
+    r->height = o.height;
+    r->events = o.events;
+    r->full_detection = o.full_detection ? 1 : 0;
+    r->n_tracks = int32_t(std::min<size_t>(o.tracks.size(), HW_MAX_TRACKS));
+    for (int i = 0; i < r->n_tracks; ++i) {
+        const auto &t = o.tracks[i];
+        hw_track &d = r->tracks[i];
+        d.id = t.id;
+        d.confirmed = t.confirmed ? 1 : 0;
+        d.age_frames = t.age_frames;
+        d.left = t.box.x;
+        d.top = t.box.y;
+        d.right = t.box.x + t.box.width;
+        d.bottom = t.box.y + t.box.height;
+        d.confidence = t.confidence;
+        d.vx_px_s = t.vel_px_s.x;
+        d.vy_px_s = t.vel_px_s.y;
+        d.range_m = t.range_m;
+        d.range_sigma_m = t.range_sigma_m;
+        d.lateral_m = t.lateral_m;
+        d.range_rate_mps = t.range_rate_mps;
+        d.ttc_s = t.ttc_s;
+        d.ttc_scale_s = t.ttc_scale_s;
+        d.lane_index = t.lane_index;
+        d.in_path = t.in_path;
+    }
+    int n = 0;
+    auto add_lane = [&](const hw::LaneBoundary &b, int position) {
+        if (!b.valid || n >= HW_MAX_LANES) return;
+        r->lanes[n++] = hw_lane{b.bottom.x, b.bottom.y, b.top.x, b.top.y, position, b.observed ? 1 : 0};
+    };
+    add_lane(o.lanes.adj_left, -2);
+    add_lane(o.lanes.ego_left, -1);
+    add_lane(o.lanes.ego_right, +1);
+    add_lane(o.lanes.adj_right, +2);
+    r->n_lanes = n;
+    r->vanishing_x = o.lanes.vanishing_point.x;
+    r->vanishing_y = o.lanes.vanishing_point.y;
+    r->horizon_row = o.horizon_row;
+    r->lead_id = o.lead_id;
+    r->fcw_level = o.fcw_level;
+    r->n_stages = int32_t(std::min<size_t>(o.times.items.size(), HW_MAX_STAGES));
+    for (int i = 0; i < r->n_stages; ++i) {
+        copy_name(r->stages[i].name, o.times.items[i].first);
+        r->stages[i].ms = o.times.items[i].second;
+    }
+    r->total_ms = o.total_ms;
+}
+
+cv::Mat wrap_gray(const uint8_t *gray, int32_t width, int32_t height, int32_t stride) {
+    require(gray, "frame data");
+    if (width <= 0 || height <= 0) throw std::invalid_argument("frame size must be positive");
+    if (stride < width) throw std::invalid_argument("stride is smaller than the width");
+    return cv::Mat(height, width, CV_8UC1, const_cast<uint8_t *>(gray), size_t(stride));
+}
+
+void require_stopped(hw_pipeline *p, const char *what) {
+    if (p->loop && p->loop->running())
+        throw hw::StateError(std::string(what) + " is not allowed while the real-time loop runs; stop it first");
+}
+
+} // namespace
+
+extern "C" {
+
+int hw_abi_version(void) { return HW_ABI_VERSION; }
+
+const char *hw_error_message(int code) {
+    switch (code) {
+    case HW_OK: return "ok";
+    case HW_ERR_INVALID_ARGUMENT: return "invalid argument";
+    case HW_ERR_CONFIG: return "invalid configuration";
+    case HW_ERR_SOURCE: return "frame source cannot be opened";
+    case HW_ERR_STATE: return "not allowed in this state";
+    case HW_ERR_TIMEOUT: return "timed out";
+    case HW_ERR_END_OF_STREAM: return "end of stream";
+    case HW_ERR_INTERNAL: return "internal error";
+    default: return "unknown status code";
+    }
+}
+
+const char *hw_last_error(void) { return g_last_error.c_str(); }
+
+double hw_monotonic_s(void) { return hw::monotonic_s(); }
+
+int hw_pipeline_create(const char *config_json, hw_pipeline **out) {
+    return guard([&] {
+        require(out, "out");
+        *out = nullptr;
+        // OpenCV's own warnings (a camera index it cannot open, ...) would repeat what our error
+        // messages already say, on stderr of a service; keep only its errors.
+        cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
+        auto p = std::make_unique<hw_pipeline>();
+        p->config = hw::Config::from_json(config_json ? config_json : "");
+        p->pipeline = std::make_unique<hw::Pipeline>(p->config);
+        p->results = std::make_unique<hw::ResultQueue<hw::FrameOutput>>(p->config.pipeline.queue_capacity);
+        *out = p.release();
+        return HW_OK;
+    });
+}
+
+void hw_pipeline_destroy(hw_pipeline *p) {
+    guard([&] {
+        if (p) {
+            if (p->loop) p->loop->stop();
+            delete p;
+        }
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *needed) {
+    return guard([&] {
+        require(needed, "needed");
+        nlohmann::json j;
+        if (p) j = p->config.to_json();
+        else j = hw::Config().describe();  // no pipeline: describe every key with its default
+        const std::string s = j.dump();
+        *needed = int32_t(s.size() + 1);
+        if (!buf || buf_len < *needed) throw std::invalid_argument("buffer too small for the configuration");
+        std::memcpy(buf, s.c_str(), s.size() + 1);
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_process(hw_pipeline *p, const uint8_t *gray, int32_t width, int32_t height, int32_t stride,
+                        double t_s, hw_frame_result *out) {
+    return guard([&] {
+        require(p, "pipeline");
+        require(out, "out");
+        std::lock_guard<std::mutex> lock(p->mu);
+        require_stopped(p, "process()");
+        hw::Frame f;
+        f.gray = wrap_gray(gray, width, height, stride);
+        f.t_s = t_s;
+        f.number = p->offline_frames++;
+        fill_result(p->pipeline->process(f), out);
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width, int32_t height,
+                          int32_t stride, hw_frame_result *out) {
+    return guard([&] {
+        require(p, "pipeline");
+        require(stage, "stage");
+        require(out, "out");
+        std::lock_guard<std::mutex> lock(p->mu);
+        require_stopped(p, "run_stage()");
+        fill_result(p->pipeline->run_stage(stage, wrap_gray(gray, width, height, stride)), out);
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_reset(hw_pipeline *p) {
+    return guard([&] {
+        require(p, "pipeline");
+        std::lock_guard<std::mutex> lock(p->mu);
+        require_stopped(p, "reset()");
+        p->pipeline->reset();
+        p->offline_frames = 0;
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_set_ego_motion(hw_pipeline *p, double speed_mps, double yaw_rate_rps) {
+    return guard([&] {
+        require(p, "pipeline");
+        p->pipeline->set_ego_motion(hw::EgoMotion{speed_mps, yaw_rate_rps});
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_start(hw_pipeline *p, const char *source_json) {
+    return guard([&] {
+        require(p, "pipeline");
+        require(source_json, "source description");
+        std::lock_guard<std::mutex> lock(p->mu);
+        require_stopped(p, "start()");
+        auto source = hw::open_source(source_json, {p->config.camera.width, p->config.camera.height},
+                                      p->config.pipeline.push_queue_capacity);
+        p->loop.reset();
+        p->loop = std::make_unique<hw::RealtimeLoop>(*p->pipeline, std::move(source), *p->results);
+        p->loop->start();
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_stop(hw_pipeline *p) {
+    return guard([&] {
+        require(p, "pipeline");
+        std::lock_guard<std::mutex> lock(p->mu);
+        if (p->loop) p->loop->stop();
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_pop(hw_pipeline *p, int32_t timeout_ms, hw_frame_result *out) {
+    return guard([&] {
+        require(p, "pipeline");
+        require(out, "out");
+        if (!p->loop) throw hw::StateError("pop() before start(): nothing is running");
+        hw::FrameOutput o;
+        switch (p->results->pop(o, timeout_ms)) {
+        case hw::ResultQueue<hw::FrameOutput>::Pop::Item: fill_result(o, out); return int(HW_OK);
+        case hw::ResultQueue<hw::FrameOutput>::Pop::Timeout: return fail(HW_ERR_TIMEOUT, "no result within the timeout");
+        case hw::ResultQueue<hw::FrameOutput>::Pop::Closed: {
+            const std::string why = p->loop->failure();
+            if (!why.empty()) return fail(HW_ERR_INTERNAL, "the real-time loop stopped: " + why);
+            return fail(HW_ERR_END_OF_STREAM, "the source has ended and every result was popped");
+        }
+        }
+        return int(HW_ERR_INTERNAL);
+    });
+}
+
+int hw_pipeline_push(hw_pipeline *p, const uint8_t *data, int32_t width, int32_t height, int32_t channels,
+                     int32_t stride, double t_s) {
+    return guard([&] {
+        require(p, "pipeline");
+        require(data, "frame data");
+        auto *push = p->loop ? dynamic_cast<hw::PushSource *>(&p->loop->source()) : nullptr;
+        if (!push || !p->loop->running()) throw hw::StateError("push() needs a running pipeline started with a push source");
+        if (channels != 1 && channels != 3 && channels != 4)
+            throw std::invalid_argument("pushed frame must have 1, 3 or 4 channels, got " + std::to_string(channels));
+        if (width <= 0 || height <= 0 || stride < width * channels)
+            throw std::invalid_argument("pushed frame has a bad size or stride");
+        cv::Mat img(height, width, CV_8UC(channels), const_cast<uint8_t *>(data), size_t(stride));
+        push->push(img, t_s);
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_push_end(hw_pipeline *p) {
+    return guard([&] {
+        require(p, "pipeline");
+        auto *push = p->loop ? dynamic_cast<hw::PushSource *>(&p->loop->source()) : nullptr;
+        if (!push) throw hw::StateError("push_end() needs a pipeline started with a push source");
+        push->end();
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_health(hw_pipeline *p, hw_health *out) {
+    return guard([&] {
+        require(p, "pipeline");
+        require(out, "out");
+        std::memset(out, 0, sizeof(*out));
+        out->last_frame_t_s = NAN;
+        out->last_progress_s = NAN;
+        out->last_total_ms = NAN;
+        out->queue_capacity = p->results->capacity();
+        if (p->loop) p->loop->fill_health(*out);
+        return HW_OK;
+    });
+}
+
+} // extern "C"

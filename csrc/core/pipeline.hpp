@@ -1,0 +1,48 @@
+// pipeline.hpp - the per-frame code path, shared by the real-time loop and offline process().
+#pragma once
+
+#include "core/config.hpp"
+#include "core/types.hpp"
+#include "fcw/lead_selection.hpp"
+#include "geometry/horizon.hpp"
+#include "geometry/track_kinematics.hpp"
+#include "lanes/lane_tracker.hpp"
+#include "track/tracker.hpp"
+
+#include <atomic>
+#include <memory>
+
+namespace hw {
+
+class Pipeline {
+public:
+    explicit Pipeline(const Config &cfg);
+
+    // One frame through every stage: lanes -> vehicles (detect + track) -> outputs.
+    // Throws std::invalid_argument for a frame of the wrong size or type, or a time going backwards.
+    FrameOutput process(const Frame &frame);
+    // Single-image units ("lanes", "hypotheses", "detect") without touching tracking state.
+    FrameOutput run_stage(const std::string &stage, const cv::Mat &gray);
+    void reset();
+    // The car's own motion from the vehicle bus; any thread may set it (the loop reads it per frame).
+    void set_ego_motion(const EgoMotion &ego) {
+        ego_speed_mps_ = ego.speed_mps;
+        ego_yaw_rate_rps_ = ego.yaw_rate_rps;
+    }
+
+    const Config &config() const { return cfg_; }
+
+private:
+    void check_frame(const cv::Mat &gray) const;
+
+    Config cfg_;
+    LaneTracker lanes_;
+    std::unique_ptr<VehicleTracker> tracker_;  // null for preset "none"
+    HorizonTracker horizon_;
+    TrackKinematics kinematics_;
+    LeadSelector lead_;
+    std::atomic<double> ego_speed_mps_{NAN}, ego_yaw_rate_rps_{NAN};
+    double last_t_s_ = -1e300;
+};
+
+} // namespace hw

@@ -1,0 +1,78 @@
+// road_prior.hpp - where the shadow detector looks, and how wide a vehicle is at each image row.
+//
+// Two sources, the lane model first and the flat-road camera model as fallback:
+//  - lanes valid: the scan area is the lane stage's road polygon, widened to at least the ego lane
+//    plus `adjacent_lanes` lane widths each side (so vehicles in the adjacent lanes are always
+//    scanned); expected vehicle width w(y) = lane_width_px(y) * vehicle_width_m / lane_width_m
+//    (thesis 2.4.2.1: "the width of a vehicle in an image is related to the width of the lane").
+//  - lanes invalid: a trapezoid of half-width road_half_width_m around the camera's ego-lane
+//    centre line, and w(y) from the pinhole model of a level road:
+//        Z(y) = fy * h / (y - y_h),  w(y) = fx * W / Z(y) = (fx / fy) * W * (y - y_h) / h.
+// The horizon row y_h is the lanes' vanishing point when valid, else cy - fy * tan(pitch).
+#pragma once
+
+#include "core/params.hpp"
+#include "core/types.hpp"
+#include "geometry/camera.hpp"
+
+#include <vector>
+
+namespace hw {
+
+struct RoadPriorParams {
+    double vehicle_width_m = 1.8;     // m; nominal rear width of a passenger car
+    double lane_width_m = 3.6;        // m; nominal lane width that the lane model's pixel width stands for
+    double road_half_width_m = 9.0;   // m; fallback scan half-width around the ego-lane centre
+    int adjacent_lanes = 1;           // lanes scanned each side of the ego lane at least
+    double max_range_m = 120.0;       // m; the scan starts at the row of this range below the horizon
+    double bottom_ignore_frac = 0.0;  // fraction of the image height at the bottom not scanned (hood)
+
+    void bind(ParamMap &m) {
+        m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0,
+              "m; expected rear width of a vehicle; with the lane width it gives the expected width in "
+              "pixels at each row; 1.8 m is a typical passenger car (the thesis sizes ROIs for cars)");
+        m.add("lane_width_m", lane_width_m, 2.0, 6.0,
+              "m; nominal lane width; converts the lane model's pixel width into the expected vehicle "
+              "width; 3.6 m is a motorway lane");
+        m.add("road_half_width_m", road_half_width_m, 1.0, 50.0,
+              "m; without a valid lane model the detector scans this far either side of the ego-lane "
+              "centre; 9 m covers the ego lane and two lanes each side");
+        m.add("adjacent_lanes", adjacent_lanes, 0, 4,
+              "lanes; with a valid lane model the scan covers at least this many lanes beside the ego "
+              "lane, so vehicles in adjacent lanes are found even if the road polygon is narrower");
+        m.add("max_range_m", max_range_m, 10.0, 1000.0,
+              "m; the scan starts at the row of this range on a flat road; farther vehicles are a few "
+              "pixels wide and cannot be verified anyway");
+        m.add("bottom_ignore_frac", bottom_ignore_frac, 0.0, 0.5,
+              "fraction of the image height; rows at the bottom not scanned (ego bonnet); 0 scans all");
+    }
+};
+
+// The scan area as one interval per row, and the expected vehicle width per row.
+struct RoadPrior {
+    float horizon_row = kNaN;
+    int y_top = 0, y_bottom = 0;   // scanned rows [y_top, y_bottom)
+    bool from_lanes = false;       // lane model used (else the camera fallback)
+    std::vector<int> x_left, x_right;     // per row (index y - y_top), inclusive; empty if left > right
+    std::vector<float> width_px;          // expected vehicle width per row
+
+    bool empty() const { return y_bottom <= y_top; }
+    bool contains_row(int y) const { return y >= y_top && y < y_bottom; }
+    float expected_width(int y) const { return width_px[size_t(y - y_top)]; }
+    int left(int y) const { return x_left[size_t(y - y_top)]; }
+    int right(int y) const { return x_right[size_t(y - y_top)]; }
+};
+
+// Builds the prior for an image of `size`. The camera is scaled to the image width if its
+// configured size differs (run_stage on images of another resolution).
+RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraParams &cam,
+                          const RoadPriorParams &p);
+
+// Horizon row for an image of `size`: the lane model's vanishing point when valid, else the camera's.
+float horizon_row(cv::Size size, const LaneModel &lanes, const CameraParams &cam);
+
+// Expected vehicle width in pixels for a box whose bottom is at row y (lane model or camera).
+float expected_vehicle_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam,
+                             const RoadPriorParams &p);
+
+} // namespace hw

@@ -1,0 +1,269 @@
+#include "detect/shadow.hpp"
+
+#include "detect/edge_projection.hpp"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+namespace hw {
+
+namespace {
+
+// Road gray level (median) per cell: level_bands row bands x level_columns cells across the road
+// interval of each row. A median ignores the vehicles and shadows inside a cell as long as they
+// cover less than half of it.
+class RoadLevels {
+public:
+    RoadLevels(const cv::Mat &gray, const RoadPrior &road, int bands, int columns)
+        : road_(road), bands_(bands), columns_(columns), level_(size_t(bands * columns), 0.f) {
+        std::vector<std::array<int, 256>> hist(level_.size());
+        std::array<int, 256> all{};
+        for (auto &h : hist) h.fill(0);
+        // Every second row and column is plenty for a median and halves the cost.
+        for (int y = road.y_top; y < road.y_bottom; y += 2) {
+            const int xl = road.left(y), xr = road.right(y);
+            if (xl > xr) continue;
+            const uint8_t *row = gray.ptr<uint8_t>(y);
+            for (int x = xl; x <= xr; x += 2) {
+                hist[cell(y, x, xl, xr)][row[x]]++;
+                all[row[x]]++;
+            }
+        }
+        const float global = median(all, 128.f);
+        for (size_t i = 0; i < hist.size(); ++i) level_[i] = median(hist[i], global);
+    }
+
+    // Cell index of pixel (x, y) whose row interval is [xl, xr].
+    size_t cell(int y, int x, int xl, int xr) const {
+        return band_cell(y, std::min(columns_ - 1, (x - xl) * columns_ / (xr - xl + 1)));
+    }
+    // Cell index of row y and column cell `col`.
+    size_t band_cell(int y, int col) const {
+        const int band = std::min(bands_ - 1, (y - road_.y_top) * bands_ / (road_.y_bottom - road_.y_top));
+        return size_t(band * columns_ + col);
+    }
+    float level(size_t cell) const { return level_[cell]; }
+
+private:
+    // Median of a histogram; `fallback` for a cell with too few samples to say.
+    static float median(const std::array<int, 256> &h, float fallback) {
+        int n = 0;
+        for (int c : h) n += c;
+        if (n < 32) return fallback;
+        int acc = 0;
+        for (int v = 0; v < 256; ++v)
+            if ((acc += h[v]) * 2 >= n) return float(v);
+        return fallback;
+    }
+
+    const RoadPrior &road_;
+    int bands_, columns_;
+    std::vector<float> level_;
+};
+
+// One horizontal run of shadow-edge pixels, and a merged group of runs (one candidate edge).
+struct Run {
+    int y, x1, x2;       // row, inclusive column range
+    float step_sum;      // sum over its pixels of the step / road level
+    int n;               // edge pixels in it
+};
+
+struct Edge {
+    int x1, x2;          // inclusive column range (union of its runs)
+    int y_bottom, y_top; // lowest and highest row of its runs
+    float step_sum;
+    int n;
+    float road_gray;
+    float bottom;        // sub-pixel row of the road/shadow boundary
+    int width() const { return x2 - x1 + 1; }
+};
+
+int overlap(int a1, int a2, int b1, int b2) { return std::min(a2, b2) - std::max(a1, b1) + 1; }
+
+// Runs of shadow-edge pixels in row y: Sobel step Gy(x) = (I(y+1) - I(y-1)) smoothed along x, at
+// least thr.grad, with I(y-1) at most thr.dark; gaps of up to gap_px pixels are bridged.
+void row_runs(const cv::Mat &gray, const short *gy, int y, int xl, int xr, const RoadLevels &levels,
+              const std::vector<ShadowThresholds> &thr, const ShadowParams &p, std::vector<Run> &out) {
+    const uint8_t *above = gray.ptr<uint8_t>(y - 1);
+    Run run{y, -1, -1, 0.f, 0};
+    int last = -1000000;
+    auto close = [&]() {
+        if (run.x1 >= 0 && run.x2 - run.x1 + 1 >= p.min_run_px) out.push_back(run);
+        run = Run{y, -1, -1, 0.f, 0};
+    };
+    const int len = xr - xl + 1;
+    for (int col = 0; col < p.level_columns; ++col) {
+        // The cells of this row, one threshold pair each.
+        const int xa = xl + col * len / p.level_columns, xb = xl + (col + 1) * len / p.level_columns;
+        if (xa >= xb) continue;
+        const size_t c = levels.band_cell(y, col);
+        const int grad = thr[c].grad, dark = thr[c].dark;
+        const float inv = 1.f / (4.f * std::max(1.f, levels.level(c)));
+        for (int x = xa; x < xb; ++x) {
+            if (gy[x] < grad || above[x] > dark) continue;
+            if (x - last > p.gap_px + 1) close();
+            if (run.x1 < 0) run.x1 = x;
+            run.x2 = x;
+            run.step_sum += gy[x] * inv;
+            run.n++;
+            last = x;
+        }
+    }
+    close();
+}
+
+// Merges runs (given bottom-up) into edges: a run joins the edge it overlaps most whose highest
+// row is at most merge_rows above it (thesis: "edges whose y differ by <= 2 px are combined").
+std::vector<Edge> merge_runs(const std::vector<Run> &runs, int merge_rows) {
+    std::vector<Edge> edges;
+    for (const Run &r : runs) {
+        Edge *best = nullptr;
+        int best_ov = 0;
+        for (Edge &e : edges) {
+            if (e.y_top - r.y > merge_rows) continue;
+            const int ov = overlap(r.x1, r.x2, e.x1, e.x2);
+            if (ov > best_ov) { best_ov = ov; best = &e; }
+        }
+        if (!best) {
+            edges.push_back({r.x1, r.x2, r.y, r.y, r.step_sum, r.n, 0.f, float(r.y)});
+            continue;
+        }
+        best->x1 = std::min(best->x1, r.x1);
+        best->x2 = std::max(best->x2, r.x2);
+        best->y_top = std::min(best->y_top, r.y);
+        best->step_sum += r.step_sum;
+        best->n += r.n;
+    }
+    return edges;
+}
+
+// Joins edges at the same height (bottom rows within merge_rows) separated by a gap of at most
+// join_gap_frac expected widths: the shadow under a vehicle often breaks into pieces at the wheels
+// or where a bright axle or exhaust interrupts it.
+void join_pieces(std::vector<Edge> &edges, const RoadPrior &road, const ShadowParams &p) {
+    std::sort(edges.begin(), edges.end(), [](const Edge &a, const Edge &b) { return a.x1 < b.x1; });
+    for (bool changed = true; changed;) {
+        changed = false;
+        for (size_t i = 0; i < edges.size() && !changed; ++i)
+            for (size_t j = i + 1; j < edges.size() && !changed; ++j) {
+                Edge &a = edges[i], &b = edges[j];
+                if (std::abs(a.y_bottom - b.y_bottom) > p.merge_rows) continue;
+                const int gap = -overlap(a.x1, a.x2, b.x1, b.x2);
+                const float w_exp = road.expected_width(std::max(a.y_bottom, b.y_bottom));
+                if (gap > p.join_gap_frac * w_exp) continue;
+                a.x1 = std::min(a.x1, b.x1); a.x2 = std::max(a.x2, b.x2);
+                a.y_bottom = std::max(a.y_bottom, b.y_bottom); a.y_top = std::min(a.y_top, b.y_top);
+                a.step_sum += b.step_sum; a.n += b.n;
+                edges.erase(edges.begin() + long(j));
+                changed = true;
+            }
+    }
+}
+
+// Sub-pixel boundary row of an edge: the peak of its column-averaged Gy over the rows around its
+// lowest row (the step between a dark row k and a bright row k+1 peaks at k + 0.5).
+float boundary_row(const cv::Mat &gy, int row0, int col0, const Edge &e) {
+    const int lo = std::max(row0, e.y_bottom - 3), hi = std::min(row0 + gy.rows - 1, e.y_bottom + 1);
+    std::vector<float> v;
+    for (int y = lo; y <= hi; ++y) {
+        const short *g = gy.ptr<short>(y - row0) - col0;
+        float s = 0.f;
+        for (int x = e.x1; x <= e.x2; ++x) s += g[x];
+        v.push_back(s);
+    }
+    return float(lo) + peak_position(v, argmax(v, 0, int(v.size())));
+}
+
+} // namespace
+
+ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p) {
+    // A step of s gray levels between the rows above and below gives a 3x3 Sobel response of 4 s.
+    const double step = std::max(p.min_step_gray, p.grad_rel * road_gray);
+    return {int(std::ceil(4.0 * step)), int(std::floor(p.dark_rel * road_gray))};
+}
+
+std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &lanes,
+                                          const CameraParams &cam, const ShadowParams &p) {
+    CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
+    const RoadPrior road = make_road_prior(gray.size(), lanes, cam, p.road);
+    if (road.empty()) return {};
+    int xmin = gray.cols, xmax = -1;
+    for (int y = road.y_top; y < road.y_bottom; ++y)
+        if (road.left(y) <= road.right(y)) {
+            xmin = std::min(xmin, road.left(y));
+            xmax = std::max(xmax, road.right(y));
+        }
+    if (xmax < xmin) return {};
+
+    const RoadLevels levels(gray, road, p.level_bands, p.level_columns);
+    std::vector<ShadowThresholds> thr;
+    for (size_t c = 0; c < size_t(p.level_bands * p.level_columns); ++c)
+        thr.push_back(shadow_thresholds(levels.level(c), p));
+
+    // Gy = d/dy of the scanned rows (positive where the road below is brighter than above).
+    const cv::Rect band(xmin, road.y_top, xmax - xmin + 1, road.y_bottom - road.y_top);
+    cv::Mat gy;
+    cv::Sobel(gray(band), gy, CV_16S, 0, 1, 3);
+
+    // Bottom-up scan (thesis): runs are produced lowest row first.
+    std::vector<Run> runs;
+    for (int y = road.y_bottom - 1; y >= road.y_top; --y) {
+        const int xl = road.left(y), xr = road.right(y);
+        if (xl > xr) continue;
+        row_runs(gray, gy.ptr<short>(y - road.y_top) - xmin, y, xl, xr, levels, thr, p, runs);
+    }
+    std::vector<Edge> edges = merge_runs(runs, p.merge_rows);
+    join_pieces(edges, road, p);
+
+    // Width against the vehicle expected at the edge's row.
+    std::vector<Edge> kept;
+    for (Edge &e : edges) {
+        const float w_exp = road.expected_width(e.y_bottom);
+        if (!(w_exp > 0.f)) continue;
+        if (e.width() < p.min_width_frac * w_exp) continue;
+        if (e.width() > p.max_width_ratio * w_exp) continue;  // a dark band across the road
+        e.bottom = boundary_row(gy, road.y_top, xmin, e);
+        e.road_gray = levels.level(levels.cell(e.y_bottom, (e.x1 + e.x2) / 2, road.left(e.y_bottom),
+                                               road.right(e.y_bottom)));
+        kept.push_back(e);
+    }
+
+    // One bottom edge per vehicle: lowest first; an edge above a kept one, overlapping it by half the
+    // shorter of the two and within reduce_height_ratio of its width, lies on the same vehicle.
+    std::sort(kept.begin(), kept.end(), [](const Edge &a, const Edge &b) {
+        return a.y_bottom != b.y_bottom ? a.y_bottom > b.y_bottom : a.width() > b.width();
+    });
+    std::vector<Edge> bottoms;
+    for (const Edge &e : kept) {
+        bool same = false;
+        for (const Edge &k : bottoms) {
+            const int ov = overlap(e.x1, e.x2, k.x1, k.x2);
+            const float reach = float(p.reduce_height_ratio * std::min(k.width(), int(road.expected_width(k.y_bottom) * 1.5f)));
+            if (ov * 2 >= std::min(e.width(), k.width()) && k.y_bottom - e.y_bottom <= reach) {
+                same = true;
+                break;
+            }
+        }
+        if (!same) bottoms.push_back(e);
+    }
+
+    std::vector<Hypothesis> out;
+    for (const Edge &e : bottoms) {
+        Hypothesis h;
+        const float bottom = e.bottom, w = float(e.width()), height = 0.5f * w;
+        h.box = cv::Rect2f(float(e.x1), bottom - height, w, height);
+        h.strength = std::min(1.f, e.step_sum / float(std::max(1, e.n)));
+        h.expected_width_px = road.expected_width(e.y_bottom);
+        h.road_gray = e.road_gray;
+        out.push_back(h);
+    }
+    std::stable_sort(out.begin(), out.end(),
+                     [](const Hypothesis &a, const Hypothesis &b) { return a.strength > b.strength; });
+    if (int(out.size()) > p.max_hypotheses) out.resize(size_t(p.max_hypotheses));
+    return out;
+}
+
+} // namespace hw

@@ -1,0 +1,100 @@
+// shadow.hpp - vehicle hypotheses from the shadow underneath (thesis 2.4.2.1).
+//
+// Scan the road area bottom-up for bright-to-dark vertical transitions (road below, shadow above),
+// keep horizontal runs of such edge pixels at least min_run_px long, merge runs whose rows are
+// within merge_rows, compare each merged edge with the vehicle width expected at its row, and
+// reduce the edges over one vehicle to one bottom edge.
+//
+// Where the thesis used one fixed gradient threshold (and names that as its weakness), the
+// thresholds here follow the road's own gray level, measured in every frame in cells of the road
+// area (bands of rows x thirds across): an edge pixel needs a step of at least grad_rel times the
+// local road level, and the pixel above it must be darker than dark_rel times that level. A dark band
+// much wider than a vehicle (an overpass or tree shadow across the road) is dropped here; an edge
+// moderately wider than a vehicle (a long shadow at low sun) is kept for verification to find the
+// vehicle's sides inside it.
+#pragma once
+
+#include "core/params.hpp"
+#include "core/types.hpp"
+#include "detect/road_prior.hpp"
+#include "geometry/camera.hpp"
+
+#include <vector>
+
+namespace hw {
+
+struct ShadowParams {
+    RoadPriorParams road;           // scan area and expected vehicle width (keys in this section)
+    int min_run_px = 12;            // px; shortest shadow run kept (thesis: 10-15)
+    double min_width_frac = 0.3;    // shortest merged edge as a fraction of the expected width
+    double max_width_ratio = 3.0;   // merged edges wider than this many expected widths are dropped
+    int merge_rows = 2;             // px; runs whose rows differ by at most this are merged (thesis: 2)
+    int gap_px = 2;                 // px; gaps of at most this many non-edge pixels inside a run
+    double join_gap_frac = 0.25;    // edges at one height with a gap below this many widths are joined
+    double grad_rel = 0.12;         // minimal bright-to-dark step as a fraction of the road level
+    double min_step_gray = 6.0;     // gray levels; floor of that step for very dark roads
+    double dark_rel = 0.8;          // the shadow side must be darker than this fraction of the road level
+    int level_bands = 8;            // row bands for the road level
+    int level_columns = 3;          // cells across the road per band
+    double reduce_height_ratio = 0.8;  // edges up to this many widths above a lower edge belong to its vehicle
+    int max_hypotheses = 48;        // cap per frame (strongest kept), bounds the verification cost
+
+    void bind(ParamMap &m) {
+        road.bind(m);
+        m.add("min_run_px", min_run_px, 1, 200,
+              "px; shortest run of shadow-edge pixels kept; the thesis keeps 10-15 px as the shortest "
+              "bottom edge it can still verify");
+        m.add("min_width_frac", min_width_frac, 0.0, 1.0,
+              "fraction of the expected vehicle width; merged edges shorter than this are dropped; 0.3 "
+              "keeps a vehicle whose shadow is partly hidden");
+        m.add("max_width_ratio", max_width_ratio, 1.0, 20.0,
+              "expected vehicle widths; merged edges wider than this are a shadow across the road "
+              "(overpass, trees), not a vehicle; 3 still keeps a long low-sun shadow");
+        m.add("merge_rows", merge_rows, 0, 20,
+              "px; runs whose rows differ by at most this many pixels are one edge (thesis: 2)");
+        m.add("gap_px", gap_px, 0, 20,
+              "px; a run continues over this many non-edge pixels (noise, a thin wheel highlight)");
+        m.add("join_gap_frac", join_gap_frac, 0.0, 1.0,
+              "expected vehicle widths; edges at the same height separated by less than this are one "
+              "shadow broken at the wheels; 0.25 stays below the gap between cars in adjacent lanes");
+        m.add("grad_rel", grad_rel, 0.01, 1.0,
+              "fraction of the local road gray level; smallest bright-to-dark step that is a shadow edge; "
+              "adapts the thesis's fixed threshold to the illumination of each frame and region");
+        m.add("min_step_gray", min_step_gray, 0.0, 100.0,
+              "gray levels; floor of the step threshold on very dark roads (sensor noise)");
+        m.add("dark_rel", dark_rel, 0.1, 1.0,
+              "fraction of the local road gray level; the pixel above a shadow edge must be darker than "
+              "this (a shadow is darker than the road, the top end of a lane marking is not)");
+        m.add("level_bands", level_bands, 1, 64,
+              "row bands in which the road gray level is measured; the level changes with range");
+        m.add("level_columns", level_columns, 1, 16,
+              "cells across the road per band; shaded and sunlit lanes get their own level");
+        m.add("reduce_height_ratio", reduce_height_ratio, 0.0, 3.0,
+              "vehicle widths; an edge this far above a lower, overlapping edge is part of the same "
+              "vehicle (bumper, window) and is dropped, leaving one bottom edge per vehicle");
+        m.add("max_hypotheses", max_hypotheses, 1, 1000,
+              "hypotheses per frame, strongest first; bounds the cost of verification");
+    }
+};
+
+// One hypothesis: the bottom edge of a vehicle (shadow line), as a box whose bottom is the edge and
+// whose height is the thesis's ROI side, half the edge length.
+struct Hypothesis {
+    cv::Rect2f box;
+    float strength = 0.f;            // mean bright-to-dark step of the edge / road level, 0..1
+    float expected_width_px = kNaN;  // vehicle width expected at the bottom row
+    float road_gray = kNaN;          // road gray level around the edge
+};
+
+// Adaptive thresholds for a road of gray level `road_gray`: a shadow-edge pixel has a 3x3 Sobel
+// vertical response (bright below) of at least `grad` and a pixel above it of at most `dark`.
+struct ShadowThresholds {
+    int grad = 0;
+    int dark = 0;
+};
+ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p);
+
+std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &lanes,
+                                          const CameraParams &cam, const ShadowParams &p);
+
+} // namespace hw

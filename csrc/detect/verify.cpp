@@ -1,0 +1,89 @@
+#include "detect/verify.hpp"
+
+#include "detect/edge_projection.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace hw {
+
+namespace {
+
+float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
+    const float inter = (a & b).area();
+    const float uni = a.area() + b.area() - inter;
+    return uni > 0.f ? inter / uni : 0.f;
+}
+
+// Verifies one hypothesis; false if it is not a vehicle.
+bool verify_one(const cv::Mat &gray, const Hypothesis &h, const VerifyParams &p, Detection &out) {
+    const float w_exp = h.expected_width_px;
+    const float w_shadow = h.box.width;
+    const float bottom = h.box.y + h.box.height;
+    if (!(w_exp > 0.f) || !std::isfinite(bottom)) return false;
+    const float ratio = w_shadow / w_exp;
+    if (ratio < p.shadow_min_ratio) return false;  // too narrow for a vehicle at this row
+    const bool long_shadow = ratio > p.shadow_max_ratio;
+
+    // ROI: the edge widened by the margin each side, roi_height_frac of the vehicle width high.
+    const float w_ref = long_shadow ? w_exp : w_shadow;
+    const int margin = int(std::lround(std::max(double(p.margin_px), p.margin_frac * w_ref)));
+    const int height = std::max(3, int(std::lround(p.roi_height_frac * w_ref)));
+    const int yb = int(std::lround(bottom));
+    cv::Rect roi(int(std::floor(h.box.x)) - margin, yb - height, int(std::lround(w_shadow)) + 2 * margin,
+                 height);
+    roi &= cv::Rect(0, 0, gray.cols, gray.rows);
+    if (roi.width < 8 || roi.height < 3) return false;
+
+    const std::vector<float> w = vertical_edge_profile(gray, roi);
+    SidePair s;
+    if (long_shadow) {
+        s = best_side_pair(w, int(p.box_min_ratio * w_exp), int(p.box_max_ratio * w_exp));
+    } else {
+        const int split = int(std::lround(h.box.x + 0.5f * w_shadow)) - roi.x;
+        s = strongest_sides(w, split);
+    }
+    if (!s.found()) return false;
+    // Two sides, each standing out against the road's own contrast level.
+    const float t_side = side_threshold(h.road_gray, p);
+    if (s.weaker() < t_side) return false;
+    const float left = roi.x + peak_position(w, s.left), right = roi.x + peak_position(w, s.right);
+    const float width = right - left;
+    if (width < p.box_min_ratio * w_exp || width > p.box_max_ratio * w_exp) return false;
+
+    const float box_h = float(p.aspect_ratio) * width;
+    out.box = cv::Rect2f(left, bottom - box_h, width, box_h);
+    // Score: 0.5 when the weaker side just reaches its threshold, towards 1 as it grows, scaled
+    // down for a faint shadow (strength = shadow step / road level; 0.5 is a deep shadow).
+    const float side_excess = s.weaker() / std::max(1e-3f, t_side);
+    out.score = (1.f - 0.5f / std::sqrt(side_excess)) * std::min(1.f, 0.5f + h.strength);
+    return true;
+}
+
+} // namespace
+
+float side_threshold(float road_gray, const VerifyParams &p) {
+    return float(std::max(p.side_min_gray, p.side_rel * road_gray));
+}
+
+std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<Hypothesis> &hyps,
+                                         const LaneModel &, const CameraParams &,
+                                         const VerifyParams &p) {
+    CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
+    std::vector<Detection> found;
+    for (const Hypothesis &h : hyps) {
+        Detection d;
+        if (verify_one(gray, h, p, d)) found.push_back(d);
+    }
+    std::stable_sort(found.begin(), found.end(),
+                     [](const Detection &a, const Detection &b) { return a.score > b.score; });
+    std::vector<Detection> out;
+    for (const Detection &d : found) {
+        bool overlapped = false;
+        for (const Detection &k : out) overlapped = overlapped || iou(d.box, k.box) > p.nms_iou;
+        if (!overlapped) out.push_back(d);
+    }
+    return out;
+}
+
+} // namespace hw

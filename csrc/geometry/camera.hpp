@@ -1,0 +1,42 @@
+// camera.hpp - the forward camera: intrinsics and mounting, and the flat-road model.
+//
+// Axes as OpenCV: x right, y down, z forward. pitch_deg > 0 looks down, so the horizon of a level
+// road is above the principal point: v_h = cy - fy * tan(pitch). Same convention as app/sim/camera.py.
+#pragma once
+
+#include "core/params.hpp"
+
+#include <cmath>
+
+namespace hw {
+
+struct CameraParams {
+    int width = 640;          // px, frame width the intrinsics refer to
+    int height = 480;         // px
+    double fx = 700.0;        // px, focal length along x
+    double fy = 700.0;        // px, focal length along y
+    double cx = 320.0;        // px, principal point
+    double cy = 240.0;        // px
+    double height_m = 1.3;    // m, camera height above the road
+    double pitch_deg = 1.0;   // deg, positive looking down
+    double yaw_deg = 0.0;     // deg, positive looking right
+    double lateral_m = 0.0;   // m, camera offset right of the ego-lane centre line of the car
+
+    void bind(ParamMap &m) {
+        m.add("width", width, 16, 8192, "px; frame width the intrinsics refer to; frames of another size are rejected");
+        m.add("height", height, 16, 8192, "px; frame height the intrinsics refer to");
+        m.add("fx", fx, 1.0, 100000.0, "px; focal length along x (calibration K[0][0])");
+        m.add("fy", fy, 1.0, 100000.0, "px; focal length along y (calibration K[1][1])");
+        m.add("cx", cx, -8192.0, 16384.0, "px; principal point column (K[0][2])");
+        m.add("cy", cy, -8192.0, 16384.0, "px; principal point row (K[1][2])");
+        m.add("height_m", height_m, 0.2, 5.0, "m; camera height above the road, sets the flat-road range scale");
+        m.add("pitch_deg", pitch_deg, -30.0, 30.0, "deg; static pitch, positive looking down; the horizon row follows from it until lanes refine it");
+        m.add("yaw_deg", yaw_deg, -30.0, 30.0, "deg; static yaw, positive looking right");
+        m.add("lateral_m", lateral_m, -3.0, 3.0, "m; camera offset right of the car's centre line");
+    }
+
+    // Horizon row of a level road for the configured pitch.
+    double horizon_row() const { return cy - fy * std::tan(pitch_deg * M_PI / 180.0); }
+};
+
+} // namespace hw

@@ -1,0 +1,48 @@
+// horizon.hpp - the horizon row used for range, corrected frame by frame for the car's pitch.
+//
+// Braking, bumps and load tilt the camera; a fixed horizon then turns every row error into a range
+// error that grows with Z^2. The lane vanishing point measures the horizon directly when the lanes
+// are straight: we follow it with a first-order filter, bounded around the calibrated horizon so a
+// bad vanishing point (a curve, a wrong marking) cannot drag range far off, and fall back towards
+// the calibrated horizon while no vanishing point is measured.
+#pragma once
+
+#include "core/params.hpp"
+#include "core/types.hpp"
+#include "geometry/camera.hpp"
+
+namespace hw {
+
+struct HorizonParams {
+    double alpha = 0.15;           // filter gain per frame towards the measured vanishing row
+    double max_offset_px = 25.0;   // largest correction from the calibrated horizon
+    double return_alpha = 0.02;    // gain per frame back to the calibrated horizon without a measurement
+    bool use_lanes = true;         // follow the lane vanishing point
+
+    void bind(ParamMap &m) {
+        m.add("alpha", alpha, 0.0, 1.0,
+              "1/frame; gain towards the lane vanishing row; 0.15 follows pitch oscillation (~1 Hz) at 30 fps "
+              "while averaging out per-frame vanishing-point noise");
+        m.add("max_offset_px", max_offset_px, 0.0, 500.0,
+              "px; the vanishing point may move the horizon this far from the calibrated one (about +-2 deg at "
+              "fy 700), so a curve or a wrong marking cannot wreck range");
+        m.add("return_alpha", return_alpha, 0.0, 1.0,
+              "1/frame; drift back to the calibrated horizon while no vanishing point is measured");
+        m.add("use_lanes", use_lanes, "follow the lane vanishing point; false = calibrated pitch only");
+    }
+};
+
+class HorizonTracker {
+public:
+    HorizonTracker(const HorizonParams &p, const CameraParams &cam) : p_(p), cam_(cam) { reset(); }
+    // The horizon row for this frame.
+    double update(const LaneModel &lanes);
+    void reset() { row_ = cam_.horizon_row(); }
+
+private:
+    HorizonParams p_;
+    CameraParams cam_;
+    double row_ = 0.0;
+};
+
+} // namespace hw

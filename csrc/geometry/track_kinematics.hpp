@@ -1,0 +1,63 @@
+// track_kinematics.hpp - range, lateral offset, range rate and both TTCs for every track.
+//
+// Range and lateral come from the bottom-centre of the box on the flat road (flat_road.hpp). A
+// constant-velocity Kalman filter per track on [Z, dZ/dt] gives the range rate; its measurement
+// noise follows the row uncertainty through dZ/dv = -Z^2/(fy h), so far vehicles are trusted less.
+// The scale-based TTC needs no calibration: for a rear face of fixed width, w ~ 1/Z, so
+// d(ln w)/dt = -(dZ/dt)/Z = 1/TTC; we fit the slope of ln w over a short window.
+#pragma once
+
+#include "core/params.hpp"
+#include "core/types.hpp"
+#include "geometry/camera.hpp"
+
+#include <deque>
+#include <unordered_map>
+#include <vector>
+
+namespace hw {
+
+struct KinematicsParams {
+    double accel_sigma_mps2 = 3.0;   // white-acceleration process noise of the range filter
+    double min_row_sigma_px = 0.7;   // floor of the contact-row uncertainty
+    double ego_front_m = 2.0;        // camera to the front bumper: TTC is to the bumper
+    double min_closing_mps = 0.3;    // slower closing is "not closing": TTC not available
+    int scale_window = 12;           // frames in the ln(w) slope fit
+    double scale_min_span_s = 0.2;   // the fit needs at least this much time
+
+    void bind(ParamMap &m) {
+        m.add("accel_sigma_mps2", accel_sigma_mps2, 0.01, 50.0,
+              "m/s^2; process noise of the range-rate filter; 3 covers hard braking (0.3 g) with little lag");
+        m.add("min_row_sigma_px", min_row_sigma_px, 0.05, 20.0,
+              "px; floor of the contact-row uncertainty used for range sigma and filter noise");
+        m.add("ego_front_m", ego_front_m, 0.0, 10.0,
+              "m; camera to the front bumper; TTC is measured to the bumper, not the windscreen");
+        m.add("min_closing_mps", min_closing_mps, 0.0, 10.0,
+              "m/s; below this closing speed TTC is not available (it would be huge and meaningless)");
+        m.add("scale_window", scale_window, 3, 100,
+              "frames; window of the scale-change fit; 12 frames = 0.4 s at 30 fps smooths 1 px width noise");
+        m.add("scale_min_span_s", scale_min_span_s, 0.0, 10.0,
+              "s; the scale fit needs at least this time span before it reports a TTC");
+    }
+};
+
+class TrackKinematics {
+public:
+    TrackKinematics(const KinematicsParams &p, const CameraParams &cam) : p_(p), cam_(cam) {}
+    // Fills range_m, range_sigma_m, lateral_m, range_rate_mps, ttc_s, ttc_scale_s of every track.
+    void update(std::vector<TrackState> &tracks, double horizon_row, double t_s);
+    void reset() { state_.clear(); }
+
+private:
+    struct State {
+        double z = 0, vz = 0;               // filtered range and range rate
+        double p00 = 0, p01 = 0, p11 = 0;   // covariance
+        double t = 0;
+        std::deque<std::pair<double, double>> log_w;  // (t, ln width)
+    };
+    KinematicsParams p_;
+    CameraParams cam_;
+    std::unordered_map<int, State> state_;
+};
+
+} // namespace hw

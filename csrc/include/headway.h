@@ -1,0 +1,184 @@
+/* headway.h - the only door between the C++ core and its callers (Python through cffi).
+ *
+ * Rules of this door:
+ *  - Opaque handles and plain structs only; the caller allocates every result buffer.
+ *  - Every function returns an hw_status (0 = HW_OK). On failure, hw_last_error() returns a message
+ *    for the calling thread that names what was wrong; hw_error_message(code) names the code.
+ *  - No C++ exception ever crosses this door: each entry point catches everything.
+ *  - "Not available" floats are NaN, "not available" ids and indices are -1. A field that a later
+ *    stage fills stays not-available until that stage runs (see the comment on each field).
+ *  - Configuration and frame-source descriptions are JSON objects (the Python supervisor validates
+ *    the YAML configuration and hands the core its JSON form).
+ *
+ * The part between HW_CDEF_BEGIN and HW_CDEF_END is read verbatim by the cffi build script, so it
+ * holds plain declarations and integer #defines only.
+ */
+#ifndef HEADWAY_H
+#define HEADWAY_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* HW_CDEF_BEGIN */
+#define HW_ABI_VERSION 1
+
+#define HW_MAX_TRACKS 64
+#define HW_MAX_LANES 8
+#define HW_MAX_STAGES 12
+#define HW_STAGE_NAME_LEN 16
+
+/* Status codes returned by every call. */
+typedef enum {
+    HW_OK = 0,
+    HW_ERR_INVALID_ARGUMENT = 1, /* a null pointer, a wrong size, a frame of the wrong shape */
+    HW_ERR_CONFIG = 2,           /* the configuration JSON is malformed or a value is out of range */
+    HW_ERR_SOURCE = 3,           /* the frame source cannot be opened (missing device, not a video) */
+    HW_ERR_STATE = 4,            /* call not allowed now (start while running, push without a push source) */
+    HW_ERR_TIMEOUT = 5,          /* pop: no result within the timeout */
+    HW_ERR_END_OF_STREAM = 6,    /* pop: the source has ended and every result was popped */
+    HW_ERR_INTERNAL = 7          /* an unexpected exception inside the core (message says which) */
+} hw_status;
+
+/* FCW levels. */
+typedef enum { HW_FCW_NONE = 0, HW_FCW_PREWARNING = 1, HW_FCW_WARNING = 2 } hw_fcw_level;
+
+/* State of the frame source feeding a running loop. */
+typedef enum {
+    HW_SOURCE_IDLE = 0,         /* not started */
+    HW_SOURCE_RUNNING = 1,      /* delivering frames */
+    HW_SOURCE_RECONNECTING = 2, /* a live source lost its device and is retrying with back-off */
+    HW_SOURCE_ENDED = 3,        /* a file or folder reached its end */
+    HW_SOURCE_FAILED = 4        /* gave up (e.g. a recording that cannot be decoded at all) */
+} hw_source_state;
+
+/* Health event bits, set in hw_frame_result.events for the frame where they happened and
+ * accumulated in hw_health.event_counts. */
+#define HW_EVENT_DECODE_ERROR 1   /* a frame could not be decoded and was skipped */
+#define HW_EVENT_SOURCE_LOST 2    /* a live device stopped delivering (unplugged, read failure) */
+#define HW_EVENT_RECONNECTED 4    /* a live device came back */
+#define HW_EVENT_SIZE_CHANGED 16  /* a frame of another size than the first one was skipped */
+
+typedef struct {
+    int32_t id;            /* stable track id, >= 1 */
+    int32_t confirmed;     /* 1 once the tracker confirmed it (M hits), else 0 */
+    int32_t age_frames;    /* frames since the track was created */
+    float left, top, right, bottom; /* box in pixels of the processed frame */
+    float confidence;      /* 0..1 */
+    float vx_px_s, vy_px_s;         /* image velocity of the bottom centre, px/s */
+    float range_m;         /* flat-road range to the rear face (geometry stage), NaN if n/a */
+    float range_sigma_m;   /* 1-sigma range uncertainty from the bottom-row uncertainty, NaN if n/a */
+    float lateral_m;       /* lateral offset of the rear centre, right positive, NaN if n/a */
+    float range_rate_mps;  /* d(range)/dt, negative when closing, NaN if n/a */
+    float ttc_s;           /* range-based time to collision, NaN if n/a or not closing */
+    float ttc_scale_s;     /* scale-based TTC = w / (dw/dt), NaN if n/a or not closing */
+    int32_t lane_index;    /* 0 ego lane, -1 left, +1 right ...; -1000 if unknown */
+    int32_t in_path;       /* 1 in the ego path, 0 not, -1 unknown */
+} hw_track;
+
+typedef struct {
+    /* a lane boundary as a segment in the image: bottom point and top point, px */
+    float x_bottom, y_bottom, x_top, y_top;
+    int32_t position;      /* -2 left of left boundary, -1 ego left, +1 ego right, +2 right of it */
+    int32_t observed;      /* 1 measured in this frame, 0 carried over by lane tracking */
+} hw_lane;
+
+typedef struct {
+    char name[HW_STAGE_NAME_LEN];
+    float ms;
+} hw_stage_time;
+
+typedef struct {
+    int64_t frame_number;  /* 0-based number of the frame from its source */
+    double t_capture_s;    /* capture timestamp (monotonic clock for live sources, media time otherwise) */
+    double t_done_s;       /* monotonic clock when processing finished */
+    int32_t width, height;
+    int32_t events;        /* HW_EVENT_* bits for this frame */
+    int32_t full_detection;/* 1 if the detector ran on the whole road area this frame */
+    int32_t n_tracks;
+    hw_track tracks[HW_MAX_TRACKS];
+    int32_t n_lanes;
+    hw_lane lanes[HW_MAX_LANES];
+    float vanishing_x, vanishing_y; /* NaN if no lane model yet */
+    float horizon_row;     /* horizon row used for range, NaN if n/a */
+    int32_t lead_id;       /* -1 if no lead */
+    int32_t fcw_level;     /* hw_fcw_level; always HW_FCW_NONE from the core: the warning state machine
+                              runs in the supervisor, which has the ego speed, brake and turn signals */
+    int32_t n_stages;
+    hw_stage_time stages[HW_MAX_STAGES];
+    float total_ms;
+} hw_frame_result;
+
+typedef struct {
+    int32_t running;          /* 1 while the real-time thread runs */
+    int32_t source_state;     /* hw_source_state */
+    int64_t frames_captured;  /* frames read from the source */
+    int64_t frames_processed;
+    int64_t results_dropped;  /* results dropped because the queue to the caller was full */
+    int64_t frames_pushed_dropped; /* pushed frames dropped because the push queue was full */
+    int64_t decode_errors;
+    int64_t source_losses;
+    int64_t reconnects;
+    double last_frame_t_s;    /* capture time of the last frame, NaN before the first */
+    double last_progress_s;   /* monotonic time the loop last finished a frame (watchdog), NaN before */
+    float last_total_ms;
+    int32_t queue_depth;
+    int32_t queue_capacity;
+} hw_health;
+
+typedef struct hw_pipeline hw_pipeline;
+
+int hw_abi_version(void);
+const char *hw_error_message(int code);
+/* Message of the last failed call on this thread ("" if none). Valid until the next call. */
+const char *hw_last_error(void);
+/* Monotonic clock of the core, seconds (the clock of t_done_s and live capture timestamps). */
+double hw_monotonic_s(void);
+
+/* config_json: the full configuration (see app/config.py); NULL or "{}" for the defaults. */
+int hw_pipeline_create(const char *config_json, hw_pipeline **out);
+void hw_pipeline_destroy(hw_pipeline *p);
+/* The effective configuration (every key the core knows, with the value in use) as JSON, written
+ * into buf with its terminating zero. *needed receives the size required; HW_ERR_INVALID_ARGUMENT
+ * if buf_len is smaller. */
+int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *needed);
+
+/* Offline: run the same per-frame code as the real-time loop on one 8-bit gray frame.
+ * Not allowed while the loop runs. t_s must not go backwards (HW_ERR_INVALID_ARGUMENT). */
+int hw_pipeline_process(hw_pipeline *p, const uint8_t *gray, int32_t width, int32_t height,
+                        int32_t stride, double t_s, hw_frame_result *out);
+/* Run the single-image units on one frame, without touching any tracking state, for tests and
+ * evaluation: stage "lanes" (lane markings of this image alone), "hypotheses" (lanes + shadow
+ * hypotheses, reported as unconfirmed tracks with id -1), "detect" (lanes + hypotheses + vertical-edge
+ * verification: the detector's boxes with their scores as confidence). */
+int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
+                          int32_t height, int32_t stride, hw_frame_result *out);
+/* The car's own motion from the vehicle bus (NaN = not available): used for the ego path when the
+ * lanes are missing. Allowed while the loop runs; takes effect from the next frame. */
+int hw_pipeline_set_ego_motion(hw_pipeline *p, double speed_mps, double yaw_rate_rps);
+/* Forget all state (tracks, lane model) as if newly created. Not allowed while the loop runs. */
+int hw_pipeline_reset(hw_pipeline *p);
+
+/* source_json: {"kind": "v4l2"|"firewire"|"video"|"folder"|"push", ...} (see app/config.py).
+ * Opens the source (HW_ERR_SOURCE with a message if it cannot) and starts the real-time thread. */
+int hw_pipeline_start(hw_pipeline *p, const char *source_json);
+/* Stops and joins the thread; results still queued can be popped afterwards. Idempotent. */
+int hw_pipeline_stop(hw_pipeline *p);
+/* Wait up to timeout_ms for the next result (the GIL is released by cffi meanwhile). */
+int hw_pipeline_pop(hw_pipeline *p, int32_t timeout_ms, hw_frame_result *out);
+/* Push source only: copy one frame into the core. gray: channels 1; bgr: channels 3. Returns
+ * HW_ERR_INVALID_ARGUMENT if the size differs from the source's configured size. */
+int hw_pipeline_push(hw_pipeline *p, const uint8_t *data, int32_t width, int32_t height,
+                     int32_t channels, int32_t stride, double t_s);
+/* Push source only: no more frames; the loop ends after the queued ones. */
+int hw_pipeline_push_end(hw_pipeline *p);
+int hw_pipeline_health(hw_pipeline *p, hw_health *out);
+/* HW_CDEF_END */
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* HEADWAY_H */

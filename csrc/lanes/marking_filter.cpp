@@ -1,0 +1,147 @@
+#include "lanes/marking_filter.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <stdexcept>
+
+namespace hw {
+
+namespace {
+
+// Sub-pixel position of a peak from its two neighbours (parabola through l, c, r):
+// offset = (l - r) / (2 (l - 2c + r)), in [-0.5, 0.5] for a true peak.
+float peak_offset(int l, int c, int r) {
+    const int den = l - 2 * c + r;
+    if (den == 0) return 0.f;
+    return std::clamp(0.5f * float(l - r) / float(den), -0.5f, 0.5f);
+}
+
+constexpr float kMaxSlope = 6.f;  // |dx/dy| of the flattest marking considered (80 deg from vertical)
+
+// Keeps the points that continue into the previous or next scanned row: within 1.5 px of where a
+// line through the vanishing point would put them, plus |k| px per row for the slope uncertainty.
+void keep_runs(std::vector<MarkingPoint> &pts, const ScanBand &band, const HorizonPrior &hp) {
+    const size_t n = pts.size();
+    std::vector<char> keep(n, 0);
+    size_t prev_lo = 0, prev_hi = 0;  // points of the previous scanned row: [prev_lo, prev_hi)
+    size_t i = 0;
+    while (i < n) {
+        size_t j = i;
+        while (j < n && pts[j].y == pts[i].y) ++j;  // this row: [i, j)
+        if (prev_hi > prev_lo && pts[prev_lo].y == pts[i].y - float(band.step)) {
+            for (size_t a = i; a < j; ++a) {
+                const float k = std::min(kMaxSlope, std::fabs(pts[a].x - hp.vp_x) /
+                                                        std::max(1.f, pts[a].y - (hp.row + hp.tol_px)));
+                const float tol = 1.5f + k * float(band.step);
+                for (size_t b = prev_lo; b < prev_hi; ++b)
+                    if (std::fabs(pts[b].x - pts[a].x) <= tol) keep[a] = keep[b] = 1;
+            }
+        }
+        prev_lo = i;
+        prev_hi = j;
+        i = j;
+    }
+    size_t o = 0;
+    for (size_t a = 0; a < n; ++a)
+        if (keep[a]) pts[o++] = pts[a];
+    pts.resize(o);
+}
+
+} // namespace
+
+ScanBand scan_band(cv::Size size, const CameraParams &cam, const HorizonPrior &hp,
+                   const MarkingFilterParams &p) {
+    ScanBand b;
+    const float top = row_at_range(cam, hp.row, float(p.max_range_m));
+    b.y_top = std::clamp(int(std::ceil(top)), 0, size.height - 1);
+    b.y_bottom = size.height - 1 - int(std::lround(p.hood_frac * size.height));
+    const int n = b.y_bottom - b.y_top + 1;
+    b.step = n > 0 ? std::max(1, (n + p.max_scan_rows - 1) / p.max_scan_rows) : 1;
+    return b;
+}
+
+void find_marking_points(const cv::Mat &gray, const ScanBand &band, const CameraParams &cam,
+                         const HorizonPrior &hp, const MarkingFilterParams &p,
+                         std::vector<MarkingPoint> &out) {
+    if (gray.empty() || gray.type() != CV_8UC1)
+        throw std::invalid_argument("find_marking_points: expected a non-empty 8-bit gray image");
+    if (band.y_top < 0 || band.y_bottom >= gray.rows || band.step < 1)
+        throw std::invalid_argument("find_marking_points: scan band outside the image");
+    out.clear();
+    const int w = gray.cols;
+    if (w < 8) return;
+
+    std::vector<int16_t> g(size_t(w), 0);
+    std::vector<float> rising, falling;
+    const int t_min = int(std::ceil(p.min_edge_contrast));
+
+    for (int y = band.y_top; y <= band.y_bottom; y += band.step) {
+        const uint8_t *row = gray.ptr<uint8_t>(y);
+        // [-1 0 1] correlation: g(x) = I(x+1) - I(x-1); its negative is the [1 0 -1] response.
+        int sum_abs = 0;
+        for (int x = 1; x < w - 1; ++x) {
+            const int d = int(row[x + 1]) - int(row[x - 1]);
+            g[size_t(x)] = int16_t(d);
+            sum_abs += std::abs(d);
+        }
+        const int t_edge = std::max(t_min, int(std::ceil(p.noise_factor * sum_abs / (w - 2))));
+
+        // Edges are the local maxima of each response above the threshold (one per edge).
+        rising.clear();
+        falling.clear();
+        for (int x = 2; x < w - 2; ++x) {
+            const int v = g[size_t(x)];
+            if (v >= t_edge) {
+                if (v >= g[size_t(x - 1)] && v > g[size_t(x + 1)])
+                    rising.push_back(float(x) + peak_offset(g[size_t(x - 1)], v, g[size_t(x + 1)]));
+            } else if (-v >= t_edge) {
+                if (-v >= -g[size_t(x - 1)] && -v > -g[size_t(x + 1)])
+                    falling.push_back(float(x) + peak_offset(-g[size_t(x - 1)], -v, -g[size_t(x + 1)]));
+            }
+        }
+        if (rising.empty() || falling.empty()) continue;
+
+        // Marking width the flat-road model allows on this row, for any horizon within the prior's
+        // tolerance: w = marking_m * fx (y - y_h) / (fy h); blur widens a thin bar by up to ~2 px.
+        const float ppm_lo = px_per_m(cam, hp.row + hp.tol_px, float(y));
+        const float ppm_hi = px_per_m(cam, hp.row - hp.tol_px, float(y));
+        const float w_min = std::max(1.f, 0.7f * float(p.marking_min_m) * ppm_lo);
+        const float w_max = 1.2f * float(p.marking_max_m) * ppm_hi + 2.f;
+        const float dy_vp = std::max(1.f, float(y) - (hp.row + hp.tol_px));
+
+        // Pair each dark-to-bright edge with the next bright-to-dark edge, if no other
+        // dark-to-bright edge comes first.
+        size_t j = 0;
+        for (size_t i = 0; i < rising.size(); ++i) {
+            const float r = rising[i];
+            while (j < falling.size() && falling[j] <= r) ++j;
+            if (j == falling.size()) break;
+            const float f = falling[j];
+            if (i + 1 < rising.size() && rising[i + 1] < f) continue;
+            // A slanted marking is wider along the row by sqrt(1 + k^2), k = dx/dy of the line from
+            // the vanishing point through it.
+            const float k = std::min(kMaxSlope, std::fabs(0.5f * (r + f) - hp.vp_x) / dy_vp);
+            const float width = f - r;
+            if (width < w_min || width > w_max * std::sqrt(1.f + k * k)) continue;
+
+            // Bar: pixels strictly between the edges; sides: one pixel beyond each edge pixel.
+            int a = int(std::floor(r)) + 1, b = int(std::ceil(f)) - 1;
+            if (b < a) a = b = int(std::lround(0.5f * (r + f)));
+            int sum = 0;
+            for (int x = a; x <= b; ++x) sum += row[x];
+            const float inside = float(sum) / float(b - a + 1);
+            const int xl = std::max(0, int(std::floor(r)) - 1);
+            const int xr = std::min(w - 1, int(std::ceil(f)) + 1);
+            const float side = float(std::max(row[xl], row[xr]));
+            const float contrast = inside - side;
+            if (contrast < float(p.min_bar_contrast) || contrast < float(p.min_bar_ratio) * side) continue;
+            out.push_back({0.5f * (r + f), float(y), contrast});
+        }
+    }
+    if (p.min_run_rows >= 2) keep_runs(out, band, hp);
+}
+
+} // namespace hw

@@ -1,0 +1,87 @@
+// marking_filter.hpp - lane-marking points from row filtering (thesis: masks [-1 0 1] / [1 0 -1]).
+//
+// The thesis filters each row with [-1 0 1] (dark-to-bright transitions) or [1 0 -1] (bright-to-dark)
+// so that only one edge of each marking responds, and feeds that to the Hough transform. Here both
+// responses are computed from the same row difference, and a marking point is kept only where a
+// dark-to-bright edge is followed, within the marking width the flat-road model allows at that row,
+// by a bright-to-dark edge, with the bar between them brighter than both sides. The point is the
+// middle of the bar: the marking centre, which is what the lane boundary means, and shadow edges,
+// tar seams and vehicle outlines (single steps or wide bright areas) give no point at all.
+#pragma once
+
+#include "core/params.hpp"
+#include "geometry/camera.hpp"
+#include "lanes/road_geometry.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <vector>
+
+namespace hw {
+
+struct MarkingFilterParams {
+    double min_edge_contrast = 8.0;  // gray levels; [-1 0 1] response of a marking edge
+    double noise_factor = 3.0;       // edge threshold >= this times the row's mean |response|
+    double min_bar_contrast = 10.0;  // gray levels; marking brighter than both sides by at least this
+    double min_bar_ratio = 0.08;     // marking brighter than its brighter side by this fraction
+    double marking_min_m = 0.08;     // m; narrowest marking (thin lines, Botts' dots)
+    double marking_max_m = 0.45;     // m; widest marking (wide edge lines, double lines merged)
+    double max_range_m = 60.0;       // m; farthest road range scanned (markings beyond are a few px)
+    int max_scan_rows = 200;         // rows; at most this many rows are filtered (cost bound)
+    int min_run_rows = 2;            // scanned rows; a marking point needs neighbours to make a run this long
+    double hood_frac = 0.0;          // fraction of the image height at the bottom not scanned (bonnet)
+
+    void bind(ParamMap &m) {
+        m.add("min_edge_contrast", min_edge_contrast, 1.0, 255.0,
+              "gray levels; smallest [-1 0 1] row response counted as a marking edge; 8 keeps faint "
+              "markings in shadow and on concrete while sensor noise stays below it");
+        m.add("noise_factor", noise_factor, 0.0, 20.0,
+              "1; the edge threshold of a row is at least this times the row's mean absolute [-1 0 1] "
+              "response, so road texture and JPEG noise give no edges while markings (several times the "
+              "texture contrast) still do; 0 disables");
+        m.add("min_bar_contrast", min_bar_contrast, 1.0, 255.0,
+              "gray levels; a marking must be this much brighter than both of its sides; 10 as the edge "
+              "threshold plus a margin for blur");
+        m.add("min_bar_ratio", min_bar_ratio, 0.0, 2.0,
+              "fraction; a marking must also be this much brighter relative to its brighter side, so the "
+              "threshold scales with illumination (sunlit vs shadowed road, the thesis' fixed-threshold weakness)");
+        m.add("marking_min_m", marking_min_m, 0.01, 1.0,
+              "m; narrowest marking accepted; 0.08 below the 0.10-0.15 m of painted lines");
+        m.add("marking_max_m", marking_max_m, 0.05, 2.0,
+              "m; widest bright bar accepted as one marking; 0.45 covers 0.30 m edge lines and close double lines");
+        m.add("max_range_m", max_range_m, 5.0, 500.0,
+              "m; farthest range scanned; 60 m, beyond which a marking is one or two pixels wide");
+        m.add("max_scan_rows", max_scan_rows, 8, 4096,
+              "rows; at most this many rows are filtered (evenly spaced); bounds cost on large frames; 200 "
+              "scans every row of small frames (Botts' dots are 2-4 rows tall) and every second row of a "
+              "640x480 road area");
+        m.add("min_run_rows", min_run_rows, 1, 2,
+              "scanned rows; 2: a point is kept only if the next or previous scanned row has a point where the "
+              "marking would continue (markings are long, texture specks and noise are not); 1 keeps all");
+        m.add("hood_frac", hood_frac, 0.0, 0.5,
+              "fraction of the image height; bottom rows not scanned (bonnet in view); 0 for none");
+    }
+};
+
+// One marking centre found on one scanned row.
+struct MarkingPoint {
+    float x = 0.f, y = 0.f;
+    float contrast = 0.f;  // gray levels above the brighter side
+};
+
+// The rows that are scanned: y_top..y_bottom inclusive, every `step` rows.
+struct ScanBand {
+    int y_top = 0, y_bottom = 0, step = 1;
+    int rows() const { return y_bottom < y_top ? 0 : (y_bottom - y_top) / step + 1; }
+};
+
+// Band from max_range_m below the horizon prior down to the bottom (minus the bonnet).
+ScanBand scan_band(cv::Size size, const CameraParams &cam, const HorizonPrior &hp,
+                   const MarkingFilterParams &p);
+
+// Marking centres on the rows of `band`; appends to `out` (cleared first).
+void find_marking_points(const cv::Mat &gray, const ScanBand &band, const CameraParams &cam,
+                         const HorizonPrior &hp, const MarkingFilterParams &p,
+                         std::vector<MarkingPoint> &out);
+
+} // namespace hw

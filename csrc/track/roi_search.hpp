@@ -1,0 +1,43 @@
+// roi_search.hpp - re-finding a tracked vehicle around its predicted bottom corners (thesis 3.6.1).
+//
+// Bottom: project the shadow edges (bright road below, dark shadow above) of the vehicle's inner
+// columns onto the rows inside the Kalman gate around the predicted bottom row; the largest value
+// is the bottom edge. Sides: project the vertical edges of an ROI standing on that bottom, widened
+// by the gate, onto the columns and apply the two-threshold rule (half the largest value first; the
+// largest value itself if a side would jump more than the largest change seen so far). The
+// measurement is accepted only with a clear bottom edge, two sides that stand out against the road,
+// and a width close to the predicted one.
+#pragma once
+
+#include "detect/shadow.hpp"
+#include "detect/verify.hpp"
+
+namespace hw {
+
+// Where to look: the predicted bottom corners and the gate half-widths (px) around them.
+struct RoiPrediction {
+    float x1 = 0.f, y1 = 0.f, x2 = 0.f;
+    float gate_x = 0.f, gate_y = 0.f;
+    float max_side_change = 0.f;  // two-threshold rule: largest accepted side change so far (px)
+};
+
+struct RoiSearchParams {
+    double bottom_min_frac = 0.5;    // bottom edge profile / step threshold, at least
+    double max_scale_change = 0.25;  // |measured width / predicted width - 1|, at most
+};
+
+struct RoiMeasurement {
+    bool found = false;
+    float x1 = kNaN, y1 = kNaN, x2 = kNaN;
+    float side_excess = 0.f;  // weaker side / side threshold (>= 1 when found)
+    float road_gray = kNaN;
+};
+
+RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const ShadowParams &shadow,
+                          const VerifyParams &verify, const RoiSearchParams &p);
+
+// Gray level of the road right below a bottom edge (median of a strip under [x1, x2]); NaN if the
+// strip lies outside the image.
+float road_gray_below(const cv::Mat &gray, float x1, float y1, float x2);
+
+} // namespace hw

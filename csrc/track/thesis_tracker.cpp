@@ -1,0 +1,305 @@
+#include "track/thesis_tracker.hpp"
+
+#include "core/stopwatch.hpp"
+#include "detect/road_prior.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace hw {
+
+void KalmanBoxParams::bind(ParamMap &m) {
+    m.add("detect_every_n", detect_every_n, 1, 1000,
+          "frames; the full shadow + vertical-edge detector runs on every n-th frame to find new "
+          "vehicles, the frames between only search around the predictions (thesis: 10)");
+    m.add("accel_mps2", accel_mps2, 0.0, 50.0,
+          "m/s^2; bound A of a vehicle's acceleration relative to the ego, converted to px/s^2 with the "
+          "vehicle's image width; sets the Kalman process noise (bounded-acceleration model)");
+    m.add("ego_accel_px_s2", ego_accel_px_s2, 0.0, 1e5,
+          "px/s^2; image acceleration any vehicle can show from the ego's pitch and yaw motion "
+          "(road bumps), added to the bound A whatever the range");
+    m.add("p_max", p_max, 0.0, 0.5,
+          "probability that the acceleration is exactly +-A in the bounded-acceleration model, "
+          "sigma^2 = A^2/3 (1 + 4 p_max - p_zero)");
+    m.add("p_zero", p_zero, 0.0, 1.0, "probability of zero acceleration in that model");
+    m.add("meas_sigma_px", meas_sigma_px, 0.05, 50.0,
+          "px; 1-sigma error of a measured corner (edge peaks are sub-pixel), floor");
+    m.add("meas_sigma_frac", meas_sigma_frac, 0.0, 1.0,
+          "vehicle widths; measured-corner error of large (near) vehicles, whose edges are blurred wider");
+    m.add("init_speed_mps", init_speed_mps, 0.01, 50.0,
+          "m/s; 1-sigma image speed of a new track (converted with its width); a new vehicle's "
+          "motion is unknown until its second measurement");
+    m.add("gate_sigma", gate_sigma, 0.5, 10.0,
+          "innovation standard deviations; half-size of the ROI searched around a prediction (the "
+          "Kalman filter decides how far to look)");
+    m.add("min_gate_px", min_gate_px, 0.0, 100.0, "px; smallest half-size of that search window");
+    m.add("side_change_floor_px", side_change_floor_px, 0.0, 100.0,
+          "px; the two-threshold side rule falls back to the largest projection when a side moves "
+          "more than the largest change seen so far, but never less than this");
+    m.add("bottom_min_frac", roi.bottom_min_frac, 0.0, 1.0,
+          "fraction of the shadow step threshold; the bottom-edge profile of a tracked vehicle must "
+          "reach this (e.g. half of its columns with a full shadow step)");
+    m.add("max_scale_change", roi.max_scale_change, 0.01, 1.0,
+          "fraction; a re-found vehicle's width may differ from the predicted one by at most this");
+    m.add("confirm_hits", confirm_hits, 1, 100,
+          "M; measurements before a track is confirmed (reported as confirmed, used for warnings)");
+    m.add("max_misses", max_misses, 1, 1000,
+          "K; consecutive frames a confirmed vehicle may be missed (edges, detection and correlation "
+          "all failed) before it is deleted");
+    m.add("tentative_max_misses", tentative_max_misses, 1, 100,
+          "frames; a tentative track missed this many times in a row is deleted");
+    m.add("ncc_min", ncc_min, -1.0, 1.0,
+          "normalised correlation of the last box with the region now above which an unfound "
+          "vehicle is kept (thesis' check before dropping a vehicle)");
+    m.add("ncc_template_px", ncc_template_px, 4, 256,
+          "px; templates are scaled down to at most this width, bounding the cost of the check");
+    m.add("ncc_min_std_gray", ncc_min_std_gray, 0.0, 100.0,
+          "gray levels; a template flatter than this is not used (it correlates with any flat road)");
+    m.add("ncc_search_frac", ncc_search_frac, 0.0, 1.0,
+          "vehicle widths; the correlation looks for the vehicle this far around its prediction");
+    m.add("ncc_sigma_scale", ncc_sigma_scale, 1.0, 100.0,
+          "factor; a position found by correlation is used as a measurement this much noisier than "
+          "an edge measurement");
+    m.add("max_coast_frames", max_coast_frames, 0, 1000,
+          "frames; how long a vehicle may be kept by correlation alone before misses count again");
+    m.add("match_iou", match_iou, 0.0, 1.0,
+          "IoU of a detection with a predicted box above which it measures that vehicle");
+    m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
+          "IoU above which two tracks are the same vehicle; the one with fewer measurements goes");
+    m.add("max_dt_s", max_dt_s, 0.01, 100.0,
+          "s; a gap between frames longer than this drops all tracks (the predictions are void)");
+}
+
+ThesisTracker::ThesisTracker(const ShadowParams &s, const VerifyParams &v, const KalmanBoxParams &k)
+    : shadow_(s), verify_(v), kalman_(k) {}
+
+void ThesisTracker::reset() {
+    tracks_.clear();
+    next_id_ = 1;
+    frames_since_detection_ = 0;
+    started_ = false;
+}
+
+namespace {
+
+float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
+    const float inter = (a & b).area();
+    const float uni = a.area() + b.area() - inter;
+    return uni > 0.f ? inter / uni : 0.f;
+}
+
+// Quality of a measurement for the confidence: 0.5 when the weaker side just passes, towards 1.
+float side_quality(float side_excess) { return 1.f - 0.5f / std::sqrt(std::max(1.f, side_excess)); }
+
+} // namespace
+
+cv::Rect2f ThesisTracker::box_of(const KalmanBox::Vec3 &z) const {
+    const float w = float(z[2] - z[0]), h = float(verify_.aspect_ratio) * w;
+    return {float(z[0]), float(z[1]) - h, w, h};
+}
+
+KalmanBox::Vec3 ThesisTracker::sigma_of(const Track &t) const {
+    const KalmanBox::Vec3 z = t.kf.measurement();
+    const double s = std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * (z[2] - z[0]));
+    return {s, s, s};
+}
+
+double ThesisTracker::accel_bound(const Track &t) const {
+    // A vehicle of width W m at range Z spans w = fx W / Z px: a lateral acceleration a shows as
+    // fx a / Z = a w / W px/s^2.
+    const KalmanBox::Vec3 z = t.kf.measurement();
+    return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / shadow_.road.vehicle_width_m + kalman_.ego_accel_px_s2;
+}
+
+void ThesisTracker::predict_all(double dt) {
+    for (Track &t : tracks_) {
+        const double a = accel_bound(t);
+        t.kf.predict(dt, a, a, kalman_.p_max, kalman_.p_zero);
+        t.age++;
+        t.updated = false;
+    }
+}
+
+void ThesisTracker::apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality) {
+    const KalmanBox::Vec3 s = sigma_of(t);
+    t.kf.update(z, s[0] * sigma_scale, s[1] * sigma_scale);
+    t.confidence = 0.7f * t.confidence + 0.3f * quality;
+}
+
+bool ThesisTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
+    const KalmanBox::Vec3 z = t.kf.measurement(), s = sigma_of(t);
+    const KalmanBox::Mat3 S = t.kf.innovation_cov(s[0], s[1]);
+    RoiPrediction pred;
+    pred.x1 = float(z[0]); pred.y1 = float(z[1]); pred.x2 = float(z[2]);
+    pred.gate_x = float(std::max(kalman_.min_gate_px, kalman_.gate_sigma * std::sqrt(std::max(S(0, 0), S(2, 2)))));
+    pred.gate_y = float(std::max(kalman_.min_gate_px, kalman_.gate_sigma * std::sqrt(S(1, 1))));
+    pred.max_side_change = std::clamp(t.max_side_change, float(kalman_.side_change_floor_px),
+                                      std::max(float(kalman_.side_change_floor_px), pred.gate_x));
+    const RoiMeasurement m = search_roi(gray, pred, shadow_, verify_, kalman_.roi);
+    if (!m.found) return false;
+    t.max_side_change = std::max({t.max_side_change, std::abs(m.x1 - pred.x1), std::abs(m.x2 - pred.x2)});
+    apply(t, KalmanBox::Vec3(m.x1, m.y1, m.x2), 1.f, side_quality(m.side_excess));
+    return true;
+}
+
+bool ThesisTracker::measure_by_detection(Track &t, std::vector<Detection> &dets, std::vector<bool> &used) {
+    const cv::Rect2f pred = box_of(t.kf.measurement());
+    int best = -1;
+    float best_iou = float(kalman_.match_iou);
+    for (size_t i = 0; i < dets.size(); ++i) {
+        const float o = iou(pred, dets[i].box);
+        if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
+    }
+    if (best < 0) return false;
+    used[size_t(best)] = true;
+    const cv::Rect2f &b = dets[size_t(best)].box;
+    apply(t, KalmanBox::Vec3(b.x, b.y + b.height, b.x + b.width), 1.f, dets[size_t(best)].score);
+    return true;
+}
+
+bool ThesisTracker::measure_by_template(const cv::Mat &gray, Track &t) {
+    if (!t.appearance.usable()) return false;
+    // Move the template's box with the predicted motion of the bottom-left corner since it was cut.
+    const KalmanBox::Vec3 z = t.kf.measurement();
+    const cv::Rect2f last = box_of(t.appearance_z);
+    const float dx = float(z[0]) - last.x, dy = float(z[1]) - (last.y + last.height);
+    const cv::Rect2f at(t.appearance.box.x + dx, t.appearance.box.y + dy, t.appearance.box.width,
+                        t.appearance.box.height);
+    const TemplateMatch m = match_template(gray, t.appearance, at, float(kalman_.ncc_search_frac * (z[2] - z[0])));
+    if (m.ncc < kalman_.ncc_min) return false;
+    apply(t, KalmanBox::Vec3(z[0] + m.shift.x, z[1] + m.shift.y, z[2] + m.shift.x), float(kalman_.ncc_sigma_scale),
+          0.5f * m.ncc);
+    return true;
+}
+
+void ThesisTracker::start_tracks(const cv::Mat &gray, const std::vector<Detection> &dets,
+                                 const std::vector<bool> &used) {
+    for (size_t i = 0; i < dets.size(); ++i) {
+        if (used[i]) continue;
+        const cv::Rect2f &b = dets[i].box;
+        const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
+        bool explained = false;
+        for (const Track &t : tracks_) {
+            const cv::Rect2f tb = box_of(t.kf.measurement());
+            // A detection on a tracked vehicle's body (window, bumper) is not a new vehicle either.
+            explained = explained || iou(tb, b) >= 0.2f ||
+                        (foot.x >= tb.x && foot.x <= tb.x + tb.width && foot.y >= tb.y && foot.y <= tb.y + tb.height);
+        }
+        if (explained) continue;
+        const KalmanBox::Vec3 z(b.x, b.y + b.height, b.x + b.width);
+        const double w = b.width;
+        Track t{next_id_++,
+                KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
+                          kalman_.init_speed_mps * w / shadow_.road.vehicle_width_m)};
+        t.confidence = dets[i].score;
+        t.appearance = make_template(gray, b, kalman_.ncc_template_px, kalman_.ncc_min_std_gray);
+        t.appearance_z = z;
+        t.updated = true;
+        t.confirmed = t.hits >= kalman_.confirm_hits;
+        tracks_.push_back(std::move(t));
+    }
+}
+
+void ThesisTracker::prune(const cv::Mat &gray, float horizon) {
+    // Same vehicle twice (two tracks converged): keep the one with more measurements.
+    for (size_t i = 0; i < tracks_.size(); ++i)
+        for (size_t j = i + 1; j < tracks_.size(); ++j) {
+            Track &a = tracks_[i], &b = tracks_[j];
+            if (a.duplicate || b.duplicate) continue;
+            if (iou(box_of(a.kf.measurement()), box_of(b.kf.measurement())) < kalman_.duplicate_iou) continue;
+            Track &loser = (a.hits > b.hits || (a.hits == b.hits && a.id < b.id)) ? b : a;
+            loser.duplicate = true;
+        }
+    const auto gone = [&](const Track &t) {
+        const KalmanBox::Vec3 z = t.kf.measurement();
+        const double w = z[2] - z[0];
+        const int limit = t.confirmed ? kalman_.max_misses : kalman_.tentative_max_misses;
+        return t.duplicate || t.misses >= limit || !(w >= 3.0) || z[1] <= horizon + 1.0 || z[2] < 0.0 || z[0] > gray.cols ||
+               z[1] - verify_.aspect_ratio * w > gray.rows;
+    };
+    tracks_.erase(std::remove_if(tracks_.begin(), tracks_.end(), gone), tracks_.end());
+}
+
+TrackState ThesisTracker::report(const Track &t) const {
+    TrackState s;
+    const KalmanBox::Vec6 &x = t.kf.state();
+    s.id = t.id;
+    s.confirmed = t.confirmed;
+    s.age_frames = t.age;
+    s.box = box_of(t.kf.measurement());
+    s.confidence = std::clamp(t.confidence, 0.f, 1.f);
+    s.vel_px_s = cv::Point2f(float(0.5 * (x[3] + x[5])), float(x[4]));  // bottom centre
+    s.bottom_sigma_px = float(std::sqrt(t.kf.cov()(1, 1)));
+    return s;
+}
+
+void ThesisTracker::step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
+                         bool &full_detection) {
+    CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
+    Stopwatch track_time;
+    float detect_ms = 0.f;
+    double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
+    if (dt < 0.0 || dt > kalman_.max_dt_s) {  // a gap: the predictions mean nothing any more
+        tracks_.clear();
+        frames_since_detection_ = 0;
+        dt = 0.0;
+    }
+    started_ = true;
+    last_t_s_ = ctx.t_s;
+
+    // Predict, then re-find each vehicle in the ROI around its prediction.
+    predict_all(dt);
+    for (Track &t : tracks_) t.updated = measure_by_roi(ctx.gray, t);
+
+    // Every n-th frame: the full detector, for vehicles the ROI search lost and for new ones.
+    full_detection = frames_since_detection_ % kalman_.detect_every_n == 0;
+    std::vector<Detection> dets;
+    std::vector<bool> used;
+    if (full_detection) {
+        Stopwatch sh;
+        const auto hyps = shadow_hypotheses(ctx.gray, ctx.lanes, ctx.camera, shadow_);
+        const float hyp_ms = sh.ms();
+        Stopwatch sv;
+        dets = verify_hypotheses(ctx.gray, hyps, ctx.lanes, ctx.camera, verify_);
+        const float verify_ms = sv.ms();
+        times.add("hypotheses", hyp_ms);
+        times.add("verify", verify_ms);
+        detect_ms = hyp_ms + verify_ms;
+        used.assign(dets.size(), false);
+        for (Track &t : tracks_) {
+            if (!t.updated) {
+                t.updated = measure_by_detection(t, dets, used);
+                continue;
+            }
+            const cv::Rect2f tb = box_of(t.kf.measurement());
+            for (size_t i = 0; i < dets.size(); ++i) used[i] = used[i] || iou(tb, dets[i].box) >= kalman_.match_iou;
+        }
+    }
+    frames_since_detection_ = full_detection ? 1 : frames_since_detection_ + 1;
+
+    // Bookkeeping: hits and misses; the correlation check before a confirmed vehicle is missed.
+    for (Track &t : tracks_) {
+        if (t.updated) {
+            t.hits++;
+            t.misses = 0;
+            t.coast = 0;
+            t.confirmed = t.confirmed || t.hits >= kalman_.confirm_hits;
+            t.appearance = make_template(ctx.gray, box_of(t.kf.measurement()), kalman_.ncc_template_px,
+                                         kalman_.ncc_min_std_gray);
+            t.appearance_z = t.kf.measurement();
+        } else if (t.confirmed && measure_by_template(ctx.gray, t)) {
+            if (++t.coast > kalman_.max_coast_frames) t.misses++;
+        } else {
+            t.misses++;
+            t.confidence *= 0.7f;
+        }
+    }
+    if (full_detection) start_tracks(ctx.gray, dets, used);
+    prune(ctx.gray, horizon_row(ctx.gray.size(), ctx.lanes, ctx.camera));
+
+    tracks.clear();
+    for (const Track &t : tracks_) tracks.push_back(report(t));
+    times.add("track", std::max(0.f, track_time.ms() - detect_ms));
+}
+
+} // namespace hw

@@ -1,0 +1,96 @@
+// thesis_tracker.hpp - the thesis pipeline's tracker: shadow hypotheses + vertical-edge verification
+// every N frames, one Kalman filter per vehicle on its bottom corners, ROI search in between.
+//
+// Per frame (thesis 3.6): predict every vehicle; search the ROI around each prediction for its
+// bottom edge and sides; every detect_every_n frames run the full detector over the road area, let
+// a vehicle that its ROI search missed take the detection that overlaps its prediction, and start a
+// tentative track on every detection that no track explains. A confirmed vehicle found by neither is
+// checked by normalised correlation of its last box before it counts as missed. Tracks are confirmed
+// after confirm_hits measurements and deleted after max_misses missed frames (tentative ones after
+// tentative_max_misses). Ids are never reused until reset().
+#pragma once
+
+#include "detect/verify.hpp"
+#include "track/kalman_box.hpp"
+#include "track/roi_search.hpp"
+#include "track/template_check.hpp"
+#include "track/tracker.hpp"
+
+#include <vector>
+
+namespace hw {
+
+struct KalmanBoxParams {
+    int detect_every_n = 10;          // frames between full detections (thesis: 10)
+    double accel_mps2 = 4.0;          // m/s^2; bound A of a vehicle's acceleration relative to the ego
+    double ego_accel_px_s2 = 300.0;   // px/s^2; image acceleration from the ego's pitch and yaw motion
+    double p_max = 0.1;               // probability of acceleration exactly +-A (bounded-acceleration model)
+    double p_zero = 0.5;              // probability of no acceleration
+    double meas_sigma_px = 0.7;       // px; measurement noise of a corner, floor
+    double meas_sigma_frac = 0.02;    // measurement noise as a fraction of the width, when larger
+    double init_speed_mps = 3.0;      // m/s; 1-sigma image speed of a new track, in vehicle widths
+    double gate_sigma = 3.0;          // search window half-width in innovation standard deviations
+    double min_gate_px = 2.0;         // px; search window half-width, floor
+    double side_change_floor_px = 2.0;  // px; floor of the two-threshold rule's largest change
+    RoiSearchParams roi;              // bottom_min_frac, max_scale_change
+    int confirm_hits = 3;             // M: measurements before a track is confirmed
+    int max_misses = 5;               // K: missed frames before a confirmed track is deleted
+    int tentative_max_misses = 1;     // missed frames before a tentative track is deleted
+    double ncc_min = 0.7;             // normalised correlation that keeps an unfound vehicle
+    int ncc_template_px = 24;         // px; templates are scaled to at most this width
+    double ncc_min_std_gray = 4.0;    // gray levels; flatter templates are not correlated
+    double ncc_search_frac = 0.1;     // shift searched around the prediction, in widths
+    double ncc_sigma_scale = 3.0;     // an NCC position is this many times noisier than an edge one
+    int max_coast_frames = 15;        // frames a vehicle may live on NCC alone before misses count
+    double match_iou = 0.3;           // detection <-> predicted box overlap that is the same vehicle
+    double duplicate_iou = 0.5;       // two tracks overlapping this much: the younger is deleted
+    double max_dt_s = 1.0;            // s; a longer gap between frames restarts tracking
+
+    void bind(ParamMap &m);
+};
+
+class ThesisTracker final : public VehicleTracker {
+public:
+    ThesisTracker(const ShadowParams &shadow, const VerifyParams &verify, const KalmanBoxParams &kalman);
+    void step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
+              bool &full_detection) override;
+    void reset() override;
+
+private:
+    struct Track {
+        int id;
+        KalmanBox kf;
+        int age = 1, hits = 1, misses = 0, coast = 0;
+        bool confirmed = false;
+        float max_side_change = 0.f;  // two-threshold rule memory (px)
+        float confidence = 0.5f;
+        VehicleTemplate appearance;   // last measured box, for the correlation check
+        KalmanBox::Vec3 appearance_z; // the corners it was cut at
+        bool updated = false;         // measured (edges or detection) this frame
+        bool duplicate = false;       // another track follows the same vehicle
+    };
+
+    void predict_all(double dt);
+    bool measure_by_roi(const cv::Mat &gray, Track &t);
+    bool measure_by_detection(Track &t, std::vector<Detection> &dets, std::vector<bool> &used);
+    bool measure_by_template(const cv::Mat &gray, Track &t);
+    void start_tracks(const cv::Mat &gray, const std::vector<Detection> &dets, const std::vector<bool> &used);
+    void prune(const cv::Mat &gray, float horizon);
+    TrackState report(const Track &t) const;
+
+    void apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality);
+    cv::Rect2f box_of(const KalmanBox::Vec3 &z) const;
+    KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
+    double accel_bound(const Track &t) const;
+
+    ShadowParams shadow_;
+    VerifyParams verify_;
+    KalmanBoxParams kalman_;
+    std::vector<Track> tracks_;
+    int next_id_ = 1;
+    int frames_since_detection_ = 0;
+    double last_t_s_ = 0.0;
+    bool started_ = false;
+};
+
+} // namespace hw

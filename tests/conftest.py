@@ -1,0 +1,39 @@
+"""Shared test helpers: where the real driving data is, and small recordings made on the spot."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+DATA = REPO.parent / "shared" / "data"
+
+
+def data_path(*parts: str) -> Path:
+    """A path inside ../shared/data; the test is skipped with the reason when it is absent."""
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real driving data not found at {p} (../shared/data is absent on this machine)")
+    return p
+
+
+def write_video(path: Path, n: int = 30, size=(640, 480), fps: float = 30.0, fourcc: str = "mp4v") -> Path:
+    """A short video whose frame i has a bright square at x = 10 * i (so frames are distinguishable)."""
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, size)
+    assert w.isOpened(), f"cannot write {path}"
+    for i in range(n):
+        img = np.full((size[1], size[0], 3), 40, np.uint8)
+        cv2.rectangle(img, (10 * i, 100), (10 * i + 40, 140), (230, 230, 230), -1)
+        w.write(img)
+    w.release()
+    return path
+
+
+@pytest.fixture
+def make_video(tmp_path):
+    def make(name="clip.mp4", **kw):
+        return write_video(tmp_path / name, **kw)
+
+    return make
