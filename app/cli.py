@@ -27,7 +27,7 @@ def _cmd_replay(args) -> int:
     from app.replay import replay
 
     s = replay(args.source, config_path=args.config, fps=args.fps, out_video=args.out_video,
-               tracks_path=args.tracks)
+               tracks_path=args.tracks, can_in=args.can_in, can_out=args.can_out)
     print(s.text())
     return 0
 
@@ -67,6 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fps", type=float, help="frame rate of an image folder")
     s.add_argument("--out-video", help="write an annotated video here (.mp4)")
     s.add_argument("--tracks", help="write the tracks here (.jsonl, one line per frame)")
+    s.add_argument("--can-in", help="vehicle CAN log replayed on the frame clock (.log candump, .asc, .blf); "
+                                    "a scenario uses its own ego-speed log when not given")
+    s.add_argument("--can-out", help="write every CAN frame Headway sends here (.log, .asc or .blf)")
 
     s = sub.add_parser("detect", help="single-image vehicle detection to JSON")
     s.add_argument("images", nargs="+", help="image files")
@@ -85,6 +88,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--repeats", type=int, default=3, help="passes over the scenario")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+    s = sub.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
+    s.add_argument("--pipeline", default="thesis", help="preset to evaluate (default thesis)")
+    s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range (default all)")
+    s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
+    s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
+    s.add_argument("--out", help="report folder (default reports/eval-PIPELINE)")
+    s.add_argument("--config", help="configuration YAML")
 
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
@@ -119,6 +130,10 @@ def _dispatch(args) -> int:
         return bench.main(args)
     if args.command == "config":
         return _cmd_config(args)
+    if args.command == "eval":
+        from app.eval import report
+
+        return report.main(args)
     raise AssertionError(args.command)
 
 

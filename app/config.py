@@ -14,8 +14,10 @@ from typing import Any, Optional, Union
 
 import yaml
 
+from app.can.config_schema import CAN_SCHEMA
 from app.core import core_schema
 from app.fcw import FCW_SCHEMA
+from app.supervisor.health import HEALTH_SCHEMA
 
 
 class ConfigFileError(ValueError):
@@ -48,6 +50,22 @@ SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
                                       "(the service must come up with the car; the camera fault says why)"),
     },
     "fcw": FCW_SCHEMA,
+    **CAN_SCHEMA,
+    "health": HEALTH_SCHEMA,
+    "mcu": {
+        "port": _key("", "serial device of the cabin microcontroller (e.g. /dev/ttyACM0); empty = no MCU"),
+        "baudrate": _key(115200, "bit/s; serial speed, as in docs/firmware-protocol.md", 1200, 4000000),
+        "heartbeat_s": _key(0.2, "s; heartbeat period each way", 0.01, 10.0),
+        "silent_after_s": _key(1.0, "s; the MCU not heard for this long is the mcu_silent fault (5 heartbeats)",
+                               0.05, 60.0),
+    },
+    "service": {
+        "status_file": _key("/run/headway/status.json", "path; the status `headway status` reads, rewritten at "
+                                                        "status_rate_hz"),
+        "status_rate_hz": _key(2.0, "Hz; how often the status file and the journal summary are refreshed",
+                               0.1, 50.0),
+        "tracks_file": _key("", "path; also record the tracks of every frame here (.jsonl); empty = none"),
+    },
 }
 
 

@@ -126,6 +126,9 @@ class FrameResult:
     fcw_level: int
     stages: dict[str, float] = field(default_factory=dict)
     total_ms: float = 0.0
+    image_mean: Optional[float] = None     # gray level
+    image_stddev: Optional[float] = None   # near 0: blinded
+    image_change: Optional[float] = None   # mean |change| since the previous frame; 0: frozen
 
 
 def _result(r: Any) -> FrameResult:
@@ -173,6 +176,9 @@ def _result(r: Any) -> FrameResult:
         fcw_level=int(r.fcw_level),
         stages=stages,
         total_ms=float(r.total_ms),
+        image_mean=_opt(r.image_mean),
+        image_stddev=_opt(r.image_stddev),
+        image_change=_opt(r.image_change),
     )
 
 
@@ -304,6 +310,7 @@ class Pipeline:
             "reconnects": int(h.reconnects),
             "last_frame_t_s": _opt(h.last_frame_t_s),
             "last_progress_s": _opt(h.last_progress_s),
+            "last_alive_s": _opt(h.last_alive_s),
             "last_total_ms": _opt(h.last_total_ms),
             "queue_depth": int(h.queue_depth),
             "queue_capacity": int(h.queue_capacity),

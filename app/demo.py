@@ -27,10 +27,10 @@ def main(args) -> int:
     counts = {"truth": 0, "found": 0}
     truth_f = open(out / "truth.jsonl", "w")
 
-    def on_result(r, f):
-        truth_f.write(json.dumps({"frame": f.index, "t": f.t_s, "vehicles": f.truth}) + "\n")
+    def on_result(r, decision, truth):
+        truth_f.write(json.dumps({"frame": r.frame, "t": r.t, "vehicles": truth}) + "\n")
         # vehicles a driver would care about: mostly visible and within 60 m
-        for v in f.truth:
+        for v in truth:
             if v["visible_fraction"] >= 0.9 and v["longitudinal_m"] <= 60:
                 counts["truth"] += 1
                 if any(t.confirmed and iou(t.box, v["box"]) >= 0.5 for t in r.tracks):
@@ -38,11 +38,12 @@ def main(args) -> int:
 
     with truth_f:
         s = replay_scenario(args.scenario, config_path=args.config, out_video=str(out / "annotated.mp4"),
-                            tracks_path=str(out / "tracks.jsonl"), on_result=on_result)
+                            tracks_path=str(out / "tracks.jsonl"), can_out=str(out / "can_out.log"),
+                            on_result=on_result)
     recall = counts["found"] / counts["truth"] if counts["truth"] else float("nan")
     summary = s.text() + (f"\n  vehicles within 60 m tracked (IoU >= 0.5): {counts['found']} of "
                           f"{counts['truth']} vehicle-frames ({recall:.0%})")
     (out / "summary.txt").write_text(summary + "\n")
     print(summary)
-    print(f"\nDemo written to {out.resolve()}/ (annotated.mp4, tracks.jsonl, truth.jsonl, summary.txt)")
+    print(f"\nDemo written to {out.resolve()}/ (annotated.mp4, tracks.jsonl, truth.jsonl, can_out.log, summary.txt)")
     return 0

@@ -26,24 +26,17 @@ def max_encoded_len(n: int) -> int:
 def encode(data: bytes) -> bytes:
     """COBS-encode data; the result contains no 0x00 and carries no delimiter."""
     out = bytearray()
-    block = bytearray()
-    ended_full = False  # the last block written was a 0xFF block with no implied zero
-    for b in data:
-        if b == 0:
-            out.append(len(block) + 1)
-            out += block
-            block.clear()
-            ended_full = False
-        else:
-            block.append(b)
-            if len(block) == MAX_BLOCK:
-                out.append(0xFF)
-                out += block
-                block.clear()
-                ended_full = True
-    if block or not ended_full:
-        out.append(len(block) + 1)
-        out += block
+    runs = bytes(data).split(b"\x00")  # the zero-free runs; a zero stands after all but the last
+    for k, run in enumerate(runs):
+        i = 0
+        while len(run) - i >= MAX_BLOCK:  # full blocks: code 0xFF, no zero implied
+            out.append(0xFF)
+            out += run[i:i + MAX_BLOCK]
+            i += MAX_BLOCK
+        rest = run[i:]
+        if rest or i == 0 or k < len(runs) - 1:  # a full last block needs no empty block after it
+            out.append(len(rest) + 1)
+            out += rest
     return bytes(out)
 
 

@@ -25,8 +25,8 @@ States (health()["state"]):
                   incompatible_retry_s) is sent until a compatible HELLO_ACK arrives
 
 Any read/write error (SerialException, OSError), the port path vanishing or pointing at another
-device closes the port and goes to `disconnected`. An MCU reset (its uptime going back) or a
-HELLO_ACK while up starts a new handshake.
+device closes the port and goes to `disconnected`. An MCU reset (its uptime going back) starts a
+new handshake. close() closes the port for good: poll() does not reopen it.
 """
 from __future__ import annotations
 
@@ -144,6 +144,7 @@ class McuLink:
         self._last_heard: float | None = None
         self._mcu: m.HelloAck | None = None
         self._mcu_heartbeat: m.Heartbeat | None = None
+        self._last_tx_heartbeat: m.Heartbeat | None = None
         self._signals: m.VehicleSignals | None = None
         self._signals_at: float | None = None
         self._warning = m.FcwWarning()
@@ -235,7 +236,10 @@ class McuLink:
             port = self._opener(self.port_path, self.config)
         except (*IO_ERRORS, ValueError) as e:
             self._counters["open_failures"] += 1
-            self._fault = f"cannot open {self.port_path}: {e}"
+            fault = f"cannot open {self.port_path}: {e}"
+            if fault != self._fault:
+                log.warning("MCU link: %s", fault)
+            self._fault = fault
             self._schedule_reopen(now)
             return
         self._port = port
@@ -297,8 +301,8 @@ class McuLink:
                 self._handle(now, seq, msg)
 
     def _handle(self, now: float, seq: int, msg: m.Message) -> None:
-        if msg.SENDER == "host":
-            # Our own HELLO/WARNING coming back: an echoing line, or a loop-back plug.
+        if msg.SENDER == "host" or msg == self._last_tx_heartbeat:
+            # Our own frames coming back: an echoing line, or a loop-back plug.
             self._counters["unexpected_messages"] += 1
             return
         if self._rx_seq is not None:
@@ -336,10 +340,10 @@ class McuLink:
         if self._state is not LinkState.UP:
             self._counters["handshakes"] += 1
             self._backoff_s = self.config.reopen_min_s
+            log.info("MCU link: MCU %s speaks protocol %d.%d", ack.firmware, ack.protocol_major, ack.protocol_minor)
             self._set_state(LinkState.UP, now, None)
             self._next_heartbeat = self._next_warning = now
             self._warning_dirty = True
-            log.info("MCU link: up, MCU %s protocol %d.%d", ack.firmware, ack.protocol_major, ack.protocol_minor)
 
     # ---- send ---------------------------------------------------------------------------------------
 
@@ -366,7 +370,8 @@ class McuLink:
             self._next_heartbeat = now + cfg.heartbeat_period_s
             status = m.HostStatus.SYSTEM_OK if self._system_ok else 0
             uptime_ms = int((now - self._created_at) * 1000) % 2**32
-            self._send(now, m.Heartbeat(uptime_ms, int(status)))
+            self._last_tx_heartbeat = m.Heartbeat(uptime_ms, int(status))
+            self._send(now, self._last_tx_heartbeat)
         if self._warning_dirty or now >= self._next_warning:
             self._next_warning = now + cfg.heartbeat_period_s
             self._warning_dirty = False

@@ -22,7 +22,7 @@ import termios
 import time
 import tty
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, NamedTuple
 
 from . import cobs
 from . import messages as m
@@ -67,8 +67,7 @@ class SimStats:
         return self.wire_segments - self.frames_sent
 
 
-@dataclass(frozen=True)
-class Outputs:
+class Outputs(NamedTuple):
     buzzer: bool
     led: str  # "off", "amber" (pre-warning), "red" (warning), "unavailable" (no host / not OK)
 
@@ -125,6 +124,7 @@ class McuSimulator:
     def reset(self, now: float | None = None) -> None:
         """A power-on reset: uptime restarts, the host is forgotten, outputs off."""
         now = self._clock() if now is None else now
+        self.decoder.reset()  # a half-received frame is lost with the RAM
         self._started = now
         self._tx_seq = 0
         self._next_heartbeat = self._next_signals = now

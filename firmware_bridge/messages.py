@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
@@ -105,16 +105,16 @@ class Message:
     MSG_ID: ClassVar[MsgId]
     LAYOUT: ClassVar[struct.Struct]
     SENDER: ClassVar[str]  # "host", "mcu" or "both"
-    RATE: ClassVar[str]  # when it is sent, for the protocol document
+    RATE: ClassVar[str]  # when it is sent (at the default periods), as in the protocol document
 
     def fields(self) -> tuple:
-        """The raw layout values, in layout order."""
-        raise NotImplementedError
+        """The raw layout values, in layout order (the dataclass fields, unless scaled)."""
+        return astuple(self)
 
     @classmethod
     def from_fields(cls, *raw):
         """The message from raw layout values (inverse of fields())."""
-        raise NotImplementedError
+        return cls(*raw)
 
     def pack(self) -> bytes:
         return self.LAYOUT.pack(*self.fields())
@@ -134,7 +134,7 @@ class Hello(Message):
     MSG_ID: ClassVar[MsgId] = MsgId.HELLO
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<BBHH")
     SENDER: ClassVar[str] = "host"
-    RATE: ClassVar[str] = "every hello period (250 ms) until HELLO_ACK; again after silence or an MCU reset"
+    RATE: ClassVar[str] = "every 250 ms until HELLO_ACK; again after silence or an MCU reset"
 
     protocol_major: int = PROTOCOL_MAJOR
     protocol_minor: int = PROTOCOL_MINOR
@@ -146,13 +146,6 @@ class Hello(Message):
         _check_uint("HELLO", "protocol_minor", self.protocol_minor, 8)
         _check_uint("HELLO", "heartbeat_period_ms", self.heartbeat_period_ms, 16, low=1)
         _check_uint("HELLO", "host_timeout_ms", self.host_timeout_ms, 16, low=1)
-
-    def fields(self) -> tuple:
-        return (self.protocol_major, self.protocol_minor, self.heartbeat_period_ms, self.host_timeout_ms)
-
-    @classmethod
-    def from_fields(cls, *raw):
-        return cls(*raw)
 
 
 FW_NAME_LEN = 8  # bytes of HELLO_ACK.fw_name: printable ASCII, NUL-padded
@@ -206,7 +199,7 @@ class Heartbeat(Message):
     MSG_ID: ClassVar[MsgId] = MsgId.HEARTBEAT
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<IB")
     SENDER: ClassVar[str] = "both"
-    RATE: ClassVar[str] = "every heartbeat period (100 ms), each side"
+    RATE: ClassVar[str] = "every 100 ms, each side"
 
     uptime_ms: int = 0  # since the sender started, wraps after 2^32 ms (49.7 days)
     status: int = 0  # HostStatus bits from the host, McuStatus bits from the MCU
@@ -214,13 +207,6 @@ class Heartbeat(Message):
     def __post_init__(self):
         _check_uint("HEARTBEAT", "uptime_ms", self.uptime_ms, 32)
         _check_uint("HEARTBEAT", "status", self.status, 8)
-
-    def fields(self) -> tuple:
-        return (self.uptime_ms, self.status)
-
-    @classmethod
-    def from_fields(cls, *raw):
-        return cls(*raw)
 
 
 @dataclass(frozen=True)
@@ -230,7 +216,7 @@ class FcwWarning(Message):
     MSG_ID: ClassVar[MsgId] = MsgId.WARNING
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<BHH")
     SENDER: ClassVar[str] = "host"
-    RATE: ClassVar[str] = "on every change, and repeated every heartbeat period (100 ms)"
+    RATE: ClassVar[str] = "on every change, and repeated every 100 ms"
 
     level: WarningLevel = WarningLevel.NONE
     ttc_s: float | None = None  # time to collision with the lead vehicle; None: not available
@@ -260,7 +246,7 @@ class VehicleSignals(Message):
     MSG_ID: ClassVar[MsgId] = MsgId.VEHICLE_SIGNALS
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<HB")
     SENDER: ClassVar[str] = "mcu"
-    RATE: ClassVar[str] = "every signals period (50 ms), and at once when brake or a turn signal changes"
+    RATE: ClassVar[str] = "every 50 ms, and at once when brake or a turn signal changes"
 
     speed_mps: float | None = None  # vehicle speed magnitude; None: unknown
     brake: bool = False

@@ -12,14 +12,19 @@ from __future__ import annotations
 INTERFACES = ("socketcan|virtual|slcan|socketcand|pcan|kvaser|vector|ixxat|gs_usb|neovi|nican|nixnet|"
               "iscan|systec|usb2can|cantact|canalystii|seeedstudio|robotell|serial|udp_multicast|etas|neousys")
 
-# input name -> (kind, SI unit, unit choices, default stale_after_s, what it is)
+# input name -> (kind, SI unit, unit choices, default stale_after_s, what it is, why that stale time)
 INPUTS = {
     "speed": ("number", "m/s", "dbc|m/s|km/h|mph", 0.5,
-              "ego speed over ground (FCW needs it: without a fresh value no warning is given)"),
-    "yaw_rate": ("number", "rad/s", "dbc|rad/s|deg/s", 0.5, "ego yaw rate, positive turning left"),
-    "brake": ("flag", "", "", 0.5, "brake pedal pressed"),
-    "turn_left": ("flag", "", "", 2.0, "left turn signal on"),
-    "turn_right": ("flag", "", "", 2.0, "right turn signal on"),
+              "ego speed over ground (FCW needs it: without a fresh value no warning is given)",
+              "25-50 periods of the usual 50-100 Hz wheel-speed message, yet short enough that FCW never runs "
+              "on a speed half a second old"),
+    "yaw_rate": ("number", "rad/s", "dbc|rad/s|deg/s", 0.5, "ego yaw rate, positive turning left",
+                 "many periods of the usual 50-100 Hz"),
+    "brake": ("flag", "", "", 0.5, "brake pedal pressed", "many periods of the usual 10-100 Hz"),
+    "turn_left": ("flag", "", "", 2.0, "left turn signal on",
+                  "turn-signal messages often come at only 1-2 Hz"),
+    "turn_right": ("flag", "", "", 2.0, "right turn signal on",
+                   "turn-signal messages often come at only 1-2 Hz"),
 }
 
 
@@ -34,30 +39,30 @@ def _k(default, doc, type=None, min=None, max=None, choices=None) -> dict:
 
 
 def _input_keys(name: str) -> dict:
-    kind, si, units, stale, what = INPUTS[name]
+    kind, si, units, stale, what, why_stale = INPUTS[name]
+    example = " (e.g. the four wheel speeds)" if name == "speed" else ""
     keys = {
-        f"{name}_dbc": _k("", f"path; DBC of the {what} message when not vehicle.dbc; empty = vehicle.dbc"),
-        f"{name}_message": _k("", f"DBC message name carrying the {what}; empty = this input is not configured"
-                                  + (" (FCW is then unavailable and HW_STATUS reports ego_speed_stale)"
-                                     if name == "speed" else "")),
-        f"{name}_signals": _k("", f"signal name(s) in that message, comma-separated; several are combined "
-                                  f"by {name}_combine (e.g. the four wheel speeds)"),
-        f"{name}_combine": _k("mean", "how several signals make one value: mean, min, max, or first; mean "
-                                      "because a car's reference speed is the mean of its wheel speeds",
-                              choices="mean|min|max|first"),
-        f"{name}_stale_after_s": _k(stale, f"s; the input counts as missing when no frame came for this long "
-                                           f"(then it is reported and never guessed); {stale} s is many periods "
-                                           f"of a car's usual 10-100 Hz", min=0.01, max=60.0),
+        f"{name}_dbc": _k("", f"path; DBC file for the {name} input when it is not vehicle.dbc; empty = vehicle.dbc"),
+        f"{name}_message": _k("", f"DBC message carrying the {what}; empty = not configured"
+                                  + (" (FCW is then never available)" if name == "speed" else "")),
+        f"{name}_signals": _k("", f"signal name(s) in that message, comma-separated; several are combined by "
+                                  f"{name}_combine{example}"),
+        f"{name}_combine": _k("mean", "how several signals make one value: mean, min, max or first; mean because "
+                                      "a car's reference speed is the mean of its wheel speeds (one signal: no "
+                                      "matter)", choices="mean|min|max|first"),
+        f"{name}_stale_after_s": _k(stale, f"s; the input is missing when no valid frame came for this long: it is "
+                                           f"then reported and never guessed; {stale} s: {why_stale}",
+                                    min=0.01, max=60.0),
     }
     if kind == "number":
         keys[f"{name}_unit"] = _k("dbc", f"unit of the decoded signal, converted to {si}; 'dbc' takes the "
-                                         f"unit written in the DBC (km/h, mph, m/s, deg/s, rad/s)", choices=units)
-        keys[f"{name}_scale"] = _k(1.0, f"factor applied after the unit conversion (tyre-size correction, "
-                                        f"sign convention); 1 = as decoded", min=-100.0, max=100.0)
+                                         f"unit written in the DBC", choices=units)
+        keys[f"{name}_scale"] = _k(1.0, "factor, no unit; applied after the unit conversion (tyre-size "
+                                        "correction, sign convention); 1 = as decoded", min=-100.0, max=100.0)
         keys[f"{name}_offset"] = _k(0.0, f"{si}; added after scaling; 0 = as decoded", min=-100.0, max=100.0)
     else:
-        keys[f"{name}_true_value"] = _k(-1, "raw value that means on (e.g. 1 for left in a turn-signal "
-                                            "signal whose values are 1 left, 2 right); -1 = any non-zero value",
+        keys[f"{name}_true_value"] = _k(-1, "raw value that means on (e.g. 1 for left in a turn-signal signal "
+                                            "whose values are 1 left, 2 right); -1 = any non-zero value",
                                         min=-1, max=2**31 - 1)
     return keys
 
@@ -89,12 +94,12 @@ CAN_SCHEMA: dict[str, dict[str, dict]] = {
                               min=0.0, max=100.0),
         "status_rate_hz": _k(10.0, "Hz; HW_STATUS heartbeat (state, fault bits); 10 Hz so that a receiver "
                                    "notices a silent Headway within a few hundred ms", min=0.5, max=100.0),
-        "max_objects": _k(16, "objects per object-list cycle (nearest first); 16 objects at 10 Hz are "
-                              "330 frames/s, about 9 % of a 500 kbit/s bus", min=0, max=64),
+        "max_objects": _k(16, "objects per object-list cycle (nearest first); 16 objects at 10 Hz make, "
+                              "with the other messages, 370 frames/s: about 9 % of a 500 kbit/s bus", min=0, max=64),
         "data_timeout_s": _k(0.5, "s; FCW, lead and object frames never carry older results: past this age "
                                   "they go out as not available (a stalled core must not look like a quiet "
                                   "road)", min=0.05, max=10.0),
-        "tx_error_hold_s": _k(1.0, "s; the can_tx_error fault stays set this long after the last failed send, "
+        "tx_error_hold_s": _k(1.0, "s; the can_error fault stays set this long after the last failed send, "
                                    "so a flapping bus is visible in the status frame", min=0.1, max=60.0),
         "output_log": _k("", "path; also write every frame Headway sends to this log (.log candump, .asc, "
                              ".blf); empty = none"),
@@ -104,8 +109,6 @@ CAN_SCHEMA: dict[str, dict[str, dict]] = {
                       "own *_dbc; empty = no vehicle inputs"),
         "channel": _k("", "only frames from this channel feed the inputs (e.g. can0 in a log that holds "
                           "several buses); empty = any channel"),
-        "error_hold_s": _k(1.0, "s; the can_rx_error fault stays set this long after the last invalid input "
-                                "frame (wrong length, decode error)", min=0.1, max=60.0),
         "log_offset_s": _k(0.0, "s; replay: the input CAN log's time since its first frame plus this is the "
                                 "frame clock; 0 = the log and the video start together", min=-3600.0, max=3600.0),
     },
@@ -117,3 +120,12 @@ for _name in INPUTS:
 def defaults() -> dict[str, dict]:
     """The CAN sections with every key at its default."""
     return {sec: {k: spec["default"] for k, spec in keys.items()} for sec, keys in CAN_SCHEMA.items()}
+
+
+def with_defaults(cfg) -> dict:
+    """``cfg`` with its ``can`` and ``vehicle`` sections completed from the defaults (a configuration
+    loaded before these sections were registered, or a partial one in tests)."""
+    out = dict(cfg)
+    for sec, values in defaults().items():
+        out[sec] = {**values, **dict(cfg.get(sec) or {})}
+    return out

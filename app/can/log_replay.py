@@ -17,13 +17,18 @@ import heapq
 import itertools
 import re
 from pathlib import Path
-from typing import Iterator, Optional, Union
+from typing import Iterable, Iterator, Optional, Union
 
 import can
 
 # (timestamp) channel id#data [R|T]; data: hex pairs, R[dlc] (remote) or #F + hex (CAN FD)
-_CANDUMP = re.compile(r"^\(\d+(?:\.\d+)?\)\s+\S+\s+(?:[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#"
+_CANDUMP = re.compile(r"^\((\d+(?:\.\d+)?)\)\s+\S+\s+([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#"
                       r"(?:R\d?|#[0-9A-Fa-f](?:[0-9A-Fa-f]{2}){0,64}|(?:[0-9A-Fa-f]{2}){0,8})(?:\s+[RTrt])?$")
+
+
+# Epoch timestamps in a double carry ~0.2 us of noise and logs have 1 us resolution: a frame within
+# 1 us of a camera frame's time counts as simultaneous (delivered with that frame).
+SAME_TIME_S = 1e-6
 
 
 class CanLogError(ValueError):
@@ -36,9 +41,12 @@ class _GoodLines:
 
     closed = False
 
-    def __init__(self, lines: Iterator[str]):
+    def __init__(self, lines: Iterator[str], ids: Optional[frozenset[int]]):
         self.bad = 0
         self.first_bad: Optional[tuple[int, str]] = None
+        self.first_t: Optional[float] = None
+        self.skipped = 0
+        self._ids = ids
         self._gen = self._filter(lines)
 
     def _filter(self, lines: Iterator[str]) -> Iterator[str]:
@@ -46,10 +54,16 @@ class _GoodLines:
             s = line.strip()
             if not s:
                 continue
-            if _CANDUMP.match(s):
-                yield s + "\n"
-            else:
+            m = _CANDUMP.match(s)
+            if m is None:
                 self.bad_line(n, s)
+                continue
+            if self.first_t is None:
+                self.first_t = float(m.group(1))
+            if self._ids is not None and int(m.group(2), 16) not in self._ids:
+                self.skipped += 1
+            else:
+                yield s + "\n"
 
     def bad_line(self, n: int, text: str) -> None:
         self.bad += 1
@@ -76,7 +90,8 @@ class CanLogReader:
     ``reorder_window_s``; a frame later than that is still delivered and counted in ``out_of_order``.
     """
 
-    def __init__(self, path: Union[str, Path], offset_s: float = 0.0, reorder_window_s: float = 0.5):
+    def __init__(self, path: Union[str, Path], offset_s: float = 0.0, reorder_window_s: float = 0.5,
+                 ids: Optional[Iterable[int]] = None):
         self.path = Path(path)
         if not self.path.is_file():
             raise CanLogError(f"{self.path}: no such CAN log")
@@ -88,8 +103,10 @@ class CanLogReader:
             except Exception as exc:
                 raise CanLogError(f"{self.path}: cannot be read as a CAN log: {exc}") from None
         self.offset_s = offset_s
+        self._ids = None if ids is None else frozenset(ids)
+        self.skipped = 0  # frames of other ids than ``ids`` (not an error)
         self.window_s = reorder_window_s
-        self.t0: Optional[float] = None
+        self._t0: Optional[float] = None
         self.messages_read = 0
         self._good: Optional[_GoodLines] = None
         self.out_of_order = 0
@@ -97,11 +114,12 @@ class CanLogReader:
         self._iter = self._ordered()
         self._next: Optional[can.Message] = None
         self._done = False
+        self._peek()  # reads up to the first frame, so that t0 is known before the replay starts
 
     # ---- raw reading -------------------------------------------------------------------------------
     def _raw_candump(self) -> Iterator[can.Message]:
         with _open_text(self.path) as f:
-            self._good = _GoodLines(iter(f))
+            self._good = _GoodLines(iter(f), self._ids)
             while True:
                 # A fresh reader after any surprise: the line that raised is consumed and skipped.
                 try:
@@ -115,6 +133,11 @@ class CanLogReader:
         try:
             for msg in can.LogReader(str(self.path)):
                 n += 1
+                if self._t0 is None and msg.timestamp is not None:
+                    self._t0 = msg.timestamp
+                if self._ids is not None and msg.arbitration_id not in self._ids:
+                    self.skipped += 1
+                    continue
                 yield msg
         except Exception as exc:
             self.read_error = f"stopped after {n} frames: {type(exc).__name__}: {exc}"
@@ -129,8 +152,8 @@ class CanLogReader:
             if msg.timestamp is None:
                 continue
             self.messages_read += 1
-            if self.t0 is None:
-                self.t0 = msg.timestamp
+            if self._t0 is None:
+                self._t0 = msg.timestamp if self.t0 is None else self.t0
             newest = max(newest, msg.timestamp)
             heapq.heappush(heap, (msg.timestamp, next(seq), msg))
             while heap and heap[0][0] <= newest - self.window_s:
@@ -145,6 +168,13 @@ class CanLogReader:
             yield m
 
     # ---- the frame clock ---------------------------------------------------------------------------
+    @property
+    def t0(self) -> Optional[float]:
+        """Timestamp of the log's first frame (of any id); None for a log without frames."""
+        if self._t0 is None and self._good is not None:
+            return self._good.first_t
+        return self._t0
+
     @property
     def bad_lines(self) -> int:
         return self._good.bad if self._good else 0
@@ -169,7 +199,7 @@ class CanLogReader:
             if msg is None:
                 return
             t = self.replay_time(msg)
-            if t > t_s:
+            if t > t_s + SAME_TIME_S:
                 return
             self._next = None
             yield t, msg
@@ -182,7 +212,9 @@ class CanLogReader:
         return self._peek() is None
 
     def summary(self) -> str:
-        parts = [f"{self.path.name}: {self.messages_read} frames read"]
+        skipped = self._good.skipped if self._good else self.skipped
+        parts = [f"{self.path.name}: {self.messages_read} frames read"
+                 + (f" ({skipped} of other ids passed over)" if skipped else "")]
         if self.bad_lines:
             where = (f", first at line {self.first_bad_line[0]}: {self.first_bad_line[1]!r}"
                      if self.first_bad_line and self.first_bad_line[0] else "")

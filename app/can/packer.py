@@ -49,9 +49,8 @@ class _Layout:
     checksum_byte: Optional[int]
     counter_mod: int                     # 0 when the message has no COUNTER
     limits: dict[str, tuple[float, float]]
-    defaults: dict[str, Any]             # what a signal left out is sent as
-    has_sna: frozenset[str]
-    active: dict[Optional[int], frozenset[str]]  # mux value (None: not multiplexed) -> signals sent
+    defaults: dict[Optional[int], dict[str, Any]]  # mux value (None: not multiplexed) -> signals sent,
+    has_sna: frozenset[str]                        # each with what it is sent as when left out
     mux: Optional[str]
 
 
@@ -67,21 +66,16 @@ def _layout(message: Message) -> _Layout:
         else:
             defaults[s.name] = s.offset  # raw 0
     mux_sig = next((s for s in message.signals if s.is_multiplexer), None)
-    active: dict[Optional[int], frozenset[str]] = {}
-    if mux_sig is None:
-        active[None] = frozenset(s.name for s in message.signals)
-    else:
-        ids = {i for s in message.signals for i in (s.multiplexer_ids or ())}
-        for i in ids:
-            active[i] = frozenset(s.name for s in message.signals
-                                  if s.multiplexer_ids is None or i in s.multiplexer_ids)
+    mux_values = [None] if mux_sig is None else sorted({i for s in message.signals for i in (s.multiplexer_ids or ())})
+    active = {i: {s.name: defaults[s.name] for s in message.signals
+                  if i is None or s.multiplexer_ids is None or i in s.multiplexer_ids} for i in mux_values}
     try:
         counter = message.get_signal_by_name(COUNTER)
         counter_mod = 1 << counter.length
     except KeyError:
         counter_mod = 0
-    return _Layout(message, checksum_byte(message), counter_mod, limits, defaults, frozenset(has_sna),
-                   active, mux_sig.name if mux_sig else None)
+    return _Layout(message, checksum_byte(message), counter_mod, limits, active, frozenset(has_sna),
+                   mux_sig.name if mux_sig else None)
 
 
 class CanPacker:
@@ -106,14 +100,11 @@ class CanPacker:
             if lay.mux not in signals:
                 raise KeyError(f"{name}: the multiplexer {lay.mux} must be given")
             mux_value = int(signals[lay.mux])
-            if mux_value not in lay.active:
+            if mux_value not in lay.defaults:
                 raise KeyError(f"{name}: {lay.mux} = {mux_value} has no signals in the DBC")
-        active = lay.active[mux_value]
-        values = {}
-        for sig in active:
-            values[sig] = lay.defaults[sig]
+        values = dict(lay.defaults[mux_value])
         for sig, v in signals.items():
-            if sig not in active:
+            if sig not in values:
                 raise KeyError(f"{name}: no signal {sig}" + (f" for {lay.mux} = {mux_value}" if lay.mux else ""))
             values[sig] = self._value(lay, sig, v)
         if lay.counter_mod:

@@ -4,8 +4,10 @@ Each input is mapped in the configuration to a DBC file, a message and one or mo
 ``vehicle`` section, see ``config_schema``), converted to SI units. A ``VehicleState`` snapshot gives
 every input's value, age and stale flag on the bus clock. An input that is stale (no frame for
 ``stale_after_s``) or never arrived has value ``None``: consumers are told "not available", never a
-guessed or held value. Stale inputs are reported as health faults once the start-up grace period
-(the same ``stale_after_s``) has passed.
+guessed or held value. Once the start-up grace period (the same ``stale_after_s``) has passed, a
+stale input is listed in ``stale_inputs``, and a stale ego speed is the health fault
+``ego_speed_stale``. Invalid frames (wrong length, undecodable) are counted in ``stats()``; they
+make no value, so an input fed only by them goes stale.
 """
 from __future__ import annotations
 
@@ -24,7 +26,6 @@ from .parser import CanParser
 UNIT_TO_SI = {"m/s": 1.0, "mps": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704,
               "rad/s": 1.0, "deg/s": math.pi / 180, "degree/s": math.pi / 180, "°/s": math.pi / 180}
 COMBINE = {"mean": lambda v: sum(v) / len(v), "min": min, "max": max, "first": lambda v: v[0]}
-RX_ERRORS = ("wrong_length", "bad_checksum", "counter_jump", "decode_error")
 
 
 class VehicleInputError(ValueError):
@@ -64,7 +65,15 @@ class InputValue:
 class VehicleState:
     t_s: float
     inputs: Mapping[str, InputValue]
-    faults: frozenset[str] = field(default_factory=frozenset)
+    stale_inputs: tuple[str, ...] = ()     # configured inputs missing or stale past the start-up grace
+    faults: frozenset[str] = field(default_factory=frozenset)  # health registry names: ego_speed_stale
+
+    @property
+    def ego_speed_fresh(self) -> Optional[bool]:
+        """For the health monitor: None = no ego speed configured, False = the ego_speed_stale fault."""
+        if not self.inputs["speed"].configured:
+            return None
+        return "speed" not in self.stale_inputs
 
     def _v(self, name: str) -> Any:
         iv = self.inputs.get(name)
@@ -96,10 +105,12 @@ def _close(word: str, options: Iterable[str]) -> str:
     return f" (did you mean {m[0]}?)" if m else ""
 
 
-def specs_from_config(vehicle: Mapping[str, Any]) -> list[InputSpec]:
-    """The configured inputs of a validated ``vehicle`` section, each checked against its DBC."""
-    specs, dbs = [], {}
-    for name, (kind, _si, _units, _stale, _what) in INPUTS.items():
+def specs_from_config(vehicle: Mapping[str, Any], databases: Optional[dict] = None) -> list[InputSpec]:
+    """The configured inputs of a validated ``vehicle`` section, each checked against its DBC
+    (``databases``, if given, receives the loaded DBCs by path)."""
+    specs = []
+    dbs = {} if databases is None else databases
+    for name, (kind, _si, _units, stale_default, _what, _why) in INPUTS.items():
         message = vehicle.get(f"{name}_message", "")
         if not message:
             continue
@@ -140,7 +151,7 @@ def specs_from_config(vehicle: Mapping[str, Any]) -> list[InputSpec]:
             tv = int(vehicle.get(f"{name}_true_value", -1))
             true_value = None if tv < 0 else tv
         specs.append(InputSpec(name, str(dbc), message, signals, vehicle.get(f"{name}_combine", "mean"),
-                               factor, offset, true_value, float(vehicle.get(f"{name}_stale_after_s", _stale))))
+                               factor, offset, true_value, float(vehicle.get(f"{name}_stale_after_s", stale_default))))
     return specs
 
 
@@ -151,10 +162,9 @@ class VehicleInput:
     come from the same clock (the replay clock in replay, the receive clock live).
     """
 
-    def __init__(self, specs: Iterable[InputSpec], channel: Optional[str] = None, error_hold_s: float = 1.0,
+    def __init__(self, specs: Iterable[InputSpec], channel: Optional[str] = None,
                  databases: Optional[Mapping[str, Any]] = None):
         self.specs = {s.name: s for s in specs}
-        self.error_hold_s = error_hold_s
         self._parsers: dict[str, CanParser] = {}
         for dbc in sorted({s.dbc for s in self.specs.values()}):
             db = (databases or {}).get(dbc) or load_dbc(dbc, strict=False)
@@ -166,12 +176,16 @@ class VehicleInput:
             self._parsers[dbc] = CanParser(db, sorted(timeouts), timeouts, checksum=None, check_counter=False,
                                            channel=channel or None)
         self.start_s: Optional[float] = None
-        self._errors_seen = 0
-        self._last_error_s: Optional[float] = None
 
     @classmethod
     def from_config(cls, vehicle: Mapping[str, Any]) -> "VehicleInput":
-        return cls(specs_from_config(vehicle), vehicle.get("channel") or None, float(vehicle.get("error_hold_s", 1.0)))
+        databases: dict = {}
+        specs = specs_from_config(vehicle, databases)
+        return cls(specs, vehicle.get("channel") or None, databases)
+
+    def frame_ids(self) -> set[int]:
+        """The frame ids the configured inputs are decoded from."""
+        return {self._parsers[s.dbc].db.get_message_by_name(s.message).frame_id for s in self.specs.values()}
 
     def on_message(self, msg: can.Message, t_s: Optional[float] = None) -> None:
         t = msg.timestamp if t_s is None else t_s
@@ -202,21 +216,13 @@ class VehicleInput:
         if self.start_s is None:
             self.start_s = now_s
         inputs = {name: InputValue(None, None, False, False) for name in INPUTS}
-        faults = set()
+        stale = []
         for name, spec in self.specs.items():
-            iv = self._read(spec, now_s)
-            inputs[name] = iv
-            past_grace = now_s - self.start_s >= spec.stale_after_s
-            if iv.stale and past_grace:
-                faults.add("ego_speed_stale" if name == "speed" else "vehicle_input_stale")
-        if "speed" not in self.specs:
-            faults.add("ego_speed_stale")  # FCW cannot run without it: say so from the start
-        errors = sum(p.drops[r] for p in self._parsers.values() for r in RX_ERRORS)
-        if errors > self._errors_seen:
-            self._errors_seen, self._last_error_s = errors, now_s
-        if self._last_error_s is not None and now_s - self._last_error_s < self.error_hold_s:
-            faults.add("can_rx_error")
-        return VehicleState(now_s, inputs, frozenset(faults))
+            inputs[name] = iv = self._read(spec, now_s)
+            if iv.stale and now_s - self.start_s >= spec.stale_after_s:
+                stale.append(name)
+        faults = frozenset({"ego_speed_stale"} if "speed" in stale else ())
+        return VehicleState(now_s, inputs, tuple(stale), faults)
 
     def stats(self) -> dict[str, Any]:
         return {Path(dbc).name: p.stats() for dbc, p in self._parsers.items()}

@@ -152,12 +152,3 @@ class Camera:
         # Level coordinates of a road point: (X - lateral, h, Z) = M (X, Z, 1).
         m = np.array([[1.0, 0.0, -self.lateral_m], [0.0, 0.0, self.height_m], [0.0, 1.0, 0.0]])
         return self.K @ self.rotation @ m
-
-    def range_footprint(self, v_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Road size of one pixel at row ``v_px`` below the camera: (metres across, metres along).
-
-        Used to fade texture detail that a pixel cannot resolve (no aliasing near the horizon).
-        """
-        z = self.range_of_row(v_px)
-        along = np.abs(self.range_of_row(np.asarray(v_px, float) + 0.5) - self.range_of_row(np.asarray(v_px, float) - 0.5))
-        return z / self.fx, along

@@ -72,20 +72,13 @@ def _clip_near(poly: np.ndarray) -> np.ndarray:
     return np.array(kept).reshape(-1, 3)
 
 
-def fill(image: np.ndarray, polygons: list[np.ndarray], value: float, antialias: bool = True,
-         disjoint: bool = False) -> None:
-    """Fill fixed-point convex polygons (from :func:`project_quads`) with one value (in place).
+def fill(image: np.ndarray, polygons: list[np.ndarray], value: float, antialias: bool = True) -> None:
+    """Fill fixed-point convex polygons (from :func:`project_quads`) one by one with one value (in place).
 
-    ``disjoint=True`` promises that no two polygons overlap in the image (lane dashes): they
-    are then filled in one call. ``cv2.fillPoly`` uses the even-odd rule, so overlapping
-    polygons are filled one by one instead.
+    One by one because ``cv2.fillPoly`` fills a polygon set by the even-odd rule: where two
+    overlap (lines meeting at the vanishing point) it would leave a hole.
     """
-    polygons = [p for p in polygons if len(p) >= 3]
-    if not polygons:
-        return
     line = cv2.LINE_AA if antialias else cv2.LINE_8
-    if disjoint and len(polygons) > 1:
-        cv2.fillPoly(image, polygons, float(value), line, SHIFT)
-        return
     for polygon in polygons:
-        cv2.fillConvexPoly(image, polygon, float(value), line, SHIFT)
+        if len(polygon) >= 3:
+            cv2.fillConvexPoly(image, polygon, float(value), line, SHIFT)

@@ -35,21 +35,21 @@ class Renderer:
         self.seed = seed
         sigma = scenario.lighting.noise_sigma
         shape = (camera.height + _NOISE_MARGIN, camera.width + _NOISE_MARGIN)
-        noise = np.random.default_rng([seed, 4]).normal(0.0, sigma, shape)
-        self.noise = np.round(noise).astype(np.int16) if sigma > 0 else None
+        noise = np.round(np.random.default_rng([seed, 4]).normal(0.0, sigma, shape))
+        # Kept as positive and negative parts: two saturating uint8 operations per frame.
+        self.noise = (np.clip(noise, 0, 255).astype(np.uint8), np.clip(-noise, 0, 255).astype(np.uint8)) if sigma > 0 else None
 
     def draw(self, state: WorldState, camera: Camera, frame_index: int) -> np.ndarray:
         odometer_m = state.ego_odometer_m
         r0 = int(np.clip(math.floor(camera.horizon_row) + 1, 0, camera.height))
         vehicles = depth_order(state)
         shadows = self.scenery.shadow(odometer_m) + [self.vehicles.shadow(v, camera.lateral_m) for v in vehicles]
-        parts = []
+        image = np.empty((camera.height, camera.width), np.uint8)
+        # Gray levels are >= 0, so convertScaleAbs is a fast rounding, saturating float -> uint8.
         if r0 > 0:
-            parts.append(self.sky.draw(camera, r0))
+            image[:r0] = cv2.convertScaleAbs(self.sky.draw(camera, r0))
         if r0 < camera.height:
-            parts.append(self.ground.draw(camera, odometer_m, shadows, r0))
-        image = np.vstack(parts) if len(parts) > 1 else parts[0]
-        image = np.clip(image, 0.0, 255.0, out=image).astype(np.uint8)
+            image[r0:] = cv2.convertScaleAbs(self.ground.draw(camera, odometer_m, shadows, r0))
 
         self.scenery.draw_roadside(image, camera, odometer_m)
         items = [(v.z_m, v) for v in vehicles]
@@ -68,5 +68,5 @@ class Renderer:
         if self.noise is None:
             return image
         dy, dx = np.random.default_rng([self.seed, 5, frame_index]).integers(0, _NOISE_MARGIN, size=2)
-        window = self.noise[dy:dy + image.shape[0], dx:dx + image.shape[1]]
-        return cv2.add(image, window, dtype=cv2.CV_8U)
+        rows, cols = slice(dy, dy + image.shape[0]), slice(dx, dx + image.shape[1])
+        return cv2.subtract(cv2.add(image, self.noise[0][rows, cols]), self.noise[1][rows, cols])

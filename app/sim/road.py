@@ -96,24 +96,27 @@ class Ground:
         self.paved_m = (self.road.left_edge_m - self.road.shoulder_m, self.road.right_edge_m + self.road.shoulder_m)
 
     def draw(self, camera: Camera, odometer_m: float, shadows: list[tuple[np.ndarray, float]], r0: int) -> np.ndarray:
-        """Gray levels (float32) of rows r0..H-1. ``shadows``: (ground corners (4, 3), light factor)."""
+        """Gray levels (float32) of rows r0..H-1. ``shadows``: (ground polygon corners (k, 3), light factor)."""
         height = camera.height - r0
         rows = np.arange(r0, camera.height, dtype=np.float64)
         z_near = self._nearest_visible_m(camera)
         albedo = np.full((height, camera.width), self.light.grass_gray, np.uint8)
         fill(albedo, project_quads(camera, [rect_xz(*self.paved_m, z_near, FAR_M)], r0), self.light.asphalt_gray)
         marking_gray = min(235.0, self.light.asphalt_gray + 105.0)
-        fill(albedo, project_quads(camera, self._markings(odometer_m, z_near), r0), marking_gray, disjoint=True)
+        fill(albedo, project_quads(camera, self._markings(odometer_m, z_near), r0), marking_gray)
 
-        light = np.full((height, camera.width), 255, np.uint8)
-        for corners, factor in shadows:
-            if len(corners) >= 3:
+        shadows = [(corners, factor) for corners, factor in shadows if len(corners) >= 3]
+        if shadows:
+            light = np.full((height, camera.width), 255, np.uint8)
+            for corners, factor in shadows:
                 fill(light, project_quads(camera, [corners], r0), 255.0 * factor)
-        lit = cv2.multiply(albedo, light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
+            lit = cv2.multiply(albedo, light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
+        else:
+            lit = albedo.astype(np.float32)
 
-        lit *= self._texture(camera, odometer_m, r0)
-        # Haze: far road fades to the horizon gray (row-wise, ranges measured below the camera).
         range_m = np.nan_to_num(camera.range_of_row(rows), nan=FAR_M)
+        lit *= self._texture(camera, odometer_m, r0, np.minimum(range_m, FAR_M))
+        # Haze: far road fades to the horizon gray (row-wise, ranges measured below the camera).
         haze = (1.0 - np.exp(-np.clip(range_m, 0.0, None) / HAZE_M)).astype(np.float32)[:, None]
         lit *= 1.0 - haze
         lit += haze * np.float32(self.haze_gray)
@@ -141,12 +144,19 @@ class Ground:
             rects.extend(rect_xz(x - 0.5 * mw, x + 0.5 * mw, z0, z1) for x in self.boundaries_m[1:-1])
         return np.array(rects)
 
-    def _texture(self, camera: Camera, odometer_m: float, r0: int) -> np.ndarray:
-        """1 + sum of faded noise layers at each pixel's ground point, rows r0..H-1 (float32)."""
+    def _texture(self, camera: Camera, odometer_m: float, r0: int, range_m: np.ndarray) -> np.ndarray:
+        """1 + sum of faded noise layers at each pixel's ground point, rows r0..H-1 (float32).
+
+        ``range_m``: road range below the camera at rows r0..H-1 (decreasing down the image).
+        """
         out = np.ones((camera.height - r0, camera.width), np.float32)
         image_to_ground = np.linalg.inv(camera.ground_to_image())
+        # Road covered by one pixel of each row: across Z / fx, along |dZ/dv| ~ Z^2 / (fy h) (small angles;
+        # only the fade uses it).
+        across_m = range_m / camera.fx
+        along_m = range_m * range_m / (camera.fy * camera.height_m)
         for layer in self.layers:
-            first = max(r0, int(math.floor(float(camera.row_of_range(layer.max_range_m(camera))))))
+            first = r0 + int(np.searchsorted(-range_m, -layer.max_range_m(camera)))  # first row nearer than its reach
             if first >= camera.height:
                 continue
             step = layer.step_px
@@ -164,8 +174,9 @@ class Ground:
             map_x = (np.float32(h[0, 0]) * u + (h[0, 1] * v + h[0, 2]).astype(np.float32)) * inv_w
             map_z = (np.float32(h[1, 0]) * u + (h[1, 1] * v + h[1, 2]).astype(np.float32)) * inv_w
             sample = cv2.remap(tile, map_x, map_z, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-            across_m, along_m = camera.range_footprint(v[:, 0])
-            ratio = step * np.maximum(across_m / layer.texel_x_m, along_m / layer.texel_z_m)
+            # Fade by the footprint of a sample (step pixels), taken at the block's first row.
+            rows = np.arange(first, camera.height, step) - r0
+            ratio = step * np.maximum(across_m[rows] / layer.texel_x_m, along_m[rows] / layer.texel_z_m)
             sample *= (layer.amplitude * np.exp(-ratio * ratio)).astype(np.float32)[:, None]
             if step > 1:
                 sample = cv2.resize(sample, (n_cols * step, n_rows * step), interpolation=cv2.INTER_LINEAR)

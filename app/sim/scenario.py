@@ -276,39 +276,44 @@ def _check_increasing(reader: _Reader, name: str, times: list[float]) -> None:
             reader.fail(f"{reader.key(name)}[{i}].t_s", f"must be later than the previous entry ({times[i - 1]})")
 
 
+def _numbers(reader: _Reader, cls: type, limits: dict[str, tuple[float, float]]) -> dict[str, float]:
+    """Number fields of a spec dataclass: its defaults, the file's values checked against ``limits``."""
+    defaults = {f.name: _REQUIRED if f.default is dataclasses.MISSING else f.default for f in dataclasses.fields(cls)}
+    return {name: reader.number(name, defaults[name], lo, hi) for name, (lo, hi) in limits.items()}
+
+
 def _read_road(top: _Reader) -> RoadSpec:
-    r = top.sub("road", ("lanes", "ego_lane", "lane_width_m", "shoulder_m", "marking_width_m", "dash_length_m",
-                         "dash_gap_m", "overpass"))
-    lanes = r.integer("lanes", 3, 1, 6)
+    r = top.sub("road", tuple(f.name for f in dataclasses.fields(RoadSpec)))
+    lanes = r.integer("lanes", RoadSpec.lanes, 1, 6)
     ego_lane = r.integer("ego_lane", (lanes - 1) // 2, 0, lanes - 1)
     overpass = None
     if r.data.get("overpass") is not None:
-        o = r.sub("overpass", ("z_m", "depth_m", "clearance_m", "thickness_m", "shadow_offset_m"))
-        overpass = OverpassSpec(o.number("z_m", lo=5.0, hi=1000.0), o.number("depth_m", 12.0, 2.0, 60.0),
-                                o.number("clearance_m", 5.5, 4.5, 10.0), o.number("thickness_m", 1.6, 0.5, 4.0),
-                                o.number("shadow_offset_m", -4.0, -30.0, 30.0))
-    return RoadSpec(lanes, ego_lane, r.number("lane_width_m", 3.6, 2.5, 5.0), r.number("shoulder_m", 1.0, 0.2, 4.0),
-                    r.number("marking_width_m", 0.15, 0.08, 0.5), r.number("dash_length_m", 3.0, 0.5, 20.0),
-                    r.number("dash_gap_m", 9.0, 0.5, 30.0), overpass)
+        o = r.sub("overpass", tuple(f.name for f in dataclasses.fields(OverpassSpec)))
+        overpass = OverpassSpec(**_numbers(o, OverpassSpec, {
+            "z_m": (5.0, 1000.0), "depth_m": (2.0, 60.0), "clearance_m": (4.5, 10.0), "thickness_m": (0.5, 4.0),
+            "shadow_offset_m": (-30.0, 30.0)}))
+    return RoadSpec(lanes=lanes, ego_lane=ego_lane, overpass=overpass, **_numbers(r, RoadSpec, {
+        "lane_width_m": (2.5, 5.0), "shoulder_m": (0.2, 4.0), "marking_width_m": (0.08, 0.5),
+        "dash_length_m": (0.5, 20.0), "dash_gap_m": (0.5, 30.0)}))
 
 
 def _read_lighting(top: _Reader) -> LightingSpec:
     r = top.sub("lighting", tuple(f.name for f in dataclasses.fields(LightingSpec)))
-    d = LightingSpec()
-    return LightingSpec(r.number("asphalt_gray", d.asphalt_gray, 60.0, 200.0),
-                        r.number("grass_gray", d.grass_gray, 20.0, 220.0),
-                        r.number("sky_gray", d.sky_gray, 60.0, 255.0),
-                        r.number("shadow_factor", d.shadow_factor, 0.1, 0.6),
-                        r.number("texture_contrast", d.texture_contrast, 0.0, 3.0),
-                        r.number("noise_sigma", d.noise_sigma, 0.0, 10.0),
-                        r.number("sun_side_m", d.sun_side_m, -1.0, 1.0))
+    return LightingSpec(**_numbers(r, LightingSpec, {
+        "asphalt_gray": (60.0, 200.0), "grass_gray": (20.0, 220.0), "sky_gray": (60.0, 255.0),
+        "shadow_factor": (0.1, 0.6), "texture_contrast": (0.0, 3.0), "noise_sigma": (0.0, 10.0),
+        "sun_side_m": (-1.0, 1.0)}))
+
+
+def _read_shake(top: _Reader) -> ShakeSpec:
+    r = top.sub("shake", tuple(f.name for f in dataclasses.fields(ShakeSpec)))
+    return ShakeSpec(**_numbers(r, ShakeSpec, {"pitch_deg": (0.0, 2.0), "yaw_deg": (0.0, 2.0)}))
 
 
 def _read_ego(top: _Reader) -> EgoSpec:
-    r = top.sub("ego", ("speed_kmh", "profile", "front_m", "width_m", "length_m"))
-    return EgoSpec(r.number("speed_kmh", lo=0.0, hi=250.0), _read_steps(r, "profile"),
-                   r.number("front_m", 2.0, 0.0, 5.0), r.number("width_m", 1.8, 1.2, 3.0),
-                   r.number("length_m", 4.6, 2.0, 20.0))
+    r = top.sub("ego", tuple(f.name for f in dataclasses.fields(EgoSpec)))
+    return EgoSpec(profile=_read_steps(r, "profile"), **_numbers(r, EgoSpec, {
+        "speed_kmh": (0.0, 250.0), "front_m": (0.0, 5.0), "width_m": (1.2, 3.0), "length_m": (2.0, 20.0)}))
 
 
 def _read_vehicle(top: _Reader, index: int, value: Any, road: RoadSpec, seed: int) -> VehicleSpec:
@@ -368,13 +373,11 @@ def parse_scenario(data: Any, where: str, default_name: str = "scenario", source
     for i, vid in enumerate(ids):
         if vid in ids[:i]:
             top.fail(f"vehicles[{i}].id", f"duplicate id {vid}")
-    s = ShakeSpec()
-    shake = top.sub("shake", ("pitch_deg", "yaw_deg"))
     return Scenario(
         name=top.string("name", default_name), description=top.string("description", ""),
         duration_s=duration_s, fps=top.number("fps", 30.0, 1.0, 240.0), seed=seed,
         camera=read_camera(where, top.data.get("camera"), "camera"), road=road,
-        shake=ShakeSpec(shake.number("pitch_deg", s.pitch_deg, 0.0, 2.0), shake.number("yaw_deg", s.yaw_deg, 0.0, 2.0)),
+        shake=_read_shake(top),
         lighting=_read_lighting(top), ego=_read_ego(top), vehicles=vehicles, source=source)
 
 

@@ -30,19 +30,20 @@ def depth_order(state: WorldState) -> list[VehicleState]:
 
 def frame_truth(state: WorldState, camera: Camera, ego_front_m: float, lane_width_m: float) -> list[dict]:
     """Truth records of the vehicles visible in this frame, nearest first."""
-    ordered = []
+    drawable = depth_order(state)
+    if not drawable:
+        return []
+    corners = np.array([rear_face(v) for v in drawable])
+    u, v = camera.project(corners.reshape(-1, 3))
+    u, v = u.reshape(-1, 4), v.reshape(-1, 4)
+    in_front = np.isfinite(u).all(axis=1)  # not beside a strongly yawed camera (partly behind it)
+    ordered = [vehicle for vehicle, ok in zip(drawable, in_front) if ok]
+    boxes = [(float(a.min()), float(b.min()), float(a.max()), float(b.max())) for a, b in zip(u[in_front], v[in_front])]
     ids = np.zeros((camera.height, camera.width), np.uint16)
-    boxes, alone = [], []
-    for vehicle in depth_order(state):
-        corners = rear_face(vehicle)
-        u, v = camera.project(corners)
-        if not np.isfinite(u).all():  # beside a strongly yawed camera: partly behind it
-            continue
-        ordered.append(vehicle)
-        index = len(ordered)
-        boxes.append((float(u.min()), float(v.min()), float(u.max()), float(v.max())))
-        fill(ids, project_quads(camera, corners[None]), index, antialias=False)
-        alone.append(_count(ids, boxes[-1], index))  # its pixels before nearer vehicles cover some
+    alone = []
+    for index, (polygon, box) in enumerate(zip(project_quads(camera, corners[in_front]), boxes), start=1):
+        fill(ids, [polygon], index, antialias=False)
+        alone.append(_count(ids, box, index))  # its pixels before nearer vehicles cover some
     records = []
     for index, (vehicle, box, n_alone) in enumerate(zip(ordered, boxes, alone), start=1):
         clipped = _clip(box, camera)

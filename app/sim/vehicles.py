@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .camera import Camera
-from .polygons import fill, project_quads, rect_xy
+from .polygons import fill, project_quads
 from .scenario import Scenario, VehicleSpec
 from .world import VehicleState
 
@@ -33,6 +33,20 @@ class VehicleLook:
         self.under = 0.6 * shadow_factor * asphalt_gray
         self.tyre = 0.45 * shadow_factor * asphalt_gray
         self.outline = 0.6 * body
+        self._shapes: dict[tuple[bool, bool], tuple[np.ndarray, np.ndarray]] = {}
+
+    def shapes(self, spec: VehicleSpec, braking: bool, detailed: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Part corners (n, 4, 3) in the rear-face frame (x from the left side, z = 0) and gray levels; cached."""
+        key = (braking, detailed)
+        if key not in self._shapes:
+            parts = np.array(self.parts(spec, braking, detailed))
+            x0, x1 = parts[:, 0] * spec.width_m, parts[:, 1] * spec.width_m
+            y0, y1, zero = parts[:, 2], parts[:, 3], np.zeros(len(parts))
+            # Corner order of polygons.rect_xy.
+            corners = np.stack([np.stack(c, axis=1) for c in ((x0, y0, zero), (x1, y0, zero), (x1, y1, zero), (x0, y1, zero))],
+                               axis=1)
+            self._shapes[key] = (corners, parts[:, 4])
+        return self._shapes[key]
 
     def parts(self, spec: VehicleSpec, braking: bool, detailed: bool) -> list[tuple[float, float, float, float, float]]:
         """(left, right, bottom_m, top_m, gray) in drawing order."""
@@ -69,20 +83,25 @@ class VehicleLook:
 
 
 def clip_convex(polygon: np.ndarray, halfplanes: list[tuple[float, float, float]]) -> np.ndarray:
-    """Sutherland-Hodgman: the part of a convex polygon (k, 2) where a p0 + b p1 + c >= 0 for all planes."""
+    """Sutherland-Hodgman: the part of a convex polygon (k, 2) where a p0 + b p1 + c >= 0 for all planes.
+
+    Plain floats: a handful of vertices, where numpy's per-call overhead would dominate.
+    """
+    points = [(float(p), float(q)) for p, q in polygon]
     for a, b, c in halfplanes:
-        if len(polygon) == 0:
-            break
-        side = polygon @ np.array([a, b]) + c
         kept = []
-        for i in range(len(polygon)):
-            j = (i + 1) % len(polygon)
-            if side[i] >= 0:
-                kept.append(polygon[i])
-            if (side[i] >= 0) != (side[j] >= 0):
-                kept.append(polygon[i] + side[i] / (side[i] - side[j]) * (polygon[j] - polygon[i]))
-        polygon = np.array(kept).reshape(-1, 2)
-    return polygon
+        for i, (p, q) in enumerate(points):
+            p2, q2 = points[(i + 1) % len(points)]
+            side, side2 = a * p + b * q + c, a * p2 + b * q2 + c
+            if side >= 0:
+                kept.append((p, q))
+            if (side >= 0) != (side2 >= 0):
+                t = side / (side - side2)
+                kept.append((p + t * (p2 - p), q + t * (q2 - q)))
+        points = kept
+        if not points:
+            break
+    return np.array(points, dtype=np.float64).reshape(-1, 2)
 
 
 class VehiclePainter:
@@ -108,16 +127,14 @@ class VehiclePainter:
         left, right = vehicle.x_m - half - camera_lateral_m, vehicle.x_m + half - camera_lateral_m
         # Half-planes a X + b Z + c >= 0 in camera-relative X: X' >= left Z / z - spill, X' <= right Z / z + spill.
         wedge = [(1.0, -left / z, -camera_lateral_m + spill), (-1.0, right / z, camera_lateral_m + spill)]
-        kept = clip_convex(footprint, wedge)
+        kept = clip_convex(footprint, wedge) if spill > 0 else np.empty((0, 2))  # else all behind the face
         corners = np.stack([kept[:, 0], np.zeros(len(kept)), kept[:, 1]], axis=1)
         return corners, self.shadow_factor
 
     def draw(self, image: np.ndarray, camera: Camera, vehicle: VehicleState, light: float = 1.0) -> None:
         spec = vehicle.spec
-        left = vehicle.x_m - 0.5 * spec.width_m
         width_px = camera.fx * spec.width_m / max(vehicle.z_m, 1e-3)
-        parts = self.looks[spec.id].parts(spec, vehicle.accel_mps2 < BRAKE_LIGHT_MPS2, width_px >= DETAIL_PX)
-        corners = np.array([rect_xy(left + a * spec.width_m, left + b * spec.width_m, y0, y1, vehicle.z_m)
-                            for a, b, y0, y1, _ in parts])
-        for polygon, part in zip(project_quads(camera, corners), parts):
-            fill(image, [polygon], min(255.0, part[4] * light))
+        corners, grays = self.looks[spec.id].shapes(spec, vehicle.accel_mps2 < BRAKE_LIGHT_MPS2, width_px >= DETAIL_PX)
+        placed = corners + np.array([vehicle.x_m - 0.5 * spec.width_m, 0.0, vehicle.z_m])
+        for polygon, gray in zip(project_quads(camera, placed), np.minimum(255.0, grays * light)):
+            fill(image, [polygon], gray)

@@ -118,6 +118,9 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
         r->stages[i].ms = o.times.items[i].second;
     }
     r->total_ms = o.total_ms;
+    r->image_mean = o.image_mean;
+    r->image_stddev = o.image_stddev;
+    r->image_change = o.image_change;
 }
 
 cv::Mat wrap_gray(const uint8_t *gray, int32_t width, int32_t height, int32_t stride) {
@@ -321,6 +324,7 @@ int hw_pipeline_health(hw_pipeline *p, hw_health *out) {
         std::memset(out, 0, sizeof(*out));
         out->last_frame_t_s = NAN;
         out->last_progress_s = NAN;
+        out->last_alive_s = NAN;
         out->last_total_ms = NAN;
         out->queue_capacity = p->results->capacity();
         if (p->loop) p->loop->fill_health(*out);

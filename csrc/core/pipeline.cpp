@@ -46,6 +46,10 @@ FrameOutput Pipeline::process(const Frame &frame) {
     out.height = frame.gray.rows;
     out.events = frame.events;
 
+    const ImageStats stats = image_stats_.measure(frame.gray);
+    out.image_mean = stats.mean;
+    out.image_stddev = stats.stddev;
+    out.image_change = stats.change;
     {
         Stopwatch sw;
         lanes_.update(frame.gray, out.lanes);
@@ -119,6 +123,7 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
 void Pipeline::reset() {
     lanes_.reset();
     if (tracker_) tracker_->reset();
+    image_stats_.reset();
     horizon_.reset();
     kinematics_.reset();
     lead_.reset();

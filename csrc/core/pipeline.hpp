@@ -1,6 +1,7 @@
 // pipeline.hpp - the per-frame code path, shared by the real-time loop and offline process().
 #pragma once
 
+#include "capture/image_stats.hpp"
 #include "core/config.hpp"
 #include "core/types.hpp"
 #include "fcw/lead_selection.hpp"
@@ -38,6 +39,7 @@ private:
     Config cfg_;
     LaneTracker lanes_;
     std::unique_ptr<VehicleTracker> tracker_;  // null for preset "none"
+    ImageStatsMeter image_stats_;
     HorizonTracker horizon_;
     TrackKinematics kinematics_;
     LeadSelector lead_;

@@ -51,8 +51,14 @@ void RealtimeLoop::run() {
 }
 
 bool RealtimeLoop::wait_reconnect(double &backoff_s) {
+    // Wait in slices so the sign of life keeps coming while the back-off is long.
+    const double until = monotonic_s() + backoff_s;
     std::unique_lock<std::mutex> lock(stop_mu_);
-    stop_cv_.wait_for(lock, std::chrono::duration<double>(backoff_s), [&] { return stop_.load(); });
+    while (!stop_ && monotonic_s() < until) {
+        last_alive_ = monotonic_s();
+        stop_cv_.wait_for(lock, std::chrono::duration<double>(std::min(0.1, until - monotonic_s())),
+                          [&] { return stop_.load(); });
+    }
     backoff_s = std::min(backoff_s * 2.0, params_.reconnect_max_s);
     return !stop_;
 }
@@ -65,6 +71,7 @@ void RealtimeLoop::run_frames() {
     bool lost = false;
     Frame frame;
     while (!stop_) {
+        last_alive_ = monotonic_s();
         if (params_.debug_stall_after_s > 0 && monotonic_s() - started > params_.debug_stall_after_s) {
             // Test hook: hang like a stuck driver call would, until stopped.
             std::unique_lock<std::mutex> lock(stop_mu_);
@@ -136,6 +143,7 @@ void RealtimeLoop::fill_health(hw_health &h) const {
     h.reconnects = reconnects_;
     h.last_frame_t_s = last_frame_t_;
     h.last_progress_s = last_progress_;
+    h.last_alive_s = running_ ? last_alive_.load() : NAN;
     h.last_total_ms = last_total_ms_;
     h.queue_depth = results_.depth();
     h.queue_capacity = results_.capacity();

@@ -47,7 +47,7 @@ private:
     // Health, written by the loop thread, read by the caller.
     std::atomic<int> source_state_{HW_SOURCE_IDLE};
     std::atomic<long long> captured_{0}, processed_{0}, decode_errors_{0}, losses_{0}, reconnects_{0};
-    std::atomic<double> last_frame_t_{NAN}, last_progress_{NAN};
+    std::atomic<double> last_frame_t_{NAN}, last_progress_{NAN}, last_alive_{NAN};
     std::atomic<float> last_total_ms_{NAN};
     mutable std::mutex failure_mu_;
     std::string failure_;

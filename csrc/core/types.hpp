@@ -88,6 +88,7 @@ struct FrameOutput {
     int fcw_level = 0;
     StageTimes times;
     float total_ms = 0.f;
+    float image_mean = kNaN, image_stddev = kNaN, image_change = kNaN;  // see capture/image_stats.hpp
 };
 
 } // namespace hw

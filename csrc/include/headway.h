@@ -109,6 +109,9 @@ typedef struct {
     int32_t n_stages;
     hw_stage_time stages[HW_MAX_STAGES];
     float total_ms;
+    /* image health on a sparse grid: mean gray, its standard deviation (near 0 = blinded), mean absolute
+     * change since the previous frame (0 = frozen; NaN on the first frame) */
+    float image_mean, image_stddev, image_change;
 } hw_frame_result;
 
 typedef struct {
@@ -122,7 +125,9 @@ typedef struct {
     int64_t source_losses;
     int64_t reconnects;
     double last_frame_t_s;    /* capture time of the last frame, NaN before the first */
-    double last_progress_s;   /* monotonic time the loop last finished a frame (watchdog), NaN before */
+    double last_progress_s;   /* monotonic time the loop last finished a frame, NaN before */
+    double last_alive_s;      /* monotonic time the loop thread last went round (also while waiting for
+                                 frames or reconnecting): the watchdog's sign of life, NaN if not running */
     float last_total_ms;
     int32_t queue_depth;
     int32_t queue_capacity;

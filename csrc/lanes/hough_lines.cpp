@@ -21,35 +21,54 @@ struct Peak {
     int votes, t, r;
 };
 
-// Least-squares line x = a + k (y - y_ref) through the points within `tol` (perpendicular) of
-// `guess` and inside the half; two passes so the second uses the refined line. False if too few.
-bool fit_line(const std::vector<MarkingPoint> &pts, const Half &h, const ImageLine &guess, float tol,
-              LaneLine &out) {
+// What a line must have to be kept.
+struct Acceptance {
+    int min_votes;    // supporting points
+    float min_span;   // rows between the 10th and 90th percentile of the support
+    float tol;        // px, perpendicular distance of a supporting point
+    float y_ref;      // row the fitted lines refer to
+};
+
+// Least-squares line x = a + k (y - y_ref) through the unclaimed points within `tol`
+// (perpendicular) of `guess` and inside the half; two passes so the second uses the refined line.
+// The window's anchor (a known vanishing point) counts as `anchor_weight` extra points: a line
+// fitted to one short dash gets its direction from the vanishing point, a long marking from its
+// own points. `support` receives the indices of the supporting points. False if too few.
+bool fit_line(const std::vector<MarkingPoint> &pts, const std::vector<char> &claimed, const Half &h,
+              const ImageLine &guess, float tol, const HoughWindow &w, LaneLine &out,
+              std::vector<size_t> &support) {
     ImageLine l = guess;
     std::vector<float> ys;
+    const double wa = w.anchor_weight, ua = w.origin.y - l.y_ref, xa = w.origin.x;
     for (int pass = 0; pass < 2; ++pass) {
         double n = 0, su = 0, suu = 0, sx = 0, sux = 0;
         float y_min = 1e9f, y_max = -1e9f;
         ys.clear();
+        support.clear();
         const float norm = std::sqrt(1.f + l.k * l.k);
-        for (const auto &q : pts) {
-            if (q.x < h.x_lo || q.x >= h.x_hi) continue;
+        for (size_t i = 0; i < pts.size(); ++i) {
+            const MarkingPoint &q = pts[i];
+            if (claimed[i] || q.x < h.x_lo || q.x >= h.x_hi) continue;
             if (std::fabs(q.x - l.x_at(q.y)) > tol * norm) continue;
             const double u = q.y - l.y_ref;
             n += 1; su += u; suu += u * u; sx += q.x; sux += u * q.x;
             y_min = std::min(y_min, q.y);
             y_max = std::max(y_max, q.y);
             ys.push_back(q.y);
+            support.push_back(i);
         }
+        if (n < 2) return false;
+        const double votes = n;
+        n += wa; su += wa * ua; suu += wa * ua * ua; sx += wa * xa; sux += wa * ua * xa;
         const double det = n * suu - su * su;
-        if (n < 2 || det <= 1e-6 * n * n) return false;
-        // Normal equations of min sum (x_i - a - k u_i)^2.
+        if (det <= 1e-6 * n * n) return false;
+        // Normal equations of min sum w_i (x_i - a - k u_i)^2.
         const double k = (n * sux - su * sx) / det;
         const double a = (sx - k * su) / n;
         l.k = float(k);
         l.x_ref = float(a);
         out.line = l;
-        out.votes = float(n);
+        out.votes = float(votes);
         out.y_min = y_min;
         out.y_max = y_max;
     }
@@ -59,6 +78,13 @@ bool fit_line(const std::vector<MarkingPoint> &pts, const Half &h, const ImageLi
     const float p10 = ys[lo];
     std::nth_element(ys.begin(), ys.begin() + long(hi), ys.end());
     out.span = ys[hi] - p10;
+    // Fit precision (the anchor, if any, is a point of weight wa at the origin's row).
+    double sy = wa * w.origin.y;
+    for (float y : ys) sy += y;
+    const double n_eff = double(ys.size()) + wa, y_mean = sy / n_eff;
+    double s_yy = wa * (w.origin.y - y_mean) * (w.origin.y - y_mean);
+    for (float y : ys) s_yy += (y - y_mean) * (y - y_mean);
+    out.fit = {float(n_eff), float(y_mean), float(s_yy)};
     return true;
 }
 
@@ -67,8 +93,9 @@ bool fit_line(const std::vector<MarkingPoint> &pts, const Half &h, const ImageLi
 // it can only vote where theta is within asin(rho_max / r) of phi - 90 deg (the line through o and
 // the point): a narrow window around a known vanishing point costs a few bins per point.
 // Appends the refined lines of the strongest peaks.
-void hough_half(const std::vector<MarkingPoint> &pts, const Half &h, const HoughWindow &w, int max_peaks,
-                int min_votes, float tol, float y_ref, std::vector<LaneLine> &out) {
+void hough_half(const std::vector<MarkingPoint> &pts, const Half &h, const HoughWindow &w,
+                const Acceptance &acc_rule, std::vector<LaneLine> &out) {
+    const int min_votes = acc_rule.min_votes;
     const cv::Point2f o = w.origin;
     const float rho_max = w.rho_max, dt = w.theta_step_deg * kDeg, dr = w.rho_step_px;
     const int n_t = std::max(1, int(std::floor((h.theta_hi - h.theta_lo) / dt)) + 1);
@@ -115,9 +142,13 @@ void hough_half(const std::vector<MarkingPoint> &pts, const Half &h, const Hough
         }
     std::sort(peaks.begin(), peaks.end(), [](const Peak &a, const Peak &b) { return a.votes > b.votes; });
 
+    // Strongest peak first; each accepted line claims its points, so a weaker peak that shares
+    // them (a marking plus a tail light, or a dash plus road texture) is judged on what is left.
     std::vector<Peak> kept;
+    std::vector<char> claimed(pts.size(), 0);
+    std::vector<size_t> support;
     for (const auto &pk : peaks) {
-        if (int(kept.size()) >= max_peaks) break;
+        if (int(kept.size()) >= w.max_peaks) break;
         bool near = false;
         for (const auto &k : kept) near |= std::abs(k.t - pk.t) <= 2 && std::abs(k.r - pk.r) <= 2;
         if (near) continue;
@@ -126,14 +157,18 @@ void hough_half(const std::vector<MarkingPoint> &pts, const Half &h, const Hough
         // Peak -> image line: x(y) = o.x + (rho - (y - o.y) sin(theta)) / cos(theta).
         const float th = h.theta_lo + pk.t * dt, rho = pk.r * dr - rho_max;
         ImageLine l;
-        l.y_ref = y_ref;
+        l.y_ref = acc_rule.y_ref;
         l.k = -std::tan(th);
-        l.x_ref = o.x + (rho - (y_ref - o.y) * std::sin(th)) / std::cos(th);
+        l.x_ref = o.x + (rho - (l.y_ref - o.y) * std::sin(th)) / std::cos(th);
         LaneLine ll;
-        if (!fit_line(pts, h, l, tol, ll)) continue;
-        // Reject by angle after the fit (thesis): the lean allowed for this half.
+        if (!fit_line(pts, claimed, h, l, acc_rule.tol, w, ll, support)) continue;
+        // Rejection: too little support, support bunched in a few rows (one vehicle), or an
+        // implausible angle for this half (thesis).
         const float th_fit = -std::atan(ll.line.k);
-        if (th_fit < h.theta_lo - dt || th_fit > h.theta_hi + dt) continue;
+        if (ll.votes < float(min_votes) || ll.span < acc_rule.min_span || th_fit < h.theta_lo - dt ||
+            th_fit > h.theta_hi + dt)
+            continue;
+        for (size_t i : support) claimed[i] = 1;
         out.push_back(ll);
     }
 }
@@ -150,13 +185,14 @@ HoughWindow wide_window(cv::Size size, const HorizonPrior &hp, const HoughLinesP
     return w;
 }
 
-HoughWindow vp_window(cv::Point2f vp, cv::Size size, const HoughLinesParams &p) {
+HoughWindow vp_window(cv::Point2f vp, bool tracked, cv::Size size, const HoughLinesParams &p) {
     HoughWindow w;
     w.origin = vp;
     w.rho_max = std::max(2.f * float(p.rho_step_px), float(p.vp_line_tol_frac) * float(size.width));
     w.theta_step_deg = float(p.theta_step_deg);
     w.rho_step_px = float(p.rho_step_px);
     w.max_peaks = p.max_peaks_per_half;
+    w.anchor_weight = tracked ? float(p.vp_anchor_points) : 0.f;
     return w;
 }
 
@@ -179,16 +215,9 @@ std::vector<LaneLine> hough_lane_lines(const std::vector<MarkingPoint> &pts, con
     // halves split at the window's origin and overlap so lines near the split are seen whole.
     const Half left{-1e9f, win.origin.x + overlap, -a_cross, a_max};
     const Half right{win.origin.x - overlap, 1e9f, -a_max, a_cross};
-    hough_half(pts, left, win, win.max_peaks, min_votes, tol, y_ref, found);
-    hough_half(pts, right, win, win.max_peaks, min_votes, tol, y_ref, found);
-
-    // Rejection: too little support, or support spanning too few rows.
-    const float min_span = float(p.min_span_frac) * float(band.y_bottom - band.y_top);
-    found.erase(std::remove_if(found.begin(), found.end(),
-                               [&](const LaneLine &l) {
-                                   return l.votes < float(min_votes) || l.span < min_span;
-                               }),
-                found.end());
+    const Acceptance rule{min_votes, float(p.min_span_frac) * float(band.y_bottom - band.y_top), tol, y_ref};
+    hough_half(pts, left, win, rule, found);
+    hough_half(pts, right, win, rule, found);
 
     // Grouping by angle and lateral distance (thesis: many lines on one marking -> one line). The
     // strongest line of a group represents it; members closer than group_angle in angle and

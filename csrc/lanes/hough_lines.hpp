@@ -33,9 +33,10 @@ struct HoughLinesParams {
     int min_votes = 6;                // scanned rows; fewest supporting rows of a line
     double min_votes_frac = 0.05;     // fraction of scanned rows; same, relative to the band
     double inlier_frac = 0.006;       // fraction of width; distance of a supporting point from its line
-    double min_span_frac = 0.25;      // fraction of the band height the support must span
+    double min_span_frac = 0.12;      // fraction of the band height the support must span
     double group_angle_deg = 3.0;     // deg; lines closer in angle may be one marking (thesis grouping)
     double group_sep_m = 0.5;         // m; lines closer laterally than this are one marking
+    double vp_anchor_points = 8.0;    // points; pull of a known vanishing point on each line fit
     int max_peaks_per_half = 12;      // Hough peaks examined per half
 
     void bind(ParamMap &m) {
@@ -70,6 +71,10 @@ struct HoughLinesParams {
         m.add("group_sep_m", group_sep_m, 0.05, 3.0,
               "m; lines closer laterally than this are one marking (both edges, double lines); well "
               "below a lane width");
+        m.add("vp_anchor_points", vp_anchor_points, 0.0, 1000.0,
+              "points; in the search around a tracked vanishing point each line fit counts the vanishing "
+              "point as this many extra points: a line seen only on one short dash takes its direction "
+              "from it, a long marking (50+ points) hardly moves; 0 fits the points alone");
         m.add("max_peaks_per_half", max_peaks_per_half, 1, 64,
               "count; Hough peaks examined in each half (thesis: two per half; more for adjacent lanes)");
     }
@@ -81,6 +86,7 @@ struct LaneLine {
     float votes = 0.f;      // scanned rows supporting the line
     float y_min = 0.f, y_max = 0.f;  // rows spanned by the support
     float span = 0.f;       // rows between the 10th and 90th percentile of the support
+    LineFit fit;            // precision of the fitted line (anchor included)
 };
 
 // Where the transform looks: lines passing within rho_max of `origin`, at this resolution.
@@ -90,14 +96,17 @@ struct HoughWindow {
     float theta_step_deg = 1.f;   // deg
     float rho_step_px = 2.f;      // px
     int max_peaks = 8;            // per half
+    float anchor_weight = 0.f;    // points' worth of pull of the line fits towards `origin`
 };
 
 // Wide window around the prior vanishing point (coarse bins): finds the strong lines whose
 // consensus gives the vanishing point.
 HoughWindow wide_window(cv::Size size, const HorizonPrior &hp, const HoughLinesParams &p);
 // Narrow window around a measured vanishing point (fine bins): finds every marking of the road,
-// faint and dashed ones too, without the clutter lines that do not pass through it.
-HoughWindow vp_window(cv::Point2f vp, cv::Size size, const HoughLinesParams &p);
+// faint and dashed ones too, without the clutter lines that do not pass through it. Only a tracked
+// vanishing point (smoothed over frames) anchors the line fits; one measured in this frame alone is
+// a compromise of lines that may not quite meet (curves) and would bend them.
+HoughWindow vp_window(cv::Point2f vp, bool tracked, cv::Size size, const HoughLinesParams &p);
 
 // Lines of the lane markings among `pts`, one per marking, sorted left to right at the bottom row.
 std::vector<LaneLine> hough_lane_lines(const std::vector<MarkingPoint> &pts, const ScanBand &band,

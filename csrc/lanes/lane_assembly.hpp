@@ -61,6 +61,7 @@ struct LaneCandidate {
     float weight = 0.f;     // evidence: supporting rows, or track history
     bool observed = true;   // measured in this frame
     int id = -1;            // caller's identity (a track id), -1 for none
+    LineFit fit;            // precision of a measured line (n = 0 when not a fit)
 };
 
 // Indices into the candidates (-1 = none) and the ego-lane width as a slope difference.

@@ -30,6 +30,7 @@ std::vector<LaneCandidate> hough_candidates(const std::vector<MarkingPoint> &pts
         LaneCandidate c;
         c.line = l.line;
         c.weight = l.votes;
+        c.fit = l.fit;
         out.push_back(c);
     }
     return out;
@@ -61,13 +62,13 @@ LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, con
     find_marking_points(gray, band, cam, hp, p.filter, pts);
 
     // Narrow search around vp: the lines through it, with the vanishing point refined by them.
-    auto narrow = [&](cv::Point2f vp) {
-        m.lines = hough_candidates(pts, band, gray.size(), cam, hp, p, vp_window(vp, gray.size(), p.hough));
+    auto narrow = [&](cv::Point2f vp, bool tracked) {
+        m.lines = hough_candidates(pts, band, gray.size(), cam, hp, p, vp_window(vp, tracked, gray.size(), p.hough));
         cv::Point2f refined;
         m.vp = keep_consensus(m.lines, hp, gray.size(), p.assembly, refined) ? refined : vp;
     };
     if (known_vp) {
-        narrow(*known_vp);
+        narrow(*known_vp, true);
         if (m.lines.size() >= 2) return m;
     }
     // The vanishing point of this frame (or the known one found too little: it moved, or the road
@@ -76,7 +77,7 @@ LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, con
         hough_candidates(pts, band, gray.size(), cam, hp, p, wide_window(gray.size(), hp, p.hough));
     cv::Point2f vp;
     if (keep_consensus(wide, hp, gray.size(), p.assembly, vp)) {
-        narrow(vp);
+        narrow(vp, false);
         if (m.lines.empty()) m.lines = wide;
     } else {
         m.lines = wide;  // no two lines agree: keep them all, vanishing point unknown
@@ -116,22 +117,52 @@ void LaneTracker::reset() {
 }
 
 ImageLine LaneTracker::line_of(const Track &t) const {
-    return {t.xb, yb_, (t.xr - t.xb) / (yr_ - yb_)};
+    return {t.b.x, yb_, (t.r.x - t.b.x) / (yr_ - yb_)};
 }
 
 void LaneTracker::set_line(Track &t, const ImageLine &l) const {
-    t.xb = l.x_at(yb_);
-    t.xr = l.x_at(yr_);
+    t.b.x = l.x_at(yb_);
+    t.r.x = l.x_at(yr_);
+}
+
+void LaneTracker::RowFilter::init(float z, float r, float v_var) {
+    x = z; v = 0.f;
+    p00 = r; p01 = 0.f; p11 = v_var;
+}
+
+// x' = x + v; P' = F P F^T + Q, Q = q^2 [[1/4, 1/2], [1/2, 1]] (white acceleration, one frame).
+void LaneTracker::RowFilter::predict(float q) {
+    x += v;
+    const float q2 = q * q;
+    p00 += 2.f * p01 + p11 + 0.25f * q2;
+    p01 += p11 + 0.5f * q2;
+    p11 += q2;
+}
+
+// K = P H^T / (H P H^T + r), H = [1 0]; x += K (z - x); P = (I - K H) P.
+void LaneTracker::RowFilter::update(float z, float r) {
+    const float s = p00 + r, k0 = p00 / s, k1 = p01 / s, res = z - x;
+    x += k0 * res;
+    v += k1 * res;
+    p11 -= k1 * p01;
+    p01 *= 1.f - k0;
+    p00 *= 1.f - k0;
 }
 
 // Predict every track (constant velocity), then match measured lines to tracks greedily by the
-// larger of the two row distances in lane widths, within the gate; alpha-beta update:
-// x = x_pred + alpha r, v = v + beta r with r = z - x_pred.
+// larger of the two row distances in lane widths, within the gate, and update each row's Kalman
+// filter with the measured column; its variance comes from the line's fit at that row.
 void LaneTracker::associate(const LaneMeasurement &m, const HorizonPrior &hp) {
+    const float q = float(p_.process_accel_frac) * float(cam_.width);
     for (auto &t : tracks_) {
-        t.xb += t.vb;
-        t.xr += t.vr;
+        t.b.predict(q);
+        t.r.predict(q);
     }
+    const float s2 = float(p_.marking_sigma_px * p_.marking_sigma_px);
+    auto meas_var = [&](const LaneCandidate &c, float y) {
+        const float rel = c.fit.rel_sigma_at(y);
+        return std::isfinite(rel) ? s2 * rel * rel : 100.f * s2;
+    };
     const float lw = float(p_.assembly.lane_width_m);
     const float wb = std::max(1.f, lw * px_per_m(cam_, hp.row, yb_));
     const float wr = std::max(1.f, lw * px_per_m(cam_, hp.row, yr_));
@@ -140,21 +171,19 @@ void LaneTracker::associate(const LaneMeasurement &m, const HorizonPrior &hp) {
     for (size_t i = 0; i < tracks_.size(); ++i)
         for (size_t j = 0; j < m.lines.size(); ++j) {
             const ImageLine &l = m.lines[j].line;
-            const float d = std::max(std::fabs(l.x_at(yb_) - tracks_[i].xb) / wb,
-                                     std::fabs(l.x_at(yr_) - tracks_[i].xr) / wr);
+            const float d = std::max(std::fabs(l.x_at(yb_) - tracks_[i].b.x) / wb,
+                                     std::fabs(l.x_at(yr_) - tracks_[i].r.x) / wr);
             if (d < float(p_.gate_lanes)) pairs.push_back({d, i, j});
         }
     std::sort(pairs.begin(), pairs.end(), [](const Pair &a, const Pair &b) { return a.d < b.d; });
     std::vector<char> t_used(tracks_.size(), 0), m_used(m.lines.size(), 0);
-    const float a = float(p_.alpha), b = float(p_.beta);
     for (const auto &pr : pairs) {
         if (t_used[pr.t] || m_used[pr.m]) continue;
         t_used[pr.t] = m_used[pr.m] = 1;
         Track &t = tracks_[pr.t];
-        const ImageLine &l = m.lines[pr.m].line;
-        const float rb = l.x_at(yb_) - t.xb, rr = l.x_at(yr_) - t.xr;
-        t.xb += a * rb; t.vb += b * rb;
-        t.xr += a * rr; t.vr += b * rr;
+        const LaneCandidate &c = m.lines[pr.m];
+        t.b.update(c.line.x_at(yb_), meas_var(c, yb_));
+        t.r.update(c.line.x_at(yr_), meas_var(c, yr_));
         ++t.hits;
         t.missing = 0;
     }
@@ -162,8 +191,8 @@ void LaneTracker::associate(const LaneMeasurement &m, const HorizonPrior &hp) {
         if (!t_used[i]) {
             Track &t = tracks_[i];
             ++t.missing;
-            t.vb *= 0.5f;  // coast, but do not extrapolate a motion that is no longer seen
-            t.vr *= 0.5f;
+            t.b.v *= 0.5f;  // coast, but do not extrapolate a motion that is no longer seen
+            t.r.v *= 0.5f;
         }
     tracks_.erase(std::remove_if(tracks_.begin(), tracks_.end(),
                                  [&](const Track &t) { return t.missing > p_.max_missing_frames; }),
@@ -172,7 +201,10 @@ void LaneTracker::associate(const LaneMeasurement &m, const HorizonPrior &hp) {
         if (m_used[j]) continue;
         Track t;
         t.id = next_id_++;
-        set_line(t, m.lines[j].line);
+        const LaneCandidate &c = m.lines[j];
+        const float v_var = (0.01f * float(cam_.width)) * (0.01f * float(cam_.width));  // ~6 px/frame at 640
+        t.b.init(c.line.x_at(yb_), meas_var(c, yb_), v_var);
+        t.r.init(c.line.x_at(yr_), meas_var(c, yr_), v_var);
         t.hits = 1;
         tracks_.push_back(t);
     }
@@ -189,11 +221,13 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
     check_frame(gray, cam_);
     // Search around the tracked vanishing point, kept within the camera prior's window.
     HorizonPrior hp = prior_;
-    if (std::isfinite(vp_.x) && std::isfinite(vp_.y)) {
+    const bool have_vp = std::isfinite(vp_.x) && std::isfinite(vp_.y);
+    if (have_vp) {
         hp.row = std::clamp(vp_.y, prior_.row - prior_.tol_px, prior_.row + prior_.tol_px);
         hp.vp_x = std::clamp(vp_.x, 0.f, float(cam_.width - 1));
     }
-    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp);
+    const cv::Point2f known_vp(hp.vp_x, hp.row);
+    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp, have_vp ? &known_vp : nullptr);
     associate(m, hp);
 
     // Tracks -> candidates; evidence grows with history and fades while a track coasts.
@@ -253,7 +287,7 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
         std::fabs(q.y - prior_.row) <= prior_.tol_px) {
         vp_ = q;
     } else if (std::isfinite(m.vp.x)) {
-        vp_ = std::isfinite(vp_.x) ? vp_ + float(p_.alpha) * (m.vp - vp_) : m.vp;
+        vp_ = std::isfinite(vp_.x) ? vp_ + 0.5f * (m.vp - vp_) : m.vp;
     } else if (tracks_.empty()) {
         vp_ = {kNaN, kNaN};
     }

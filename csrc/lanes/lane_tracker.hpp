@@ -3,7 +3,7 @@
 // One frame: row filtering (marking_filter), Hough per half with grouping and rejection
 // (hough_lines), vanishing-point consensus and ego/adjacent assignment (lane_assembly).
 // Over frames (the thesis names lane tracking as the remedy for markings that are missing or hidden
-// by vehicles, but does not build it): every marking is a track with an alpha-beta filter on its x
+// by vehicles, but does not build it): every marking is a track with a Kalman filter on its x
 // at two rows; a measurement joins the track it is within `gate_lanes` lane widths of, so a line
 // that jumps implausibly starts a new track instead of moving the old one, and loses the ego
 // assignment to the established track; a track that is not measured coasts for up to
@@ -29,8 +29,8 @@ struct LaneParams {
     HoughLinesParams hough;
     LaneAssemblyParams assembly;
     int max_missing_frames = 15;  // frames a boundary is carried over after it was last measured
-    double alpha = 0.6;           // alpha-beta filter: position gain
-    double beta = 0.2;            // alpha-beta filter: velocity gain
+    double marking_sigma_px = 1.0;     // px; noise of one marking point (measurement model)
+    double process_accel_frac = 0.0015; // fraction of width per frame^2; how fast a boundary may change
     double gate_lanes = 0.25;     // lane widths; farthest a measurement may be from its track
     double width_alpha = 0.2;     // smoothing gain of the tracked ego-lane width
     int max_tracks = 8;           // markings tracked at most
@@ -42,11 +42,13 @@ struct LaneParams {
         m.add("max_missing_frames", max_missing_frames, 0, 1000,
               "frames; how long a boundary that is no longer measured is kept by lane tracking; 15 "
               "(0.5 s at 30 fps) bridges dash gaps, worn paint and a vehicle passing over the marking");
-        m.add("alpha", alpha, 0.01, 1.0,
-              "1; alpha-beta position gain of a tracked boundary; 0.6: line fits are accurate to a pixel, "
-              "so follow them closely");
-        m.add("beta", beta, 0.0, 1.0,
-              "1; alpha-beta velocity gain; 0.2 follows the steady sideways motion of a lane change without lag");
+        m.add("marking_sigma_px", marking_sigma_px, 0.05, 50.0,
+              "px; noise of one marking-centre point; a measured line's variance at a row follows from its "
+              "least-squares fit (a long marking counts fully, a line through one short far dash hardly "
+              "moves the boundary at the bottom of the image)");
+        m.add("process_accel_frac", process_accel_frac, 0.0, 0.1,
+              "fraction of the image width per frame^2; white-acceleration noise of a boundary's column "
+              "(Kalman process noise); 0.0015 (1 px/frame^2 at 640) follows a lane change at 1 m/s and pitch shake");
         m.add("gate_lanes", gate_lanes, 0.01, 1.0,
               "lane widths; a measured line farther than this from a tracked boundary (at the bottom row or "
               "mid-band) is a different marking; 0.25 rejects jumps to a neighbouring marking or a vehicle edge");
@@ -77,10 +79,17 @@ public:
     void reset();
 
 private:
+    // Constant-velocity Kalman filter of a boundary's column on one row (px, px per frame).
+    struct RowFilter {
+        float x = 0.f, v = 0.f;
+        float p00 = 0.f, p01 = 0.f, p11 = 0.f;  // covariance of (x, v)
+        void init(float z, float r, float v_var);
+        void predict(float q);                  // q: acceleration sigma, px per frame^2
+        void update(float z, float r);          // r: measurement variance, px^2
+    };
     struct Track {
         int id = -1;
-        float xb = 0.f, xr = 0.f;  // x at rows yb_ and yr_
-        float vb = 0.f, vr = 0.f;  // px per frame
+        RowFilter b, r;  // columns at rows yb_ and yr_
         int hits = 0, missing = 0;
     };
     ImageLine line_of(const Track &t) const;

@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace hw {
 
@@ -62,6 +63,21 @@ inline float row_at_range(const CameraParams &cam, float y_h, float range_m) {
 struct ImageLine {
     float x_ref = 0.f, y_ref = 0.f, k = 0.f;
     float x_at(float y) const { return x_ref + k * (y - y_ref); }
+};
+
+// Precision of a least-squares line fitted to points of equal noise sigma (a weighted anchor point
+// counts with its weight): var(x at row y) = sigma^2 (1/n + (y - y_mean)^2 / s_yy). A long marking
+// is known to a fraction of a pixel everywhere; a line through one short far dash is poorly known
+// at the bottom of the image, far from its points.
+struct LineFit {
+    float n = 0.f;       // points (weights) in the fit
+    float y_mean = 0.f;  // their mean row
+    float s_yy = 0.f;    // sum of squared row deviations
+    // sigma of x at row y in units of the point sigma (infinite for no fit).
+    float rel_sigma_at(float y) const {
+        if (n <= 0.f || s_yy <= 0.f) return std::numeric_limits<float>::infinity();
+        return std::sqrt(1.f / n + (y - y_mean) * (y - y_mean) / s_yy);
+    }
 };
 
 // Intersection of two image lines; false when they are (nearly) parallel.

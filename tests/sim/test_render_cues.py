@@ -7,6 +7,7 @@ import pytest
 
 from app.sim import load_scenario, render
 from app.sim.frames import scenario_camera
+from app.sim.scenario import parse_scenario
 from app.sim.world import World
 
 
@@ -130,3 +131,16 @@ def test_brake_lights_light_up_when_the_lead_brakes():
 
     # Unlit, the brightest part is the number plate (~215); lit brake lights are ~245.
     assert brightest_in_box(before) < 235 <= brightest_in_box(during)
+
+
+def test_sun_side_shadow_spills_beside_the_vehicle_only_on_that_side():
+    data = {"duration_s": 1.0, "seed": 3, "lighting": {"sun_side_m": 0.6, "noise_sigma": 0.0},
+            "ego": {"speed_kmh": 50}, "vehicles": [{"id": 1, "lane": 0, "z_m": 15, "speed_kmh": 50, "shade": "light"}]}
+    scenario = parse_scenario(data, "scenario sun.yaml")
+    frame = next(render(scenario, frames=[0]))
+    l, t, r, b = frame.truth[0]["box"]
+    image = frame.image.astype(np.float64)
+    rows = slice(int(b) - 3, int(b))  # just above the bottom edge: the road beside the tyres
+    right = image[rows, int(r) + 3:int(r) + 8].mean()
+    left = image[rows, int(l) - 8:int(l) - 3].mean()
+    assert left - right >= 30.0  # shadow on the right (sun on the left), sun-lit road on the left

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from app.sim import Camera, list_scenarios, load_scenario
+from app.sim import Camera, list_scenarios, load_scenario, render
 from app.sim.frames import scenario_camera
 
 REQUIRED_SCENARIOS = {
@@ -16,8 +16,9 @@ def test_the_scenario_set_is_complete():
     assert REQUIRED_SCENARIOS <= set(list_scenarios())
 
 
-def _frame_camera(scenario, frame) -> Camera:
-    base = scenario_camera(scenario)
+def _frame_camera(scenario, frame, overrides=None) -> Camera:
+    """The camera of this frame: the scenario's camera (with overrides) turned by the frame's shake."""
+    base = scenario_camera(scenario, overrides)
     return base.shaken(frame.pitch_deg - base.pitch_deg, frame.yaw_deg - base.yaw_deg)
 
 
@@ -101,3 +102,23 @@ def test_occluded_and_clipped_vehicles_report_partial_visibility(sampled_frames)
     # A vehicle entering from the bottom-left edge is clipped by the image border.
     clipped = [v for f in sampled_frames("overtaking_from_side") for v in f.truth if v["box"][0] < 0]
     assert clipped and all(v["visible_fraction"] < 1.0 for v in clipped)
+
+
+def test_other_cameras_keep_truth_and_pixels_consistent():
+    scenario = load_scenario("lane_change")
+    overrides = {"width": 1280, "height": 720, "fx": 1000.0, "height_m": 1.5, "pitch_deg": 3.0,
+                 "yaw_deg": 2.0, "lateral_m": 0.5}
+    frames = list(render(scenario, camera_overrides=overrides, frames=[0, 120]))
+    for frame in frames:
+        assert frame.image.shape == (720, 1280)
+        camera = _frame_camera(scenario, frame, overrides)
+        assert abs(frame.pitch_deg - 3.0) < 0.5 and abs(frame.yaw_deg - 2.0) < 0.5
+        for v in frame.truth:
+            x_world = v["lateral_m"] + 0.5
+            assert abs(v["box"][3] - camera.row_of_range(v["longitudinal_m"], x_world)) <= 1.0
+        # The lead's bottom edge is where the picture turns dark (the gap under the body).
+        lead = next(v for v in frame.truth if v["id"] == 1)
+        l, t, r, b = lead["box"]
+        column = frame.image[:, int(round(0.5 * (l + r)))].astype(float)
+        row = int(round(b))
+        assert column[row + 3:row + 8].mean() - column[row - 4:row - 1].mean() > 30.0

@@ -1,0 +1,77 @@
+"""Cost of Headway's CAN output per frame set: pack (cantools, counter, checksum) and send on a
+python-can ``virtual`` bus, with and without a candump log. ``python -m app.can.bench``.
+
+A frame set is what one camera frame produces when every group is due: HW_FCW, HW_LEAD,
+HW_LEAD_TTC, HW_STATUS, HW_OBJECT_HEADER and two HW_OBJECT pages per object.
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import can
+
+from .bus import CanOutput
+from .config_schema import defaults
+from .session import CanSession
+from .vehicle_input import VehicleInput
+
+CAMERA = {"fx": 700.0, "cx": 320.0}
+
+
+def fake_track(i: int) -> SimpleNamespace:
+    """A plausible confirmed track, i metres further out per index (attributes as app.core.Track)."""
+    left = 280.0 + 7 * i
+    return SimpleNamespace(id=i + 1, confirmed=True, box=(left, 240.0, left + 40.0, 270.0), confidence=0.8,
+                           range_m=10.0 + 7.5 * i, lateral_m=-1.5 + 0.5 * (i % 7), range_rate_mps=-1.0 - 0.1 * i,
+                           ttc_s=(10.0 + 7.5 * i) / (1.0 + 0.1 * i), ttc_scale_s=9.0 + i, lane_index=i % 3 - 1,
+                           in_path=i % 3 == 1)
+
+
+def fake_result(frame: int, n_objects: int, fcw_level: int = 0, lead: int = 1) -> SimpleNamespace:
+    """A frame result (attributes as app.core.FrameResult) with ``n_objects`` tracks; track ``lead`` leads."""
+    tracks = [fake_track(i) for i in range(n_objects)]
+    return SimpleNamespace(frame=frame, t=frame / 30.0, t_done=frame / 30.0 + 0.02, tracks=tracks,
+                           lead_id=lead if n_objects >= lead else None, fcw_level=fcw_level)
+
+
+def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
+    """(median CPU microseconds of this thread per frame set, frames per set); CPU time, so that a
+    busy machine does not inflate it."""
+    cfg = defaults()
+    cfg["can"].update(max_objects=64)
+    cfg["camera"] = CAMERA
+    with tempfile.TemporaryDirectory() as tmp, can.Bus(interface="virtual", channel="bench") as bus, \
+            can.Bus(interface="virtual", channel="bench") as sink:
+        output = CanOutput(bus, Path(tmp) / "out.log" if log else None)
+        session = CanSession(cfg, output, VehicleInput([]), deterministic=True)
+        times, frames = [], 0
+        for k in range(repeats):
+            t = k * 0.1  # every group due every call
+            result = fake_result(k, n_objects, fcw_level=k % 3)
+            t_start = time.thread_time()
+            frames = len(session.publish(t, result))
+            times.append(time.thread_time() - t_start)
+            while sink.recv(timeout=0) is not None:
+                pass
+        session.close()
+    return statistics.median(times) * 1e6, frames
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=300)
+    args = ap.parse_args()
+    print("objects  frames/set  us/set (bus)  us/set (bus + .log)  us/frame")
+    for n in (0, 4, 16, 32, 64):
+        us, frames = measure(n, False, args.repeats)
+        us_log, _ = measure(n, True, args.repeats)
+        print(f"{n:7d}  {frames:10d}  {us:12.0f}  {us_log:19.0f}  {us / frames:8.1f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,80 @@
+"""FCW over the synthetic scenarios through the whole stack (core, supervisor, CAN): when the first
+warning came, with which TTC, and how much margin that leaves to the US NCAP FCW requirement; and the
+false warnings where none is expected. The CAN output is decoded with cantools, as the car would."""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Optional
+
+import can
+
+from app.can import headway_database
+from app.replay import replay_scenario
+
+# scenario -> the true TTC (s) by which a warning must have come (NCAP FCW confirmation test);
+# scenarios not listed must give no warning.
+REQUIRED_TTC_S = {
+    "stopped_lead_50kmh": 2.1,
+    "stopped_lead_72kmh": 2.1,
+    "stopped_lead_100kmh": 2.1,
+    "lead_braking_0p3g": 2.4,
+    "slower_lead": 2.0,
+}
+NO_WARNING = ("steady_following", "adjacent_passing", "cut_out_stopped_car", "overpass_shadow", "dense_traffic",
+              "empty_road", "cut_in", "lane_change", "overtaking_from_side")
+
+
+def _true_ttc(truth: list[dict]) -> Optional[float]:
+    """TTC to the ego front of the most urgent vehicle in the ego lane (None if nobody is closing)."""
+    ttcs = [v["ttc_s"] for v in truth if v["lane"] == 0 and v["ttc_s"] is not None]
+    return min(ttcs) if ttcs else None
+
+
+def warnings_in_can_log(path: str) -> list[tuple[float, int, Optional[float]]]:
+    """(t, level, ttc) at every change of HW_FCW's level in a CAN log, decoded with cantools; t is
+    relative to the log's first frame (the replay's frame 0)."""
+    db = headway_database()
+    msg = db.get_message_by_name("HW_FCW")
+    frames = list(can.LogReader(path))
+    if not frames:
+        return []
+    t0 = min(m.timestamp for m in frames)
+    out, last = [], 0
+    for m in frames:
+        if m.arbitration_id != msg.frame_id:
+            continue
+        sig = msg.decode(m.data, decode_choices=False)
+        level = int(sig["FCW_LEVEL"])
+        if level != last:
+            out.append((m.timestamp - t0, level, sig.get("FCW_TTC")))
+            last = level
+    return out
+
+
+def evaluate(name: str, config_path: Optional[str] = None) -> dict:
+    truth_ttc: list[tuple[float, Optional[float]]] = []
+
+    def on_result(r, decision, truth):
+        truth_ttc.append((r.t, _true_ttc(truth)))
+
+    with tempfile.TemporaryDirectory() as tmp:
+        can_out = str(Path(tmp) / "out.log")
+        s = replay_scenario(name, config_path=config_path, can_out=can_out, on_result=on_result, progress=False)
+        changes = warnings_in_can_log(can_out)
+    warnings = [(t, ttc) for t, level, ttc in changes if level == 2]
+    out = {"scenario": name, "frames": s.frames, "warnings": len(warnings),
+           "prewarnings": sum(1 for _, level, _ in changes if level == 1), "first_warning_t_s": None,
+           "ttc_used_s": None, "true_ttc_s": None}
+    if warnings:
+        t, ttc_used = warnings[0]
+        nearest = min(truth_ttc, key=lambda x: abs(x[0] - t))
+        out.update(first_warning_t_s=round(t, 3), ttc_used_s=ttc_used, true_ttc_s=nearest[1])
+    req = REQUIRED_TTC_S.get(name)
+    if req is not None:
+        out["required_ttc_s"] = req
+        out["margin_s"] = None if out["true_ttc_s"] is None else out["true_ttc_s"] - req
+        out["pass"] = out["margin_s"] is not None and out["margin_s"] >= 0
+    else:
+        out["pass"] = not warnings
+    return out

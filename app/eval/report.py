@@ -1,0 +1,139 @@
+"""`headway eval`: run a pipeline preset over the evaluation sets and write a JSON report, a markdown
+table and a few annotated example images into one folder."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Optional
+
+import cv2
+
+from app.annotate import annotate
+
+PARTS = ("synthetic", "tusimple", "lanes", "range")
+
+
+def _f(x, nd=3) -> str:
+    return "n/a" if x is None else f"{x:.{nd}f}"
+
+
+def markdown(report: dict) -> str:
+    out = [f"## Preset `{report['preset']}`", ""]
+    syn = report.get("synthetic")
+    if syn:
+        o = syn["overall"]
+        out += [f"### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5)", "",
+                "| scenario | precision | recall | MOTA | IDF1 | id switches | fragments |",
+                "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+        for name, m in syn["per_scenario"].items():
+            out.append(f"| {name} | {_f(m['precision'])} | {_f(m['recall'])} | {_f(m['mota'])} | {_f(m['idf1'])} | "
+                       f"{m['id_switches']} | {m['fragments']} |")
+        out.append(f"| **all** | {_f(o['precision'])} | {_f(o['recall'])} | {_f(o['mota'])} | {_f(o['idf1'])} | "
+                   f"{o['id_switches']} | {o['fragments']} |")
+        out += ["", "Range error of matched confirmed tracks, by true range:", "",
+                "| band | n | median relative error | p90 relative error |", "| --- | ---: | ---: | ---: |"]
+        for band, b in syn["range_bands"].items():
+            out.append(f"| {band} | {b['n']} | {_f(b['median_rel_error'])} | {_f(b['p90_rel_error'])} |")
+        out.append("")
+    tu = report.get("tusimple")
+    if tu:
+        out += [f"### TuSimple highway images ({tu['images']} images, single-image detection, IoU >= 0.5)", "",
+                "| box height | ground truth | detected | false positives | recall | precision |",
+                "| --- | ---: | ---: | ---: | ---: | ---: |"]
+        for band, b in tu["bands"].items():
+            out.append(f"| {band} px | {b['gt']} | {b['tp']} | {b['fp']} | {_f(b['recall'])} | {_f(b['precision'])} |")
+        out.append("")
+    ln = report.get("lanes")
+    if ln:
+        out += [f"### TuSimple lane sample ({ln['images']} images)", "",
+                "| accuracy | false positives | false negatives | ego lane found |", "| ---: | ---: | ---: | ---: |",
+                f"| {_f(ln['accuracy'])} | {_f(ln['fp'])} | {_f(ln['fn'])} | {ln['ego_lane_found']} of {ln['images']} |",
+                ""]
+    rc = report.get("range")
+    if rc:
+        out += [f"### Range on TuSimple train_clip1 (frame {rc['frames']}, range-sensor truth)", "",
+                "| true range m | estimated m | error m | relative | range rate m/s (true) |",
+                "| ---: | ---: | ---: | ---: | ---: |"]
+        for v in rc["vehicles"]:
+            if v["found"]:
+                rr = "n/a" if v["range_rate_mps"] is None else f"{v['range_rate_mps']:.2f}"
+                out.append(f"| {v['true_range_m']:.1f} | {v['range_m']:.1f} | {v['error_m']:+.1f} | "
+                           f"{v['rel_error']:+.1%} | {rr} ({v['true_range_rate_mps']:.2f}) |")
+            else:
+                out.append(f"| {v['true_range_m']:.1f} | not found | | | |")
+        out.append("")
+    return "\n".join(out)
+
+
+def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data", config_path: Optional[str] = None,
+        scenarios: Optional[list[str]] = None, examples: int = 4) -> dict:
+    out = Path(out_dir)
+    (out / "examples").mkdir(parents=True, exist_ok=True)
+    data = Path(data_dir)
+    report: dict = {"preset": preset, "skipped": {}}
+
+    def say(msg: str) -> None:
+        print(f"eval {preset}: {msg}", file=sys.stderr)
+
+    if "synthetic" in parts:
+        from app.eval import synthetic
+
+        report["synthetic"] = synthetic.evaluate_suite(preset, scenarios, config_path,
+                                                       progress=lambda n: say(f"scenario {n}"))
+    if "tusimple" in parts:
+        supp = data / "tusimple" / "supp"
+        if supp.exists():
+            from app.eval import tusimple_boxes
+
+            shown = [0]
+
+            def keep(e, gray, r):
+                if shown[0] < examples and e["bbox"]:
+                    truth = [{"box": (b["left"], b["top"], b["right"], b["bottom"])} for b in e["bbox"]]
+                    cv2.imwrite(str(out / "examples" / f"tusimple_{Path(e['file_name']).stem}.jpg"),
+                                annotate(gray, r, truth))
+                    shown[0] += 1
+
+            say("TuSimple images")
+            report["tusimple"] = tusimple_boxes.evaluate(str(supp), config_path, preset, on_image=keep)
+        else:
+            report["skipped"]["tusimple"] = f"{supp} not found"
+    if "lanes" in parts:
+        sample = data / "tusimple" / "lane_sample"
+        if sample.exists():
+            from app.eval import lanes_sample
+
+            def keep_lane(lab, gray, r):
+                name = Path(lab["raw_file"]).parent.name
+                cv2.imwrite(str(out / "examples" / f"lanes_{name}.jpg"), annotate(gray, r))
+
+            say("lane sample")
+            report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=keep_lane)
+        else:
+            report["skipped"]["lanes"] = f"{sample} not found"
+    if "range" in parts:
+        clip = data / "tusimple" / "train_clip1"
+        if clip.exists():
+            from app.eval import range_clip
+
+            say("train_clip1 range")
+            report["range"] = range_clip.evaluate(str(clip), config_path, preset)
+        else:
+            report["skipped"]["range"] = f"{clip} not found"
+    (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
+    (out / "report.md").write_text(markdown(report) + "\n")
+    return report
+
+
+def main(args) -> int:
+    parts = tuple(args.parts.split(",")) if args.parts else PARTS
+    unknown = set(parts) - set(PARTS)
+    if unknown:
+        raise ValueError(f"--parts: unknown part(s) {', '.join(sorted(unknown))}; choose from {', '.join(PARTS)}")
+    out = args.out or f"reports/eval-{args.pipeline}"
+    report = run(args.pipeline, out, parts, args.data, args.config,
+                 args.scenarios.split(",") if args.scenarios else None)
+    print(markdown(report))
+    print(f"\nreport: {Path(out).resolve()}/report.json, report.md, examples/")
+    return 0

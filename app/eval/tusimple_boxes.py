@@ -1,0 +1,77 @@
+"""Single-image detection on the real TuSimple highway images: precision and recall by box-height band.
+
+Every car in those images is boxed. A detection matches a ground-truth box at IoU >= 0.5 (one to one).
+Per band (ground-truth box height < 20, 20-40, 40-80, >= 80 px): recall over the band's ground-truth
+boxes; precision over the detections whose own height falls in the band, where a detection that
+matches a box of another band counts for the box's band. "40 px and up" pools the two upper bands.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Callable, Optional
+
+import cv2
+
+from app import config as configuration
+from app.core import Pipeline
+from app.eval.matching import match
+
+BANDS = ((0, 20), (20, 40), (40, 80), (80, 10_000))
+
+# The TuSimple clips come with one calibration (train_clip1/calibration.txt): the same camera.
+TUSIMPLE_CAMERA = {"width": 1280, "height": 720, "fx": 714.1526, "fy": 710.3725, "cx": 675.5754, "cy": 376.2563,
+                   "height_m": 1.80, "pitch_deg": 0.0}
+
+
+def _band(h: float) -> str:
+    for lo, hi in BANDS:
+        if lo <= h < hi:
+            return f"{lo}-{hi}" if hi < 10_000 else f">={lo}"
+    return "?"
+
+
+def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "thesis", limit: Optional[int] = None,
+             on_image: Optional[Callable] = None) -> dict:
+    root = Path(supp_dir)
+    entries = json.loads((root / "annotation.json").read_text())[:limit]
+    cfg = configuration.load(config_path)
+    cfg["camera"].update(TUSIMPLE_CAMERA)
+    cfg["pipeline"]["preset"] = preset
+    counts: dict[str, dict[str, int]] = {}
+
+    def add(band: str, key: str) -> None:
+        counts.setdefault(band, {"tp": 0, "fp": 0, "fn": 0, "gt": 0})[key] += 1
+
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        for e in entries:
+            gray = cv2.imread(str(root / e["file_name"]), cv2.IMREAD_GRAYSCALE)
+            if gray is None:
+                raise FileNotFoundError(f"{root / e['file_name']}: cannot be read")
+            r = pipe.run_stage("detect", gray)
+            gt = [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
+            det = [t.box for t in r.tracks]
+            pairs = match(gt, det)
+            matched_gt = {i for i, _, _ in pairs}
+            matched_det = {j for _, j, _ in pairs}
+            for i, g in enumerate(gt):
+                band = _band(g[3] - g[1])
+                add(band, "gt")
+                add(band, "tp" if i in matched_gt else "fn")
+            for j, d in enumerate(det):
+                if j not in matched_det:
+                    add(_band(d[3] - d[1]), "fp")
+            if on_image:
+                on_image(e, gray, r)
+    out = {}
+    for band in [_band(lo) for lo, _ in BANDS] + [">=40"]:
+        if band == ">=40":
+            c = {k: counts.get("40-80", {}).get(k, 0) + counts.get(">=80", {}).get(k, 0) for k in ("tp", "fp", "fn", "gt")}
+        else:
+            c = counts.get(band, {"tp": 0, "fp": 0, "fn": 0, "gt": 0})
+        out[band] = c | {"recall": c["tp"] / c["gt"] if c["gt"] else None,
+                         "precision": c["tp"] / (c["tp"] + c["fp"]) if c["tp"] + c["fp"] else None}
+    tot = {k: sum(c[k] for c in counts.values()) for k in ("tp", "fp", "fn", "gt")}
+    out["overall"] = tot | {"recall": tot["tp"] / tot["gt"] if tot["gt"] else None,
+                            "precision": tot["tp"] / (tot["tp"] + tot["fp"]) if tot["tp"] + tot["fp"] else None}
+    return {"images": len(entries), "bands": out}

@@ -1,0 +1,1 @@
+"""The in-vehicle service: health, systemd notification, status, and the loop that wires them."""

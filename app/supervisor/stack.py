@@ -1,0 +1,50 @@
+"""One frame's work in the supervisor: vehicle inputs -> ego motion to the core -> FCW -> health ->
+CAN frames (and the warning to the cabin MCU). The same object serves replay, `headway run` and the
+service, so a replay does exactly what the car did.
+"""
+from __future__ import annotations
+
+from typing import Any, Optional
+
+from app.core import FrameResult
+from app.fcw import EgoState, FcwOutput, FcwParams, FcwStateMachine, Lead
+
+
+def lead_of(r: FrameResult) -> Optional[Lead]:
+    if r.lead_id is None:
+        return None
+    t = next((t for t in r.tracks if t.id == r.lead_id), None)
+    if t is None:
+        return None
+    return Lead(id=t.id, range_m=t.range_m, range_rate_mps=t.range_rate_mps, ttc_s=t.ttc_s,
+                ttc_scale_s=t.ttc_scale_s)
+
+
+class Stack:
+    def __init__(self, cfg: dict, can_session: Any = None, bridge: Any = None):
+        self.fcw = FcwStateMachine(FcwParams.from_config(cfg["fcw"]), ego_front_m=cfg["kinematics"]["ego_front_m"])
+        self.can = can_session
+        self.bridge = bridge
+        self.decisions: list[tuple[float, FcwOutput]] = []  # every level change, for summaries and tests
+
+    def vehicle_state(self, now_s: float):
+        return self.can.vehicle_state(now_s) if self.can is not None else None
+
+    def step(self, r: FrameResult, now_s: float, pipe: Any = None, status: Optional[dict] = None,
+             state: Any = None) -> FcwOutput:
+        """`now_s`: the clock of the vehicle inputs (the frame time in replay, the bus clock live)."""
+        if state is None:
+            state = self.vehicle_state(now_s)
+        speed = state.speed_mps if state is not None else None
+        if pipe is not None:  # for the ego path when the lanes are missing (next frame on)
+            pipe.set_ego_motion(speed, state.yaw_rate_rps if state is not None else None)
+        ego = EgoState(speed_mps=speed, brake=getattr(state, "brake", None),
+                       turn_left=getattr(state, "turn_left", None), turn_right=getattr(state, "turn_right", None))
+        decision = self.fcw.step(r.t, lead_of(r), ego)
+        if decision.changed:
+            self.decisions.append((r.t, decision))
+        if self.can is not None:
+            self.can.publish(now_s, r, fcw=decision, status=status)
+        if self.bridge is not None:
+            self.bridge.send_warning(decision.level, decision.ttc_used_s, decision.lead_range_m)
+        return decision

@@ -1,0 +1,49 @@
+// homography_dlt.hpp - the plane homography from point correspondences: normalised DLT
+// (Hartley & Zisserman, algorithm 4.2), with one trimming pass.
+//
+// For x' ~ H x, each correspondence gives two rows of A h = 0 (h = H row-major):
+//     [ 0 0 0   -x -y -1   y'x y'y y' ]
+//     [ x y 1    0  0  0  -x'x -x'y -x' ]
+// Both point sets are first normalised (centroid to the origin, mean distance sqrt 2) so that A is
+// well conditioned; h is the eigenvector of A^T A with the smallest eigenvalue, and
+// H = T'^-1 H_n T. The paper relies on its Kalman gate rather than robust estimation; one cheap
+// trimming pass (refit without the correspondences whose transfer error is far above the median)
+// keeps a single mismatched corner from spoiling an otherwise good measurement.
+#pragma once
+
+#include "core/params.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <vector>
+
+namespace hw {
+
+struct DltParams {
+    int min_points = 8;            // correspondences needed for a measurement
+    double min_row_span_px = 40.0; // px; the points must spread over this many rows
+    double trim_factor = 3.0;      // transfer errors above this many medians are trimmed (0: no trimming)
+    double trim_floor_px = 1.0;    // px; never trim below this transfer error
+    double max_rms_px = 2.5;       // px; a fit with a larger rms transfer error is no measurement
+
+    void bind(ParamMap &m);
+};
+
+struct HomographyFit {
+    bool ok = false;
+    cv::Matx33d H = cv::Matx33d::eye();  // from -> to, H(2,2) = 1
+    int used = 0;                         // correspondences in the final fit
+    double rms_px = 0.0;                  // rms transfer error of the used correspondences
+};
+
+// Plain normalised DLT over the given points (>= 4, not checked for degeneracy). H(2,2) = 1.
+cv::Matx33d normalised_dlt(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to);
+
+// |to - H from| for one correspondence.
+double transfer_error(const cv::Matx33d &H, cv::Point2f from, cv::Point2f to);
+
+// DLT with the checks and the trimming pass of DltParams.
+HomographyFit fit_homography(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
+                             const DltParams &p);
+
+} // namespace hw
