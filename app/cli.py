@@ -32,6 +32,25 @@ def _cmd_replay(args) -> int:
     return 0
 
 
+def _cmd_status(args) -> int:
+    import json
+    import os
+
+    from app.supervisor.status_file import format_status, read_status
+
+    path = args.file
+    if path is None:
+        path = os.environ.get("HEADWAY_STATUS_FILE")
+    if path is None:
+        from app import config as configuration
+
+        cfg = configuration.load(args.config if os.path.exists(args.config) else None)
+        path = cfg["service"]["status_file"]
+    st = read_status(path)
+    print(json.dumps(st, indent=1) if args.json and st else format_status(st, path))
+    return 0 if st else 1
+
+
 def _cmd_config(args) -> int:
     from app import config as configuration
 
@@ -76,9 +95,23 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output JSON file")
     s.add_argument("--config", help="configuration YAML")
 
-    s = sub.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM")
-    s.add_argument("--config", help="configuration YAML (source: and camera: sections)")
+    s = sub.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM "
+                                   "(the service, in a terminal)")
+    s.add_argument("--config", help="configuration YAML (source:, camera:, can: sections)")
     s.add_argument("--tracks", help="also write the tracks here (.jsonl)")
+
+    s = sub.add_parser("service", help="the in-vehicle daemon systemd runs (systemd/headway.service)")
+    s.add_argument("--config", default="/etc/headway/config.yaml", help="configuration YAML")
+
+    s = sub.add_parser("status", help="the running service's health, for a person at a shell")
+    s.add_argument("--file", default=None, help="status file (default: service.status_file of --config)")
+    s.add_argument("--config", default="/etc/headway/config.yaml", help="configuration YAML")
+    s.add_argument("--json", action="store_true", help="print the raw JSON")
+
+    s = sub.add_parser("install-service", help="install the systemd unit, the CAN set-up and /etc/headway/config.yaml")
+    s.add_argument("--root", default="/", help="install into this root folder (default /; for packaging and tests)")
+    s.add_argument("--bench", action="store_true", help="also set up a virtual CAN interface vcan0")
+    s.add_argument("--no-enable", action="store_true", help="do not run systemctl (no daemon-reload, no enable)")
 
     s = sub.add_parser("bench", help="per-stage median and p99 ms per frame")
     s.add_argument("--scenario", default="dense_traffic", help="scenario whose frames are timed")
@@ -120,10 +153,16 @@ def _dispatch(args) -> int:
         from app import detect_images
 
         return detect_images.main(args)
-    if args.command == "run":
-        from app import run_live
+    if args.command in ("run", "service"):
+        from app.supervisor import service
 
-        return run_live.main(args)
+        return service.main(args)
+    if args.command == "status":
+        return _cmd_status(args)
+    if args.command == "install-service":
+        from app.supervisor import install
+
+        return install.main(args)
     if args.command == "bench":
         from app import bench
 

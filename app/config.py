@@ -38,14 +38,16 @@ def _key(default: Any, doc: str, min: Any = None, max: Any = None, choices: Opti
 # The supervisor's sections. Units in the names or first word of each doc.
 SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
     "source": {
-        "kind": _key("v4l2", "where frames come from in `headway run`", choices="v4l2|firewire|video|folder"),
+        "kind": _key("v4l2", "where frames come from in `headway run` / the service: a V4L2 or FireWire camera, "
+                             "a video file or image folder (bench), or raw GRAY8 frames written to a FIFO by "
+                             "another process", choices="v4l2|firewire|video|folder|fifo"),
         "device": _key("/dev/video0", "V4L2 device path, or its index as a number string such as '0'"),
         "index": _key(0, "FireWire: index of the camera on the bus (when guid is empty)", 0, 63),
         "guid": _key("", "FireWire: the camera's GUID in hex; empty = use index"),
         "fps": _key(30.0, "frames/s asked of the camera; for a folder, the rate its images were taken at",
                     0.1, 1000.0),
         "pixel_format": _key("", "V4L2 FOURCC such as YUYV, MJPG or GREY; empty = the driver's default"),
-        "path": _key("", "video file or image folder for kind video/folder"),
+        "path": _key("", "video file, image folder or FIFO for kind video / folder / fifo"),
         "wait_for_device": _key(True, "start even if the camera is not there yet and keep reconnecting "
                                       "(the service must come up with the car; the camera fault says why)"),
     },
@@ -55,8 +57,8 @@ SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
     "mcu": {
         "port": _key("", "serial device of the cabin microcontroller (e.g. /dev/ttyACM0); empty = no MCU"),
         "baudrate": _key(115200, "bit/s; serial speed, as in docs/firmware-protocol.md", 1200, 4000000),
-        "heartbeat_s": _key(0.2, "s; heartbeat period each way", 0.01, 10.0),
-        "silent_after_s": _key(1.0, "s; the MCU not heard for this long is the mcu_silent fault (5 heartbeats)",
+        "heartbeat_s": _key(0.1, "s; heartbeat period each way (docs/firmware-protocol.md)", 0.01, 10.0),
+        "silent_after_s": _key(0.5, "s; the MCU not heard for this long is the mcu_silent fault (5 heartbeats)",
                                0.05, 60.0),
     },
     "service": {
@@ -159,6 +161,8 @@ def source_spec(cfg: dict) -> dict:
     """The core's source description for the configured live or recorded source."""
     src, cam = cfg["source"], cfg["camera"]
     kind = src["kind"]
+    if kind == "fifo":
+        raise ConfigFileError("source.kind fifo: frames come through the service's FIFO reader, not a core source")
     if kind in ("video", "folder"):
         if not src["path"]:
             raise ConfigFileError(f"source.path: required for source.kind {kind}")

@@ -93,6 +93,7 @@ class Track:
     range_sigma_m: Optional[float]
     lateral_m: Optional[float]
     range_rate_mps: Optional[float]
+    range_accel_mps2: Optional[float]
     ttc_s: Optional[float]
     ttc_scale_s: Optional[float]
     lane_index: Optional[int]
@@ -148,6 +149,7 @@ def _result(r: Any) -> FrameResult:
                 range_sigma_m=_opt(t.range_sigma_m),
                 lateral_m=_opt(t.lateral_m),
                 range_rate_mps=_opt(t.range_rate_mps),
+                range_accel_mps2=_opt(t.range_accel_mps2),
                 ttc_s=_opt(t.ttc_s),
                 ttc_scale_s=_opt(t.ttc_scale_s),
                 lane_index=None if t.lane_index == -1000 else int(t.lane_index),

@@ -35,8 +35,9 @@ FCW_SCHEMA = {
                                "2.1-2.4 s, and 3.0 leaves ~0.6 s for range-rate filter lag and one frame of latency",
                           0.5, 10.0),
     "ttc_prewarning_s": _key(4.0, "s; pre-warning (visual only) below this TTC", 0.5, 15.0),
-    "min_decel_mps2": _key(1.5, "m/s^2; a TTC warning also needs the ego car to need at least this deceleration "
-                                "(v_rel^2 / 2 gap): below it closing is slow (stop-and-go), not a threat", 0.0, 10.0),
+    "min_decel_mps2": _key(1.0, "m/s^2; a TTC warning also needs the ego car to need at least this deceleration "
+                                "(v_rel^2 / 2 gap - a_rel): below it closing is slow (stop-and-go), not a threat; "
+                                "1.0 still lets a lead braking at 0.3 g warn by TTC 2.4 s", 0.0, 10.0),
     "decel_warning_mps2": _key(5.0, "m/s^2; a required deceleration above this warns whatever the TTC "
                                     "(half of a full brake: the driver must act now)", 1.0, 15.0),
     "min_ego_speed_mps": _key(5.0, "m/s; no warning below this ego speed (parking and queues; openpilot's "
@@ -51,8 +52,15 @@ FCW_SCHEMA = {
     "suppress_on_brake": _key(True, "no new warning while the driver brakes: they are already reacting"),
     "suppress_on_turn_signal": _key(True, "no new warning while a turn signal is on: the driver is changing "
                                           "lane around the lead"),
-    "use_scale_ttc": _key(True, "when the range-based TTC is not available, use the scale-based one "
-                                "(needs no calibration)"),
+    "use_scale_ttc": _key(True, "while the range rate is not yet known (a new track), use the scale-based TTC "
+                                "(needs no calibration); once the range filter knows the rate it decides"),
+    "use_accel": _key(True, "take the relative acceleration into account (TTC and required deceleration with "
+                            "a braking lead): a lead braking at 0.3 g is otherwise caught late"),
+    "max_closing_margin_mps": _key(3.0, "m/s; a TTC is believed only if the closing speed it implies (gap / TTC) "
+                                        "is at most the ego speed plus this: traffic ahead does not drive "
+                                        "backwards, so anything faster is a measurement error", 0.0, 50.0),
+    "min_threat_s": _key(0.1, "s; a threat must last this long (3 frames at 30 fps) before it warns: one noisy "
+                              "frame never sounds the buzzer", 0.0, 2.0),
 }
 
 
@@ -70,6 +78,9 @@ class FcwParams:
     suppress_on_brake: bool = FCW_SCHEMA["suppress_on_brake"]["default"]
     suppress_on_turn_signal: bool = FCW_SCHEMA["suppress_on_turn_signal"]["default"]
     use_scale_ttc: bool = FCW_SCHEMA["use_scale_ttc"]["default"]
+    use_accel: bool = FCW_SCHEMA["use_accel"]["default"]
+    max_closing_margin_mps: float = FCW_SCHEMA["max_closing_margin_mps"]["default"]
+    min_threat_s: float = FCW_SCHEMA["min_threat_s"]["default"]
 
     @classmethod
     def from_config(cls, section: dict) -> "FcwParams":
@@ -85,6 +96,7 @@ class Lead:
     range_rate_mps: Optional[float]
     ttc_s: Optional[float]
     ttc_scale_s: Optional[float]
+    range_accel_mps2: Optional[float] = None
 
 
 @dataclass
@@ -101,7 +113,7 @@ class EgoState:
 class FcwOutput:
     level: int
     ttc_used_s: Optional[float]
-    ttc_source: Optional[str]       # "range" | "scale" | None
+    ttc_source: Optional[str]       # "range" | "range_accel" | "scale" | None
     lead_id: Optional[int]
     lead_range_m: Optional[float]
     lead_range_rate_mps: Optional[float]
@@ -120,21 +132,43 @@ class FcwStateMachine:
         self._lead_id: Optional[int] = None
         self._lead_since: Optional[float] = None
         self._warning_since: Optional[float] = None
+        self._warning_ttc = math.inf          # TTC when the last warning started
         self._last_warning_end = -math.inf
+        self._threat_since: Optional[float] = None
+
+    def _accel(self, lead: Lead) -> float:
+        """Relative acceleration that makes things worse (< 0: closing speeds up), else 0."""
+        a = lead.range_accel_mps2
+        return min(0.0, a) if (self.params.use_accel and a is not None) else 0.0
 
     def _ttc(self, lead: Lead) -> tuple[Optional[float], Optional[str]]:
-        if lead.ttc_s is not None:
-            return lead.ttc_s, "range"
+        """Once the range filter knows the range rate it decides (and says "not closing" with None);
+        before that the scale-based TTC stands in."""
+        if lead.range_rate_mps is not None:
+            ttc, src = lead.ttc_s, "range"
+            a = self._accel(lead)
+            if a < 0 and lead.range_m is not None:
+                # gap + v t + a t^2 / 2 = 0: the first contact with the closing speeding up
+                gap = max(0.0, lead.range_m - self.ego_front_m)
+                v = lead.range_rate_mps
+                t_acc = (-v - math.sqrt(v * v - 2.0 * a * gap)) / a
+                if ttc is None or t_acc < ttc:
+                    ttc, src = t_acc, "range_accel"
+            return (ttc, src) if ttc is not None else (None, None)
         if self.params.use_scale_ttc and lead.ttc_scale_s is not None:
             return lead.ttc_scale_s, "scale"
         return None, None
 
     def _required_decel(self, lead: Lead) -> Optional[float]:
-        """v_rel^2 / (2 gap): constant deceleration that ends the closing just at the lead."""
-        if lead.range_m is None or lead.range_rate_mps is None or lead.range_rate_mps >= 0:
+        """v_rel^2 / (2 gap) - a_rel: the extra deceleration that ends the closing just at the lead,
+        with the lead's own braking (a_rel < 0) added."""
+        if lead.range_m is None or lead.range_rate_mps is None:
+            return None
+        a = self._accel(lead)
+        if lead.range_rate_mps >= 0 and a >= 0:
             return None
         gap = max(0.1, lead.range_m - self.ego_front_m)
-        return lead.range_rate_mps ** 2 / (2.0 * gap)
+        return min(0.0, lead.range_rate_mps) ** 2 / (2.0 * gap) - a
 
     def step(self, t_s: float, lead: Optional[Lead], ego: EgoState) -> FcwOutput:
         p = self.params
@@ -142,6 +176,10 @@ class FcwStateMachine:
             self._lead_id = None if lead is None else lead.id
             self._lead_since = None if lead is None else t_s
         ttc, source = self._ttc(lead) if lead else (None, None)
+        if ttc is not None and ego.speed_mps is not None and lead.range_m is not None and ttc > 0:
+            closing = max(0.0, lead.range_m - self.ego_front_m) / ttc
+            if closing > ego.speed_mps + p.max_closing_margin_mps:
+                ttc, source = None, None  # physically impossible for traffic ahead: a bad estimate
         a_req = self._required_decel(lead) if lead else None
         seen_s = t_s - self._lead_since if self._lead_since is not None else 0.0
 
@@ -155,6 +193,14 @@ class FcwStateMachine:
                 threat = PREWARNING
         if a_req is not None and a_req >= p.decel_warning_mps2:
             threat = WARNING
+
+        # A warning-level threat must persist for min_threat_s before it counts.
+        if threat == WARNING:
+            self._threat_since = t_s if self._threat_since is None else self._threat_since
+            if self.level < WARNING and t_s - self._threat_since < p.min_threat_s - 1e-9:
+                threat = PREWARNING
+        else:
+            self._threat_since = None
 
         suppressed = None
         if threat > NONE:
@@ -174,10 +220,12 @@ class FcwStateMachine:
         if self.level == WARNING and level < WARNING and t_s - self._warning_since < p.min_warning_s:
             level = WARNING
         if level == WARNING and self.level < WARNING:
-            if t_s - self._last_warning_end < p.min_gap_s:
+            # at most one warning per min_gap_s, unless the threat is worse than when the last one started
+            if t_s - self._last_warning_end < p.min_gap_s and (ttc is None or ttc >= self._warning_ttc):
                 level, suppressed = PREWARNING, "min_gap"
             else:
                 self._warning_since = t_s
+                self._warning_ttc = ttc if ttc is not None else 0.0
         if self.level == WARNING and level < WARNING:
             self._last_warning_end = t_s
         changed = level != self.level

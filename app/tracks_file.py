@@ -49,3 +49,6 @@ class TracksWriter:
         self._f.write(json.dumps(frame_record(r, fcw_level), separators=(",", ":")) + "\n")
         self._f.flush()
         self.lines += 1
+
+    def close(self) -> None:
+        self._f.close()

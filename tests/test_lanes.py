@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from app.core import Pipeline
-from app.eval.tusimple_lanes import bench_image, evaluate_lanes, segments_to_tusimple
+from app.eval.tusimple_lanes import bench_image, evaluate_lanes, lane_threshold, segments_to_tusimple
 from app.sim import Camera, frame_count, load_scenario, render
 from app.sim.frames import scenario_camera
 from tests.conftest import data_path
@@ -231,15 +231,16 @@ def _lane_sample_results() -> tuple:
 
 
 def _matches_a_gt_lane(lane, label: dict, width: int) -> bool:
-    """The boundary lies on one ground-truth lane: over the rows both have, within the TuSimple
-    threshold (20 px at 1280 wide) on average, and the rows cover at least half of that lane."""
-    thresh = 20.0 * width / 1280
+    """The boundary lies on one ground-truth lane: over the rows both have, on average within that
+    lane's TuSimple threshold (20 px at 1280 wide, divided by the cosine of the lane's angle), and
+    those rows cover at least half of the lane."""
     pred = segments_to_tusimple([lane], label["h_samples"], width)
     if not pred:
         return False
     for gt in label["lanes"]:
         gt_rows = [i for i, g in enumerate(gt) if g >= 0]
         both = [i for i in gt_rows if pred[0][i] >= 0]
+        thresh = lane_threshold(gt, label["h_samples"], 20.0 * width / 1280)
         if gt_rows and len(both) >= 0.5 * len(gt_rows) and \
                 np.mean([abs(pred[0][i] - gt[i]) for i in both]) < thresh:
             return True

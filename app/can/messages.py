@@ -13,7 +13,7 @@ from typing import Any, Iterable, Mapping, Optional
 from .database import wire_id
 
 FCW_LEVELS = ("none", "prewarning", "warning")
-TTC_SOURCES = ("none", "range", "scale")
+TTC_SOURCES = ("none", "range", "scale", "range_accel")
 STATES = ("starting", "ok", "degraded", "fault")
 # Faults of severity "fault" in the health registry (app/supervisor/faults.py): Headway cannot warn
 # the driver reliably; any other fault only degrades it. Tests keep the two in step.

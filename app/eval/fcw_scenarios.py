@@ -47,7 +47,7 @@ def warnings_in_can_log(path: str) -> list[tuple[float, int, Optional[float]]]:
         sig = msg.decode(m.data, decode_choices=False)
         level = int(sig["FCW_LEVEL"])
         if level != last:
-            out.append((m.timestamp - t0, level, sig.get("FCW_TTC")))
+            out.append((m.timestamp - t0, level, sig.get("TTC_USED_S")))
             last = level
     return out
 

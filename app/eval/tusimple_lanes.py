@@ -79,6 +79,11 @@ def _lane_angle(xs: Sequence[float], ys: Sequence[float]) -> float:
     return math.atan(k)
 
 
+def lane_threshold(gt_xs: Sequence[float], h_samples: Sequence[int], pixel_thresh: float) -> float:
+    """The official per-lane threshold: pixel_thresh / cos(angle of the ground-truth lane)."""
+    return pixel_thresh / math.cos(_lane_angle(gt_xs, h_samples))
+
+
 def _line_accuracy(pred: Sequence[float], gt: Sequence[float], thresh: float) -> float:
     """Fraction of rows where pred and gt agree within thresh (absent = -100 on both sides)."""
     hits = 0
@@ -99,7 +104,7 @@ def bench_image(pred: Sequence[Sequence[float]], gt: Sequence[Sequence[float]], 
         return 0.0, (1.0 if pred else 0.0), 0.0
     if len(gt) + 2 < len(pred):
         return 0.0, 0.0, 1.0
-    threshs = [pixel_thresh / math.cos(_lane_angle(g, h_samples)) for g in gt]
+    threshs = [lane_threshold(g, h_samples, pixel_thresh) for g in gt]
     line_accs = []
     fn = 0.0
     matched = 0.0

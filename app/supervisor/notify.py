@@ -31,10 +31,11 @@ class Notifier:
             return True
         msg = "\n".join(f"{k}={v}" for k, v in fields.items()).encode()
         try:
-            self._sock.sendto(msg, self._addr)
+            # never block: a notify socket nobody reads (a stuck manager, a test) must not hang the loop
+            self._sock.sendto(msg, socket.MSG_DONTWAIT, self._addr)
             return True
         except OSError:
-            self.failures += 1  # systemd gone or socket full: the watchdog will tell, never crash here
+            self.failures += 1  # systemd gone or socket full: the watchdog will tell, never crash or wait here
             return False
 
     def ready(self, status: str) -> bool:

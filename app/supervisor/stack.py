@@ -17,7 +17,7 @@ def lead_of(r: FrameResult) -> Optional[Lead]:
     if t is None:
         return None
     return Lead(id=t.id, range_m=t.range_m, range_rate_mps=t.range_rate_mps, ttc_s=t.ttc_s,
-                ttc_scale_s=t.ttc_scale_s)
+                ttc_scale_s=t.ttc_scale_s, range_accel_mps2=t.range_accel_mps2)
 
 
 class Stack:

@@ -92,6 +92,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
         d.range_sigma_m = t.range_sigma_m;
         d.lateral_m = t.lateral_m;
         d.range_rate_mps = t.range_rate_mps;
+        d.range_accel_mps2 = t.range_accel_mps2;
         d.ttc_s = t.ttc_s;
         d.ttc_scale_s = t.ttc_scale_s;
         d.lane_index = t.lane_index;

@@ -59,6 +59,7 @@ struct TrackState {
     float bottom_sigma_px = kNaN;    // 1-sigma uncertainty of the bottom row (for range uncertainty)
     // Filled by the geometry stage (NaN until then).
     float range_m = kNaN, range_sigma_m = kNaN, lateral_m = kNaN, range_rate_mps = kNaN;
+    float range_accel_mps2 = kNaN;   // relative acceleration d2(range)/dt2
     float ttc_s = kNaN, ttc_scale_s = kNaN;
     int lane_index = -1000;          // -1000 unknown
     int in_path = -1;                // -1 unknown

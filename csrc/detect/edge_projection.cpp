@@ -93,21 +93,25 @@ SidePair best_side_pair(const std::vector<float> &w, int min_sep, int max_sep) {
     return s;
 }
 
-SidePair two_threshold_sides(const std::vector<float> &w, int pred_left, int pred_right, int split,
+SidePair two_threshold_sides(const std::vector<float> &w, int pred_left, int pred_right, int window,
                              float max_change) {
     const int n = int(w.size());
-    if (split <= 0 || split >= n) return {};
-    // Threshold 1: half the largest projection value, first column reaching it from each end.
-    const float half = 0.5f * w[size_t(argmax(w, 0, n))];
+    // Side windows, kept apart at the predicted centre.
+    const int mid = (pred_left + pred_right) / 2;
+    const int l0 = std::max(0, pred_left - window), l1 = std::min({n, pred_left + window + 1, mid});
+    const int r0 = std::max({0, pred_right - window, mid}), r1 = std::min(n, pred_right + window + 1);
+    if (l0 >= l1 || r0 >= r1) return {};
+    const int il = argmax(w, l0, l1), ir = argmax(w, r0, r1);
+    // Threshold 1: half the largest projection value, first column reaching it from the outside.
+    const float half = 0.5f * std::max(w[size_t(il)], w[size_t(ir)]);
     SidePair s;
-    for (int x = 0; x < split && s.left < 0; ++x)
+    for (int x = l0; x < l1 && s.left < 0; ++x)
         if (w[size_t(x)] >= half) s.left = x;
-    for (int x = n - 1; x >= split && s.right < 0; --x)
+    for (int x = r1 - 1; x >= r0 && s.right < 0; --x)
         if (w[size_t(x)] >= half) s.right = x;
-    const bool jumped = s.left < 0 || s.right < 0 || std::abs(s.left - pred_left) > max_change ||
-                        std::abs(s.right - pred_right) > max_change;
-    // Threshold 2: the largest value itself, on each side of the split.
-    if (jumped) return strongest_sides(w, split);
+    // Threshold 2: the largest value itself, for a side that jumped.
+    if (s.left < 0 || std::abs(s.left - pred_left) > max_change) s.left = il;
+    if (s.right < 0 || std::abs(s.right - pred_right) > max_change) s.right = ir;
     s.left_strength = w[size_t(s.left)];
     s.right_strength = w[size_t(s.right)];
     return s;

@@ -44,10 +44,11 @@ SidePair strongest_sides(const std::vector<float> &w, int split);
 // strongest (the vehicle stands over part of a shadow that is wider than itself).
 SidePair best_side_pair(const std::vector<float> &w, int min_sep, int max_sep);
 
-// Tracking rule (thesis 3.6.1): search from the left and from the right for the first column whose
-// value reaches half the largest one; if either side then moves more than `max_change` from its
-// predicted column, fall back to the largest value on each side of `split`.
-SidePair two_threshold_sides(const std::vector<float> &w, int pred_left, int pred_right, int split,
+// Tracking rule (thesis 3.6.1), inside a window of +-`window` columns around each predicted side
+// (the Kalman gate: a neighbour's edge elsewhere in the ROI cannot take a side): search each window
+// from its outer end for the first column reaching half the largest value in the windows; if that
+// moves a side more than `max_change` from its prediction, take the largest value of its window.
+SidePair two_threshold_sides(const std::vector<float> &w, int pred_left, int pred_right, int window,
                              float max_change);
 
 } // namespace hw

@@ -18,36 +18,48 @@ void LaneFeatureParams::bind(ParamMap &m) {
     m.add("t_min_px", t_min_px, 1, 50, "px; smallest t, near the vanishing point where markings are 1-2 px wide");
     m.add("response_min", response_min, 1.0, 510.0,
           "gray levels; eq. 1 response kept; the response is twice the margin over the brighter neighbour, so "
-          "24 keeps markings 12 levels brighter than the road around them");
+          "40 keeps markings 20 levels brighter than the road around them and drops most asphalt grain");
+    m.add("min_run_frac", min_run_frac, 0.0, 1.0,
+          "marking widths; a run of response narrower than this is a texture speck, not a marking");
     m.add("max_range_m", max_range_m, 5.0, 500.0,
           "m; farthest road range filtered; beyond 50 m markings are too thin and too close to the horizon to "
           "constrain the homography (the paper names features near the horizon as unreliable)");
-    m.add("hough_threshold", hough_threshold, 1, 1000, "votes; accumulator threshold of the probabilistic Hough transform");
-    m.add("hough_min_length_px", hough_min_length_px, 2, 1000, "px; shortest Hough segment; a far dash is ~10 px long");
+    m.add("hough_threshold", hough_threshold, 1, 1000,
+          "votes; accumulator threshold of the probabilistic Hough transform; the response is thinned to one pixel "
+          "per row, so a far dash (~8 rows) gives about 8 votes");
+    m.add("hough_min_length_px", hough_min_length_px, 2, 1000, "px; shortest Hough segment; a dash 50 m ahead is ~8 px long");
     m.add("hough_max_gap_px", hough_max_gap_px, 0, 100, "px; gap bridged inside one Hough segment");
     m.add("min_angle_deg", min_angle_deg, 0.0, 90.0,
           "deg from horizontal; flatter segments are vehicle bottoms or shadows; 12 still keeps the outer road "
           "edges of a three-lane road (about 14 deg at 640x480)");
+    m.add("vp_tol_px", vp_tol_px, 0.0, 10000.0,
+          "px; a Hough segment whose line passes farther than this from the road's vanishing point is not a "
+          "marking (vehicle edges, shadows, texture); 40 allows for curves and yaw shake; 0 disables");
     m.add("cluster_tol_px", cluster_tol_px, 0.5, 100.0,
           "px; a segment joins a marking when both its ends lie this close to the marking's line (plus one "
           "marking width at that row)");
     m.add("max_markings", max_markings, 1, 32, "count; markings kept, most Hough support first");
-    m.add("grow_along", grow_along, 0.0, 10.0,
-          "fraction of the marking's row span; its search region extends this much above and below the "
-          "segments so the whole marking (the next dashes) is inside");
     m.add("grow_across", grow_across, 0.5, 20.0,
           "marking widths; half-width of the search region across the marking, enough for the dash corners and "
-          "the mean segment's error");
+          "the mean segment's error; the Harris cost grows with it");
     m.add("grow_min_px", grow_min_px, 1, 100, "px; smallest half-width of a search region (far rows)");
+    m.add("grow_max_px", grow_max_px, 1, 1000,
+          "px; largest half-width of a search region; near the camera a marking is ~30 px wide and its dash ends "
+          "lie within 15 px of its centre line, so 20 px holds them while bounding the Harris cost");
     m.add("max_corners", max_corners, 4, 5000, "count; Harris corners at most; bounds the Lucas-Kanade cost");
-    m.add("harris_quality", harris_quality, 1e-4, 1.0,
-          "fraction of the strongest Harris response a corner must reach");
+    m.add("harris_quality", harris_quality, 1e-6, 1.0,
+          "fraction of the strongest Harris response a corner must reach; 0.001 because the near dash ends are "
+          "far stronger than the far ones, which constrain the homography as much");
     m.add("harris_k", harris_k, 0.01, 0.25, "Harris detector free parameter (det - k trace^2)");
     m.add("min_corner_distance_px", min_corner_distance_px, 1, 100, "px; corners closer than this are one");
-    m.add("lk_window_px", lk_window_px, 5, 101, "px; Lucas-Kanade window side");
+    m.add("lk_window_px", lk_window_px, 5, 101,
+          "px; Lucas-Kanade window side; 11 holds a dash corner, and the pre-warp leaves no scale change to average");
     m.add("lk_levels", lk_levels, 0, 6,
-          "pyramid levels above the base; the predicted homography gives the start, so 3 covers what the "
-          "prediction misses (shake, speed changes)");
+          "pyramid levels above the base; the patches are pre-warped with the prediction, so 1 covers what it "
+          "misses (shake, speed changes; the far points of a first frame without prediction)");
+    m.add("lk_patch_px", lk_patch_px, 9, 301,
+          "px; side of the pre-warped patch around each corner; the window plus twice the largest prediction "
+          "error followed (31: +-10 px)");
     m.add("fb_max_px", fb_max_px, 0.05, 10.0,
           "px; largest forward-backward error of a kept correspondence; a point sliding along a marking or "
           "hidden by a vehicle does not come back");
@@ -63,22 +75,32 @@ cv::Range lane_feature_rows(int height, float horizon_row, const CameraParams &c
 void marking_response(const cv::Mat &gray, cv::Range rows, float horizon_row, const CameraParams &cam,
                       const LaneFeatureParams &p, cv::Mat &binary) {
     CV_Assert(gray.type() == CV_8UC1);
+    CV_Assert(rows.start >= 0 && rows.end <= gray.rows);
     binary.create(gray.size(), CV_8UC1);
     binary.setTo(0);
     const int W = gray.cols;
     const int thr = int(std::ceil(p.response_min));
+    std::vector<uint8_t> on(size_t(W) + 1, 0);
     for (int j = rows.start; j < rows.end; ++j) {
         // Marking width in px at this row: fx / Z * w_m with Z = fy h / (j - y_h).
-        const double px_per_m = std::max(0.0, cam.fx * (j - horizon_row) / (cam.fy * cam.height_m));
-        const int t = std::max(p.t_min_px, int(std::lround(p.t_factor * p.marking_width_m * px_per_m)));
+        const double width = p.marking_width_m * std::max(0.0, cam.fx * (j - horizon_row) / (cam.fy * cam.height_m));
+        const int t = std::max(p.t_min_px, int(std::lround(p.t_factor * width)));
         if (2 * t >= W) continue;
+        const int min_run = std::max(1, int(std::lround(p.min_run_frac * width)));
         const uint8_t *x = gray.ptr<uint8_t>(j);
         uint8_t *y = binary.ptr<uint8_t>(j);
+        // eq. 1: y_i = 2 x_i - (x_{i-t} + x_{i+t}) - |x_{i-t} - x_{i+t}|, thresholded (a plain loop the
+        // compiler vectorises), then each run reduced to its centre.
         for (int i = t; i < W - t; ++i) {
             const int l = x[i - t], r = x[i + t];
-            // eq. 1: y_i = 2 x_i - (x_{i-t} + x_{i+t}) - |x_{i-t} - x_{i+t}|
-            const int resp = 2 * x[i] - (l + r) - std::abs(l - r);
-            y[i] = resp >= thr ? 255 : 0;
+            on[i] = uint8_t(2 * x[i] - (l + r) - std::abs(l - r) >= thr);
+        }
+        on[W - t] = 0;
+        for (int i = t; i <= W - t;) {
+            if (!on[i]) { ++i; continue; }
+            const int start = i;
+            while (on[i]) ++i;
+            if (i - start >= min_run) y[(start + i - 1) / 2] = 255;
         }
     }
 }
@@ -99,12 +121,15 @@ struct Segment {
 
 } // namespace
 
-std::vector<MarkingSegment> marking_segments(const cv::Mat &binary, cv::Range rows, float horizon_row,
+std::vector<MarkingSegment> marking_segments(const cv::Mat &binary, cv::Range rows, cv::Point2f vp,
                                              const CameraParams &cam, const LaneFeatureParams &p) {
+    const float horizon_row = vp.y;
     std::vector<MarkingSegment> out;
     if (rows.size() < 2) return out;
     std::vector<cv::Vec4i> lines;
-    cv::HoughLinesP(binary.rowRange(rows), lines, 1.0, CV_PI / 180.0, p.hough_threshold, p.hough_min_length_px,
+    // 2 px x 2 deg cells: the accumulator (cleared on every call) is a quarter of the 1 px x 1 deg one;
+    // the segment ends come from the pixels walked, not from the cell.
+    cv::HoughLinesP(binary.rowRange(rows), lines, 2.0, 2.0 * CV_PI / 180.0, p.hough_threshold, p.hough_min_length_px,
                     p.hough_max_gap_px);
     const float tan_min = float(std::tan(p.min_angle_deg * CV_PI / 180.0));
     std::vector<Segment> segs;
@@ -112,6 +137,7 @@ std::vector<MarkingSegment> marking_segments(const cv::Mat &binary, cv::Range ro
         cv::Point2f a(float(l[0]), float(l[1] + rows.start)), b(float(l[2]), float(l[3] + rows.start));
         if (std::fabs(b.y - a.y) < tan_min * std::fabs(b.x - a.x)) continue;  // too flat
         if (a.y < b.y) std::swap(a, b);
+        if (p.vp_tol_px > 0 && line_distance(a, b, vp) > p.vp_tol_px) continue;  // not toward the vanishing point
         segs.push_back({a, b, float(cv::norm(a - b))});
     }
     std::sort(segs.begin(), segs.end(), [](const Segment &a, const Segment &b) { return a.length > b.length; });
@@ -149,27 +175,21 @@ std::vector<MarkingSegment> marking_segments(const cv::Mat &binary, cv::Range ro
     for (const auto &c : clusters) {
         MarkingSegment m;
         // s_i = (1/S_i) sum_j (p_l_ij, p_u_ij): the mean segment of the marking.
-        float top = 1e9f, bottom = -1e9f;
         for (int s : c.members) {
             m.lower += segs[s].lower;
             m.upper += segs[s].upper;
-            top = std::min(top, segs[s].upper.y);
-            bottom = std::max(bottom, segs[s].lower.y);
         }
         m.lower *= 1.f / float(c.members.size());
         m.upper *= 1.f / float(c.members.size());
         m.segments = int(c.members.size());
-        // The region follows the mean segment's line x(y) = x_l + k (y - y_l) over the cluster's rows,
-        // extended by grow_along of that span at both ends.
+        // The region follows the mean segment's line x(y) = x_l + k (y - y_l) over all rows of the band.
         const float dy = m.lower.y - m.upper.y;
         if (dy < 1.f) continue;
         const float k = (m.upper.x - m.lower.x) / (m.upper.y - m.lower.y);
-        const float span = bottom - top;
-        const float yt = std::max(y_min, top - float(p.grow_along) * span);
-        const float yb = std::min(y_max, bottom + float(p.grow_along) * span);
+        const float yt = y_min, yb = y_max;
         const float stretch = std::sqrt(1.f + k * k);  // horizontal width of a slanted band
         auto half = [&](float y) {
-            return stretch * std::max(float(p.grow_min_px), float(p.grow_across) * width_px(y));
+            return stretch * std::clamp(float(p.grow_across) * width_px(y), float(p.grow_min_px), float(p.grow_max_px));
         };
         auto x_at = [&](float y) { return m.lower.x + k * (y - m.lower.y); };
         m.region = {cv::Point(cvRound(x_at(yt) - half(yt)), cvRound(yt)), cv::Point(cvRound(x_at(yt) + half(yt)), cvRound(yt)),
@@ -179,58 +199,214 @@ std::vector<MarkingSegment> marking_segments(const cv::Mat &binary, cv::Range ro
     return out;
 }
 
-void LaneFeatureTracker::process(const cv::Mat &gray, float horizon_row, const CameraParams &cam,
-                                 const cv::Matx33d &H_guess, LaneFeatures &out) {
-    CV_Assert(gray.type() == CV_8UC1 && !gray.empty());
-    out = LaneFeatures{};
-    const cv::Size win(p_.lk_window_px, p_.lk_window_px);
-    std::vector<cv::Mat> pyr;
-    // Own copies (tryReuseInputImage = false): the frame may be a view of the caller's buffer.
-    cv::buildOpticalFlowPyramid(gray, pyr, win, p_.lk_levels, false, cv::BORDER_REFLECT_101, cv::BORDER_CONSTANT, false);
-    if (!prev_pyr_.empty() && prev_pyr_[0].size() != gray.size()) prev_pyr_.clear();
+namespace {
 
-    const cv::Range rows = lane_feature_rows(gray.rows, horizon_row, cam, p_);
-    if (!prev_pyr_.empty() && rows.size() > 1) {
-        marking_response(gray, rows, horizon_row, cam, p_, binary_);
-        out.markings = marking_segments(binary_, rows, horizon_row, cam, p_);
-        if (!out.markings.empty()) {
-            // Harris corners inside the union of the search regions.
-            cv::Mat mask = cv::Mat::zeros(gray.size(), CV_8UC1);
-            cv::Rect box;
-            for (const auto &m : out.markings) {
-                cv::fillConvexPoly(mask, m.region, cv::Scalar(255));
-                box |= cv::boundingRect(m.region);
-            }
-            box &= cv::Rect(0, rows.start, gray.cols, rows.size());
-            if (box.width > 4 && box.height > 4) {
-                cv::goodFeaturesToTrack(gray(box), out.corners, p_.max_corners, p_.harris_quality,
-                                        p_.min_corner_distance_px, mask(box), 3, true, p_.harris_k);
-                for (auto &c : out.corners) c += cv::Point2f(float(box.x), float(box.y));
-            }
-        }
-        if (out.corners.size() >= 4) {
-            // Start each corner where the predicted homography puts it in the previous frame.
-            const cv::Matx33d Hinv = H_guess.inv();
-            std::vector<cv::Point2f> prev_pts, back;
-            cv::perspectiveTransform(out.corners, prev_pts, cv::Mat(Hinv));
-            back = out.corners;
-            std::vector<uint8_t> st_f, st_b;
-            std::vector<float> err;
-            const cv::TermCriteria crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
-            cv::calcOpticalFlowPyrLK(pyr, prev_pyr_, out.corners, prev_pts, st_f, err, win, p_.lk_levels, crit,
-                                     cv::OPTFLOW_USE_INITIAL_FLOW);
-            cv::calcOpticalFlowPyrLK(prev_pyr_, pyr, prev_pts, back, st_b, err, win, p_.lk_levels, crit,
-                                     cv::OPTFLOW_USE_INITIAL_FLOW);
-            const float fb2 = float(p_.fb_max_px * p_.fb_max_px);
-            const cv::Rect inside(0, 0, gray.cols, gray.rows);
-            for (size_t i = 0; i < out.corners.size(); ++i) {
-                const cv::Point2f d = back[i] - out.corners[i];
-                if (st_f[i] && st_b[i] && d.dot(d) <= fb2 && inside.contains(cv::Point(prev_pts[i])))
-                    out.matches.push_back({prev_pts[i], out.corners[i]});
-            }
-        }
+// Runs [begin, end) of non-zero bytes of a row.
+void row_runs(const uint8_t *m, int W, std::vector<cv::Vec2i> &runs) {
+    runs.clear();
+    for (int x = 0; x < W;) {
+        if (!m[x]) { ++x; continue; }
+        const int b = x;
+        while (x < W && m[x]) ++x;
+        runs.push_back({b, x});
     }
-    prev_pyr_ = std::move(pyr);
+}
+
+// Union of the runs of rows [r0, r1) of `rows`, each widened by `pad` and clipped to [lo, hi).
+void union_runs(const std::vector<std::vector<cv::Vec2i>> &rows, int r0, int r1, int pad, int lo, int hi,
+                std::vector<cv::Vec2i> &out) {
+    out.clear();
+    for (int r = std::max(0, r0); r < std::min(int(rows.size()), r1); ++r)
+        for (const auto &run : rows[size_t(r)]) out.push_back({std::max(lo, run[0] - pad), std::min(hi, run[1] + pad)});
+    std::sort(out.begin(), out.end(), [](const cv::Vec2i &a, const cv::Vec2i &b) { return a[0] < b[0]; });
+    size_t n = 0;
+    for (const auto &run : out) {
+        if (run[0] >= run[1]) continue;
+        if (n > 0 && run[0] <= out[n - 1][1]) out[n - 1][1] = std::max(out[n - 1][1], run[1]);
+        else out[n++] = run;
+    }
+    out.resize(n);
+}
+
+} // namespace
+
+std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask, cv::Range rows,
+                                        const LaneFeatureParams &p) {
+    CV_Assert(gray.type() == CV_8UC1 && mask.type() == CV_8UC1 && mask.size() == gray.size());
+    const int W = gray.cols;
+    const int y0 = std::max(rows.start, 3), y1 = std::min(rows.end, gray.rows - 3);  // 3x3 window of 3x3 Sobel + NMS
+    std::vector<cv::Point2f> out;
+    if (y1 - y0 < 3) return out;
+    // Streamed row by row through ring buffers of three rows, and only on the runs of region pixels:
+    // gradient products one pixel around them (the 3x3 window), responses on them and one pixel
+    // around (the 3x3 non-maximum suppression).
+    std::vector<std::vector<cv::Vec2i>> mruns(size_t(y1 - y0 + 6));  // mask runs of rows y0-3 .. y1+2
+    for (int r = 0; r < int(mruns.size()); ++r) row_runs(mask.ptr<uint8_t>(y0 - 3 + r), W, mruns[size_t(r)]);
+    auto runs_of = [&](int y) -> const std::vector<cv::Vec2i> & { return mruns[size_t(y - y0 + 3)]; };
+    // Per ring row: horizontal 3-sums of Ix^2, Iy^2, IxIy (separate arrays so the loops vectorise),
+    // and the response.
+    cv::Mat hxx(3, W, CV_32F), hyy(3, W, CV_32F), hxy(3, W, CV_32F), resp(3, W, CV_32F);
+    std::vector<float> gxx(size_t(W)), gyy(size_t(W)), gxy(size_t(W));
+    std::vector<cv::Vec2i> pruns, rruns;
+    struct Cand { float r; int x, y; };
+    std::vector<Cand> cand;
+    float r_max = 0.f;
+    const float k = float(p.harris_k);
+    for (int y = y0 - 2; y <= y1 + 1; ++y) {
+        // Ix^2, Iy^2, IxIy of row y where the mask of rows y-2 .. y+2 reaches, then their 3-sums along the row
+        union_runs(mruns, y - 2 - (y0 - 3), y + 3 - (y0 - 3), 2, 1, W - 1, pruns);
+        {
+            const uint8_t *a = gray.ptr<uint8_t>(y - 1), *b = gray.ptr<uint8_t>(y), *c = gray.ptr<uint8_t>(y + 1);
+            float *sxx = hxx.ptr<float>((y + 3) % 3), *syy = hyy.ptr<float>((y + 3) % 3), *sxy = hxy.ptr<float>((y + 3) % 3);
+            for (const auto &run : pruns) {
+                for (int x = run[0]; x < run[1]; ++x) {
+                    // 3x3 Sobel
+                    const float ix = float((a[x + 1] - a[x - 1]) + 2 * (b[x + 1] - b[x - 1]) + (c[x + 1] - c[x - 1]));
+                    const float iy = float((c[x - 1] - a[x - 1]) + 2 * (c[x] - a[x]) + (c[x + 1] - a[x + 1]));
+                    gxx[size_t(x)] = ix * ix;
+                    gyy[size_t(x)] = iy * iy;
+                    gxy[size_t(x)] = ix * iy;
+                }
+                for (int x = run[0] + 1; x < run[1] - 1; ++x) {
+                    sxx[x] = gxx[size_t(x - 1)] + gxx[size_t(x)] + gxx[size_t(x + 1)];
+                    syy[x] = gyy[size_t(x - 1)] + gyy[size_t(x)] + gyy[size_t(x + 1)];
+                    sxy[x] = gxy[size_t(x - 1)] + gxy[size_t(x)] + gxy[size_t(x + 1)];
+                }
+            }
+        }
+        // R = det M - k (trace M)^2 of row yr = y - 1, M the 3x3 sum of the products
+        const int yr = y - 1;
+        if (yr < y0 - 1) continue;
+        union_runs(mruns, yr - 1 - (y0 - 3), yr + 2 - (y0 - 3), 1, 2, W - 2, rruns);
+        {
+            const int ra = (yr + 2) % 3, rb = (yr + 3) % 3, rc = (yr + 4) % 3;
+            const float *xa = hxx.ptr<float>(ra), *xb = hxx.ptr<float>(rb), *xc = hxx.ptr<float>(rc);
+            const float *ya = hyy.ptr<float>(ra), *yb = hyy.ptr<float>(rb), *yc = hyy.ptr<float>(rc);
+            const float *ca = hxy.ptr<float>(ra), *cb = hxy.ptr<float>(rb), *cc = hxy.ptr<float>(rc);
+            float *o = resp.ptr<float>(rb);
+            const uint8_t *m = mask.ptr<uint8_t>(yr);
+            for (const auto &run : rruns)
+                for (int x = run[0]; x < run[1]; ++x) {
+                    const float sx = xa[x] + xb[x] + xc[x], sy = ya[x] + yb[x] + yc[x], sc = ca[x] + cb[x] + cc[x];
+                    const float tr = sx + sy;
+                    o[x] = sx * sy - sc * sc - k * tr * tr;
+                }
+            for (const auto &run : runs_of(yr))
+                for (int x = run[0]; x < run[1]; ++x)
+                    if (m[x]) r_max = std::max(r_max, o[x]);
+        }
+        // 3x3 local maxima of row yn = y - 2 (ties broken toward the first), on region pixels
+        const int yn = y - 2;
+        if (yn < y0 || yn >= y1) continue;
+        const float *a = resp.ptr<float>((yn + 2) % 3), *b = resp.ptr<float>((yn + 3) % 3), *c = resp.ptr<float>((yn + 4) % 3);
+        const uint8_t *m = mask.ptr<uint8_t>(yn);
+        for (const auto &run : runs_of(yn))
+            for (int x = std::max(run[0], 3); x < std::min(run[1], W - 3); ++x) {
+                const float v = b[x];
+                if (v <= 0.f || !m[x]) continue;
+                if (v < a[x - 1] || v < a[x] || v < a[x + 1] || v < b[x - 1] || v <= b[x + 1] || v <= c[x - 1] ||
+                    v <= c[x] || v <= c[x + 1])
+                    continue;
+                cand.push_back({v, x, yn});
+            }
+    }
+    // Keep those above harris_quality of the strongest.
+    const float thr = float(p.harris_quality) * r_max;
+    cand.erase(std::remove_if(cand.begin(), cand.end(), [&](const Cand &c) { return c.r <= thr; }), cand.end());
+    std::sort(cand.begin(), cand.end(), [](const Cand &a, const Cand &b) { return a.r > b.r; });
+    // Strongest first, none within min distance of a kept one (grid of min-distance cells).
+    const int d = std::max(1, p.min_corner_distance_px);
+    const int gw = W / d + 1;
+    std::vector<std::vector<cv::Point2f>> grid(size_t(gw) * size_t(gray.rows / d + 1));
+    const float d2 = float(d * d);
+    for (const auto &c : cand) {
+        if (int(out.size()) >= p.max_corners) break;
+        const int gx = c.x / d, gy = c.y / d;
+        bool ok = true;
+        for (int yy = std::max(0, gy - 1); yy <= gy + 1 && ok; ++yy)
+            for (int xx = std::max(0, gx - 1); xx <= std::min(gw - 1, gx + 1) && ok; ++xx) {
+                const size_t cell = size_t(yy) * size_t(gw) + size_t(xx);
+                if (cell >= grid.size()) continue;
+                for (const auto &q : grid[cell]) {
+                    const float dx = q.x - float(c.x), dy = q.y - float(c.y);
+                    if (dx * dx + dy * dy < d2) { ok = false; break; }
+                }
+            }
+        if (!ok) continue;
+        const cv::Point2f pt(float(c.x), float(c.y));
+        grid[size_t(gy) * size_t(gw) + size_t(gx)].push_back(pt);
+        out.push_back(pt);
+    }
+    return out;
+}
+
+std::vector<Correspondence> patch_lk(const cv::Mat &cur, const cv::Mat &prev, const std::vector<cv::Point2f> &corners,
+                                     const cv::Matx33d &H_guess, const LaneFeatureParams &p) {
+    CV_Assert(cur.type() == CV_8UC1 && prev.type() == CV_8UC1 && cur.size() == prev.size());
+    std::vector<Correspondence> out;
+    const int n = int(corners.size()), S = p.lk_patch_px;
+    if (n == 0) return out;
+    const cv::Matx33d Hi = H_guess.inv();
+    // Patches side by side: current ones in `cm`, pre-warped previous ones in `pm`.
+    cv::Mat cm(S, S * n, CV_8UC1), pm(S, S * n, CV_8UC1);
+    std::vector<cv::Point2f> g(corners.size());
+    std::vector<cv::Matx22f> J(corners.size());
+    const float c0 = 0.5f * float(S - 1);
+    for (int i = 0; i < n; ++i) {
+        const cv::Point2f c = corners[size_t(i)];
+        // g = H^-1 c and the Jacobian of x -> H^-1 x at c: rows (h_r w - u_r h_3) / w^2.
+        const cv::Vec3d q = Hi * cv::Vec3d(c.x, c.y, 1.0);
+        const double w = q[2];
+        g[size_t(i)] = cv::Point2f(float(q[0] / w), float(q[1] / w));
+        cv::Matx22f Ji;
+        for (int r = 0; r < 2; ++r)
+            for (int k = 0; k < 2; ++k) Ji(r, k) = float((Hi(r, k) * w - q[r] * Hi(2, k)) / (w * w));
+        J[size_t(i)] = Ji;
+        cv::Mat cp = cm.colRange(i * S, (i + 1) * S), pp = pm.colRange(i * S, (i + 1) * S);
+        cv::getRectSubPix(cur, cv::Size(S, S), c, cp);
+        // pp(u) = prev(g + J (u - c0)): warpAffine with the inverse map [J | g - J c0].
+        const cv::Matx23d M(Ji(0, 0), Ji(0, 1), g[size_t(i)].x - Ji(0, 0) * c0 - Ji(0, 1) * c0,
+                            Ji(1, 0), Ji(1, 1), g[size_t(i)].y - Ji(1, 0) * c0 - Ji(1, 1) * c0);
+        cv::warpAffine(prev, pp, M, cv::Size(S, S), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
+    }
+    std::vector<cv::Point2f> start(corners.size()), fwd, back;
+    for (int i = 0; i < n; ++i) start[size_t(i)] = cv::Point2f(float(i * S) + c0, c0);
+    fwd = back = start;
+    std::vector<uint8_t> st_f, st_b;
+    std::vector<float> err;
+    const cv::Size win(p.lk_window_px, p.lk_window_px);
+    const cv::TermCriteria crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
+    cv::calcOpticalFlowPyrLK(cm, pm, start, fwd, st_f, err, win, p.lk_levels, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
+    cv::calcOpticalFlowPyrLK(pm, cm, fwd, back, st_b, err, win, p.lk_levels, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
+    const float fb2 = float(p.fb_max_px * p.fb_max_px);
+    const float reach = 0.5f * float(S - p.lk_window_px);  // farther the window left its patch
+    for (int i = 0; i < n; ++i) {
+        const cv::Point2f d = fwd[size_t(i)] - start[size_t(i)], e = back[size_t(i)] - start[size_t(i)];
+        if (!st_f[size_t(i)] || !st_b[size_t(i)] || e.dot(e) > fb2 || std::fabs(d.x) > reach || std::fabs(d.y) > reach)
+            continue;
+        const cv::Matx22f &Ji = J[size_t(i)];
+        const cv::Point2f pr(g[size_t(i)].x + Ji(0, 0) * d.x + Ji(0, 1) * d.y, g[size_t(i)].y + Ji(1, 0) * d.x + Ji(1, 1) * d.y);
+        if (pr.x < 0 || pr.y < 0 || pr.x > float(prev.cols - 1) || pr.y > float(prev.rows - 1)) continue;
+        out.push_back({pr, corners[size_t(i)]});
+    }
+    return out;
+}
+
+LaneFeatures lane_correspondences(const cv::Mat &cur, const cv::Mat &prev, cv::Point2f vp, const CameraParams &cam,
+                                  const cv::Matx33d &H_guess, const LaneFeatureParams &p) {
+    CV_Assert(cur.type() == CV_8UC1 && prev.type() == CV_8UC1 && cur.size() == prev.size());
+    LaneFeatures out;
+    const cv::Range rows = lane_feature_rows(cur.rows, vp.y, cam, p);
+    if (rows.size() < 2) return out;
+    cv::Mat binary;
+    marking_response(cur, rows, vp.y, cam, p, binary);
+    out.markings = marking_segments(binary, rows, vp, cam, p);
+    if (out.markings.empty()) return out;
+    cv::Mat mask = cv::Mat::zeros(cur.size(), CV_8UC1);
+    for (const auto &m : out.markings) cv::fillConvexPoly(mask, m.region, cv::Scalar(255));
+    out.corners = harris_corners(cur, mask, rows, p);
+    out.matches = patch_lk(cur, prev, out.corners, H_guess, p);
+    return out;
 }
 
 } // namespace hw

@@ -12,6 +12,10 @@ void DltParams::bind(ParamMap &m) {
     m.add("min_points", min_points, 4, 10000,
           "count; correspondences needed for a homography measurement; 8 leaves the DLT over-determined "
           "twice over, so one bad point shows in the residual");
+    m.add("point_gate_px", point_gate_px, 0.0, 10000.0,
+          "px; a correspondence farther than this from where the predicted homography puts it is dropped before the "
+          "DLT (a corner matched to the wrong dash, a corner on a vehicle); 3 px is about three times what shake "
+          "changes between frames on the synthetic road; 0 disables");
     m.add("min_row_span_px", min_row_span_px, 0.0, 10000.0,
           "px; the used points must spread over this many rows; points in a thin band near the horizon fix the "
           "homography poorly (the paper's warning)");
@@ -74,7 +78,7 @@ double transfer_error(const cv::Matx33d &H, cv::Point2f from, cv::Point2f to) {
 }
 
 HomographyFit fit_homography(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
-                             const DltParams &p) {
+                             const DltParams &p, const cv::Matx33d *predicted) {
     CV_Assert(from.size() == to.size());
     HomographyFit fit;
     auto row_span = [](const std::vector<cv::Point2f> &pts) {
@@ -82,9 +86,14 @@ HomographyFit fit_homography(const std::vector<cv::Point2f> &from, const std::ve
         for (const auto &q : pts) { lo = std::min(lo, q.y); hi = std::max(hi, q.y); }
         return pts.empty() ? 0.f : hi - lo;
     };
-    if (int(from.size()) < std::max(4, p.min_points) || row_span(to) < p.min_row_span_px) return fit;
+    std::vector<cv::Point2f> f, t;
+    for (size_t i = 0; i < from.size(); ++i)
+        if (!predicted || p.point_gate_px <= 0 || transfer_error(*predicted, from[i], to[i]) <= p.point_gate_px) {
+            f.push_back(from[i]);
+            t.push_back(to[i]);
+        }
+    if (int(f.size()) < std::max(4, p.min_points) || row_span(t) < p.min_row_span_px) return fit;
 
-    std::vector<cv::Point2f> f = from, t = to;
     cv::Matx33d H = normalised_dlt(f, t);
     std::vector<double> err(f.size());
     for (size_t i = 0; i < f.size(); ++i) err[i] = transfer_error(H, f[i], t[i]);

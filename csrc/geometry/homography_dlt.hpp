@@ -6,9 +6,12 @@
 //     [ x y 1    0  0  0  -x'x -x'y -x' ]
 // Both point sets are first normalised (centroid to the origin, mean distance sqrt 2) so that A is
 // well conditioned; h is the eigenvector of A^T A with the smallest eigenvalue, and
-// H = T'^-1 H_n T. The paper relies on its Kalman gate rather than robust estimation; one cheap
-// trimming pass (refit without the correspondences whose transfer error is far above the median)
-// keeps a single mismatched corner from spoiling an otherwise good measurement.
+// H = T'^-1 H_n T. The paper relies on its Kalman gate rather than robust estimation. Two cheap
+// guards are added, because a wrong correspondence far from the others (a near dash end matched to
+// the next dash, 12 m on) has so much leverage that the DLT fits it exactly and spoils the rest:
+// correspondences farther than point_gate_px from where the predicted homography puts them are
+// dropped first (when a prediction exists), and one trimming pass refits without those whose
+// transfer error is far above the median.
 #pragma once
 
 #include "core/params.hpp"
@@ -21,6 +24,7 @@ namespace hw {
 
 struct DltParams {
     int min_points = 8;            // correspondences needed for a measurement
+    double point_gate_px = 3.0;    // px; farthest a correspondence may be from the prediction (0: no gate)
     double min_row_span_px = 40.0; // px; the points must spread over this many rows
     double trim_factor = 3.0;      // transfer errors above this many medians are trimmed (0: no trimming)
     double trim_floor_px = 1.0;    // px; never trim below this transfer error
@@ -42,8 +46,9 @@ cv::Matx33d normalised_dlt(const std::vector<cv::Point2f> &from, const std::vect
 // |to - H from| for one correspondence.
 double transfer_error(const cv::Matx33d &H, cv::Point2f from, cv::Point2f to);
 
-// DLT with the checks and the trimming pass of DltParams.
+// DLT with the checks, the prediction gate and the trimming pass of DltParams. predicted: the
+// predicted homography from -> to, or null when there is none.
 HomographyFit fit_homography(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
-                             const DltParams &p);
+                             const DltParams &p, const cv::Matx33d *predicted = nullptr);
 
 } // namespace hw

@@ -6,19 +6,30 @@ namespace hw {
 
 void HomographyKalmanParams::bind(ParamMap &m) {
     m.add("q", q, 0.0, 1.0,
-          "process noise variance of each of the nine entries of H in normalised camera coordinates (K^-1 H K); "
-          "the square root is the change per frame the filter follows (rotation in rad, travel in camera heights)");
+          "process noise variance of each of the nine entries of H in road-band coordinates (see "
+          "geometry/homography_kalman.hpp); its square root times half the image width is roughly the change per "
+          "frame in pixels the filter follows");
     m.add("r", r, 1e-12, 1.0,
-          "measurement noise variance of each entry of a DLT homography (normalised coordinates)");
+          "measurement noise variance of each entry of a DLT homography (road-band coordinates)");
     m.add("gate", gate, 1e-6, 10.0,
-          "t_a: a measured H is accepted only if the 2-norm of H_meas - H_pred (normalised coordinates) is below "
-          "this; 0.03 is a change of ~1.7 deg of rotation or 4 cm of travel per frame beyond the prediction, more "
-          "than shake and braking give between frames, less than a fit to the wrong plane");
+          "t_a: a measured H is accepted only if the 2-norm of H_meas - H_pred (road-band coordinates) is below "
+          "this; the norm is about the largest disagreement on the road in half image widths, so 0.02 is ~6 px at "
+          "640 px: more than shake and braking change between frames, less than a fit to the wrong points");
     m.add("max_coast_frames", max_coast_frames, 0, 100000,
           "frames; after this many frames without an accepted measurement the filter is lost and starts again from "
           "two agreeing measurements (the alignment of a stale prediction is worse than none)");
+    m.add("restart_agreeing", restart_agreeing, 2, 1000,
+          "count; this many consecutive rejected measurements that agree with each other within the gate restart "
+          "the filter from the newest (a wrong state would otherwise gate out every good measurement); 3 = 0.1 s "
+          "at 30 fps");
     m.add("use_ego_speed", use_ego_speed,
           "use the CAN ego speed, when known, to replace the travel part of the predicted homography");
+}
+
+cv::Matx33d road_band_normaliser(const CameraParams &cam) {
+    const double s = 2.0 / cam.width;
+    const double yc = 0.5 * (cam.horizon_row() + cam.height);
+    return {s, 0, -s * cam.cx, 0, s, -s * yc, 0, 0, 1};
 }
 
 cv::Matx33d travel_homography(const CameraParams &cam, double s_m) {
@@ -30,7 +41,8 @@ cv::Matx33d travel_homography(const CameraParams &cam, double s_m) {
     // Road points of the level camera satisfy n^T X = h with n = (0, 1, 0) (y down); travelling s forward,
     // X' = X - t = (I - t n^T / h) X with t = (0, 0, s).
     const cv::Matx33d T(1, 0, 0, 0, 1, 0, 0, -s_m / cam.height_m, 1);
-    cv::Matx33d G = R * T * R.t();
+    const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
+    cv::Matx33d G = K * R * T * R.t() * K.inv();
     return G * (1.0 / G(2, 2));
 }
 
@@ -41,13 +53,13 @@ double spectral_norm(const cv::Matx33d &A) {
 }
 
 HomographyKalman::HomographyKalman(const HomographyKalmanParams &p, const CameraParams &cam) : p_(p), cam_(cam) {
-    K_ = cv::Matx33d(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
-    Kinv_ = K_.inv();
+    T_ = road_band_normaliser(cam);
+    Tinv_ = T_.inv();
 }
 
 void HomographyKalman::reset() {
     initialised_ = false;
-    have_candidate_ = false;
+    agreeing_ = 0;
     x_ = pred_ = cv::Matx33d::eye();
     P_ = 0.0;
     step_ = step_prev_ = NAN;
@@ -56,12 +68,12 @@ void HomographyKalman::reset() {
 }
 
 cv::Matx33d HomographyKalman::to_normalised(const cv::Matx33d &H_px) const {
-    cv::Matx33d H = Kinv_ * H_px * K_;
+    cv::Matx33d H = T_ * H_px * Tinv_;
     return H * (1.0 / H(2, 2));
 }
 
 cv::Matx33d HomographyKalman::to_pixels(const cv::Matx33d &H_n) const {
-    cv::Matx33d H = K_ * H_n * Kinv_;
+    cv::Matx33d H = Tinv_ * H_n * T_;
     return H * (1.0 / H(2, 2));
 }
 
@@ -73,13 +85,13 @@ void HomographyKalman::predict(double step_m) {
     step_ = p_.use_ego_speed ? step_m : NAN;
     if (!initialised_) {
         // Without a state the best guess is the road moving by the known travel (or not at all).
-        pred_ = std::isfinite(step_) ? travel_homography(cam_, step_) : cv::Matx33d::eye();
+        pred_ = std::isfinite(step_) ? to_normalised(travel_homography(cam_, step_)) : cv::Matx33d::eye();
         return;
     }
     // x^- = x_{k-1}, with the travel part swapped for this frame's when the ego speed is known.
     pred_ = x_;
     if (std::isfinite(step_) && std::isfinite(step_prev_)) {
-        pred_ = x_ * travel_homography(cam_, step_prev_).inv() * travel_homography(cam_, step_);
+        pred_ = x_ * to_normalised(travel_homography(cam_, step_prev_).inv() * travel_homography(cam_, step_));
         pred_ = pred_ * (1.0 / pred_(2, 2));
     }
     P_ += p_.q;  // P^- = P + Q
@@ -88,6 +100,7 @@ void HomographyKalman::predict(double step_m) {
 HomographyKalman::Status HomographyKalman::update(const cv::Matx33d *H_meas_px) {
     distance_ = NAN;
     if (!H_meas_px) {
+        agreeing_ = 0;
         if (initialised_) {
             x_ = pred_;
             if (++coast_ > p_.max_coast_frames) reset();
@@ -95,32 +108,34 @@ HomographyKalman::Status HomographyKalman::update(const cv::Matx33d *H_meas_px) 
         return Status::kNoMeasurement;
     }
     const cv::Matx33d z = to_normalised(*H_meas_px);
-    if (!initialised_) {
-        // Start from two consecutive measurements that agree within the gate.
-        if (have_candidate_ && spectral_norm(z - candidate_) < p_.gate) {
-            x_ = z;
-            P_ = p_.r;
-            initialised_ = true;
-            have_candidate_ = false;
-            coast_ = 0;
-            return Status::kAccepted;
-        }
-        candidate_ = z;
-        have_candidate_ = true;
-        return Status::kRejected;
+    // Count consecutive measurements that agree with each other (used to start and to restart).
+    agreeing_ = (agreeing_ > 0 && spectral_norm(z - candidate_) < p_.gate) ? agreeing_ + 1 : 1;
+    candidate_ = z;
+    const int needed = initialised_ ? p_.restart_agreeing : 2;
+    if (initialised_) distance_ = spectral_norm(z - pred_);
+    if (initialised_ && distance_ < p_.gate) {
+        const double gain = P_ / (P_ + p_.r);  // K = P^- (P^- + R)^-1
+        x_ = pred_ + gain * (z - pred_);
+        x_ = x_ * (1.0 / x_(2, 2));
+        P_ = (1.0 - gain) * P_;
+        coast_ = 0;
+        agreeing_ = 0;
+        return Status::kAccepted;
     }
-    distance_ = spectral_norm(z - pred_);
-    if (distance_ >= p_.gate) {
+    if (agreeing_ >= needed) {
+        // (Re)start from the newest of the agreeing measurements.
+        x_ = z;
+        P_ = p_.r;
+        initialised_ = true;
+        coast_ = 0;
+        agreeing_ = 0;
+        return Status::kAccepted;
+    }
+    if (initialised_) {
         x_ = pred_;
         if (++coast_ > p_.max_coast_frames) reset();
-        return Status::kRejected;
     }
-    const double gain = P_ / (P_ + p_.r);  // K = P^- (P^- + R)^-1
-    x_ = pred_ + gain * (z - pred_);
-    x_ = x_ * (1.0 / x_(2, 2));
-    P_ = (1.0 - gain) * P_;
-    coast_ = 0;
-    return Status::kAccepted;
+    return Status::kRejected;
 }
 
 } // namespace hw

@@ -1,23 +1,29 @@
 // homography_kalman.hpp - the road-plane homography between consecutive frames, filtered
 // (paper 000, section II-B).
 //
-// State: the nine entries of H (previous -> current frame), expressed in normalised camera
-// coordinates, H_n = K^-1 H K scaled to H_n(2,2) = 1, so that the entries are dimensionless and the
-// gate reads as physics: for a camera moving on a plane, H_n = R - t n^T / d, i.e. a rotation
-// between the frames (radians) plus the travel per frame over the camera height.
+// State: the nine entries of H (previous -> current frame), expressed in road-band coordinates:
+// H_n = T H T^-1 scaled to H_n(2,2) = 1, where T moves the middle of the road band (the rows between
+// the horizon and the bottom, centre column) to the origin and divides by half the image width.
+// The entries are then dimensionless and comparable, and since the road points lie within about
+// +-1 of the origin, ||H_1 - H_2||_2 is close to the largest disagreement of the two homographies
+// on the road in half-widths: the gate reads as pixels (gate * width / 2). (In pixel coordinates the
+// translation entries would dominate the norm; in plain normalised camera coordinates the entries
+// that only matter far above the road would.)
 // Constant-state Kalman filter, the same for every entry:
 //     predict   x_k^- = x_{k-1}          P^- = P + Q          (Q = q I)
 //     gate      ||H_meas - H_pred||_2 < t_a   (largest singular value)
 //     update    K = P^- / (P^- + R)   x = x^- + K (z - x^-)   P = (1 - K) P^-   (R = r I)
 // A measurement outside the gate is not used and the prediction carries on; coast_frames counts
-// the frames since a measurement was last accepted. After max_coast_frames the filter is lost and
-// starts again from two consecutive measurements that agree within the gate (a single bad first
-// measurement would otherwise lock every later good one out).
+// the frames since a measurement was last accepted. The filter starts from two consecutive
+// measurements that agree within the gate. Because a constant-state filter never leaves a wrong
+// state by itself (every good measurement is then gated out), it also restarts from the newest
+// measurement when restart_agreeing consecutive rejected measurements agree with each other within
+// the gate (they, not the state, describe the road), and it is dropped after max_coast_frames.
 //
 // Ego speed (CAN), when known for this frame and the previous one, informs the prediction: the
 // travel part of H is replaced by this frame's, x^- = H_{k-1} G(s_{k-1})^-1 G(s_k), with
-// G(s) = R_c (I - t n^T / h) R_c^T the road homography of a forward travel s = v dt at the static
-// mounting R_c (pitch, yaw), n = (0, 1, 0), t = (0, 0, s) in level-camera axes.
+// G(s) = K R_c (I - t n^T / h) R_c^T K^-1 the road homography of a forward travel s = v dt at the
+// static mounting R_c (pitch, yaw), n = (0, 1, 0), t = (0, 0, s) in level-camera axes.
 #pragma once
 
 #include "core/params.hpp"
@@ -25,21 +31,27 @@
 
 #include <opencv2/core.hpp>
 
+#include <cmath>
+
 namespace hw {
 
 struct HomographyKalmanParams {
     double q = 1e-6;              // process noise variance per entry (paper: 1e-6)
     double r = 1e-3;              // measurement noise variance per entry (paper: 1e-3)
-    double gate = 0.03;           // t_a on the 2-norm of H_meas - H_pred (normalised coordinates)
+    double gate = 0.02;           // t_a on the 2-norm of H_meas - H_pred (road-band coordinates)
     int max_coast_frames = 15;    // frames on the prediction alone before the filter is lost
+    int restart_agreeing = 3;     // consecutive rejected measurements agreeing with each other restart the filter
     bool use_ego_speed = true;    // CAN speed informs the prediction when known
 
     void bind(ParamMap &m);
 };
 
-// Road homography of a forward travel of s metres for the camera's static mounting, normalised
-// coordinates (K^-1 H K), previous -> current.
+// Road homography of a forward travel of s metres for the camera's static mounting, in pixels,
+// previous -> current.
 cv::Matx33d travel_homography(const CameraParams &cam, double s_m);
+
+// The road-band normalisation T of the filter state (see above).
+cv::Matx33d road_band_normaliser(const CameraParams &cam);
 
 // Largest singular value of a 3x3 matrix.
 double spectral_norm(const cv::Matx33d &A);
@@ -56,6 +68,7 @@ public:
     Status update(const cv::Matx33d *H_meas_px);
 
     bool valid() const { return initialised_; }             // an estimate exists (measured or coasting)
+    bool has_prediction() const { return initialised_ || std::isfinite(step_); }  // predicted_px() means something
     cv::Matx33d H_px() const;                              // current estimate, pixels, prev -> cur
     cv::Matx33d predicted_px() const;                      // last prediction, pixels (identity if none)
     int coast_frames() const { return coast_; }
@@ -67,15 +80,15 @@ private:
     cv::Matx33d to_pixels(const cv::Matx33d &H_n) const;
 
     HomographyKalmanParams p_;
-    cv::Matx33d K_, Kinv_;
+    cv::Matx33d T_, Tinv_;
     CameraParams cam_;
     bool initialised_ = false;
     cv::Matx33d x_ = cv::Matx33d::eye();     // state (normalised)
     cv::Matx33d pred_ = cv::Matx33d::eye();  // x^- of this frame
     double P_ = 0.0;                          // variance of every entry
     double step_ = NAN, step_prev_ = NAN;     // ego travel of this and the previous frame
-    bool have_candidate_ = false;
-    cv::Matx33d candidate_;                  // first of two agreeing measurements (not initialised)
+    int agreeing_ = 0;                        // consecutive measurements agreeing with each other, not with x
+    cv::Matx33d candidate_;                   // the last of them
     int coast_ = 0;
     double distance_ = NAN;
 };

@@ -9,8 +9,8 @@ namespace hw {
 
 namespace {
 
-// Least-squares slope of y over t.
-double slope(const std::deque<std::pair<double, double>> &pts) {
+// Least-squares slope of y over t, and its standard error (from the residuals).
+double slope(const std::deque<std::pair<double, double>> &pts, double &std_error) {
     double st = 0, sy = 0;
     for (const auto &p : pts) { st += p.first; sy += p.second; }
     const double n = double(pts.size()), mt = st / n, my = sy / n;
@@ -19,7 +19,15 @@ double slope(const std::deque<std::pair<double, double>> &pts) {
         num += (p.first - mt) * (p.second - my);
         den += (p.first - mt) * (p.first - mt);
     }
-    return den > 0 ? num / den : NAN;
+    if (den <= 0) return NAN;
+    const double b = num / den;
+    double ss = 0;
+    for (const auto &p : pts) {
+        const double r = p.second - my - b * (p.first - mt);
+        ss += r * r;
+    }
+    std_error = n > 2 ? std::sqrt(ss / (n - 2) / den) : INFINITY;
+    return b;
 }
 
 } // namespace
@@ -41,47 +49,56 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
         auto it = state_.find(tr.id);
         if (it == state_.end()) {
             State s;
-            s.z = rp.z_m;
-            s.vz = 0;
-            s.p00 = r_sigma * r_sigma;
-            s.p11 = 100.0;  // (10 m/s)^2: range rate unknown at birth
+            s.x << rp.z_m, 0.0, 0.0;
+            // range as measured; range rate and acceleration unknown at birth: (15 m/s)^2, (5 m/s^2)^2
+            s.P = Eigen::Vector3d(r_sigma * r_sigma, 225.0, 25.0).asDiagonal();
             s.t = t_s;
             it = state_.emplace(tr.id, s).first;
         } else {
             State &s = it->second;
             const double dt = std::max(1e-3, t_s - s.t);
-            // predict: x' = F x, P' = F P F^T + Q with F = [1 dt; 0 1], Q = q [dt^4/4 dt^3/2; dt^3/2 dt^2]
-            const double q = p_.accel_sigma_mps2 * p_.accel_sigma_mps2;
-            s.z += s.vz * dt;
-            const double p00 = s.p00 + 2 * dt * s.p01 + dt * dt * s.p11 + q * dt * dt * dt * dt / 4;
-            const double p01 = s.p01 + dt * s.p11 + q * dt * dt * dt / 2;
-            const double p11 = s.p11 + q * dt * dt;
-            // update with the range measurement: K = P H^T (H P H^T + R)^-1, H = [1 0]
-            const double sk = p00 + r_sigma * r_sigma;
-            const double k0 = p00 / sk, k1 = p01 / sk;
-            const double innov = rp.z_m - s.z;
-            s.z += k0 * innov;
-            s.vz += k1 * innov;
-            s.p00 = (1 - k0) * p00;
-            s.p01 = (1 - k0) * p01;
-            s.p11 = p11 - k1 * p01;
+            // predict: x' = F x, P' = F P F^T + Q, constant acceleration, white jerk of variance q:
+            // Q = q [dt^5/20 dt^4/8 dt^3/6; dt^4/8 dt^3/3 dt^2/2; dt^3/6 dt^2/2 dt]
+            Eigen::Matrix3d F;
+            F << 1, dt, 0.5 * dt * dt, 0, 1, dt, 0, 0, 1;
+            const double q = p_.jerk_sigma_mps3 * p_.jerk_sigma_mps3;
+            const double d2 = dt * dt, d3 = d2 * dt, d4 = d3 * dt, d5 = d4 * dt;
+            Eigen::Matrix3d Q;
+            Q << d5 / 20, d4 / 8, d3 / 6, d4 / 8, d3 / 3, d2 / 2, d3 / 6, d2 / 2, dt;
+            s.x = F * s.x;
+            s.P = F * s.P * F.transpose() + q * Q;
+            // update with the range: K = P H^T / (H P H^T + R), H = [1 0 0]
+            const double sk = s.P(0, 0) + r_sigma * r_sigma;
+            const Eigen::Vector3d K = s.P.col(0) / sk;
+            s.x += K * (rp.z_m - s.x(0));
+            s.P -= K * s.P.row(0);
             s.t = t_s;
         }
         State &s = it->second;
-        // Range rate only once the filter has seen some motion (its variance has come down).
-        if (s.p11 < 4.0) tr.range_rate_mps = float(s.vz);
-        const double closing = -s.vz;
-        if (s.p11 < 4.0 && closing > p_.min_closing_mps)
-            tr.ttc_s = float(std::max(0.0, s.z - p_.ego_front_m) / closing);
+        // Range rate and acceleration only once the filter has converged: variance down to (2 m/s)^2,
+        // and for the acceleration to (1.5 m/s^2)^2 with the estimate clear of zero by two sigma
+        // (a noisy acceleration would turn every wobble of the box into a braking lead).
+        const bool rate_known = s.P(1, 1) < 4.0;
+        if (rate_known) tr.range_rate_mps = float(s.x(1));
+        if (rate_known && s.P(2, 2) < 2.25 && std::fabs(s.x(2)) > 2.0 * std::sqrt(s.P(2, 2)))
+            tr.range_accel_mps2 = float(s.x(2));
+        const double closing = -s.x(1);
+        if (rate_known && closing > p_.min_closing_mps)
+            tr.ttc_s = float(std::max(0.0, s.x(0) - p_.ego_front_m) / closing);
+        const double z_now = s.x(0);
 
         if (tr.box.width > 1.f) {
             s.log_w.emplace_back(t_s, std::log(double(tr.box.width)));
             while (int(s.log_w.size()) > p_.scale_window) s.log_w.pop_front();
-            if (s.log_w.size() >= 3 && s.log_w.back().first - s.log_w.front().first >= p_.scale_min_span_s) {
-                const double rate = slope(s.log_w);  // d(ln w)/dt = 1 / TTC to the camera plane
-                if (std::isfinite(rate) && rate * s.z > p_.min_closing_mps) {
+            // a full window only: while a track is young its box is still settling
+            if (int(s.log_w.size()) >= p_.scale_window &&
+                s.log_w.back().first - s.log_w.front().first >= p_.scale_min_span_s) {
+                double se = NAN;
+                const double rate = slope(s.log_w, se);  // d(ln w)/dt = 1 / TTC to the camera plane
+                // only a clear scale change: the slope at least 3 standard errors from zero
+                if (std::isfinite(rate) && rate * z_now > p_.min_closing_mps && rate > 3.0 * se) {
                     // to the bumper: the camera-plane TTC scaled by the share of range left to the bumper
-                    tr.ttc_scale_s = float(std::max(0.0, s.z - p_.ego_front_m) / s.z / rate);
+                    tr.ttc_scale_s = float(std::max(0.0, z_now - p_.ego_front_m) / z_now / rate);
                 }
             }
         }

@@ -1,8 +1,10 @@
 // track_kinematics.hpp - range, lateral offset, range rate and both TTCs for every track.
 //
 // Range and lateral come from the bottom-centre of the box on the flat road (flat_road.hpp). A
-// constant-velocity Kalman filter per track on [Z, dZ/dt] gives the range rate; its measurement
-// noise follows the row uncertainty through dZ/dv = -Z^2/(fy h), so far vehicles are trusted less.
+// constant-acceleration Kalman filter per track on [Z, dZ/dt, d2Z/dt2] gives the range rate and the
+// relative acceleration (a braking lead shows in it before the range rate has grown: the FCW uses it
+// for its required deceleration); its measurement noise follows the row uncertainty through
+// dZ/dv = -Z^2/(fy h), so far vehicles are trusted less.
 // The scale-based TTC needs no calibration: for a rear face of fixed width, w ~ 1/Z, so
 // d(ln w)/dt = -(dZ/dt)/Z = 1/TTC; we fit the slope of ln w over a short window.
 #pragma once
@@ -11,6 +13,8 @@
 #include "core/types.hpp"
 #include "geometry/camera.hpp"
 
+#include <Eigen/Dense>
+
 #include <deque>
 #include <unordered_map>
 #include <vector>
@@ -18,16 +22,17 @@
 namespace hw {
 
 struct KinematicsParams {
-    double accel_sigma_mps2 = 3.0;   // white-acceleration process noise of the range filter
+    double jerk_sigma_mps3 = 2.0;    // white-jerk process noise of the range filter
     double min_row_sigma_px = 0.7;   // floor of the contact-row uncertainty
     double ego_front_m = 2.0;        // camera to the front bumper: TTC is to the bumper
     double min_closing_mps = 0.3;    // slower closing is "not closing": TTC not available
     int scale_window = 12;           // frames in the ln(w) slope fit
-    double scale_min_span_s = 0.2;   // the fit needs at least this much time
+    double scale_min_span_s = 0.3;   // the fit needs at least this much time
 
     void bind(ParamMap &m) {
-        m.add("accel_sigma_mps2", accel_sigma_mps2, 0.01, 50.0,
-              "m/s^2; process noise of the range-rate filter; 3 covers hard braking (0.3 g) with little lag");
+        m.add("jerk_sigma_mps3", jerk_sigma_mps3, 0.01, 100.0,
+              "m/s^3; process noise of the range filter (white jerk); 2 lets the relative acceleration follow "
+              "a lead that starts braking at 0.3 g within about a second while keeping it quiet when nobody brakes");
         m.add("min_row_sigma_px", min_row_sigma_px, 0.05, 20.0,
               "px; floor of the contact-row uncertainty used for range sigma and filter noise");
         m.add("ego_front_m", ego_front_m, 0.0, 10.0,
@@ -35,7 +40,7 @@ struct KinematicsParams {
         m.add("min_closing_mps", min_closing_mps, 0.0, 10.0,
               "m/s; below this closing speed TTC is not available (it would be huge and meaningless)");
         m.add("scale_window", scale_window, 3, 100,
-              "frames; window of the scale-change fit; 12 frames = 0.4 s at 30 fps smooths 1 px width noise");
+              "frames; window of the scale-change fit, and the track age before a scale TTC is given; 12 frames = 0.4 s at 30 fps smooths 1 px width noise");
         m.add("scale_min_span_s", scale_min_span_s, 0.0, 10.0,
               "s; the scale fit needs at least this time span before it reports a TTC");
     }
@@ -50,8 +55,8 @@ public:
 
 private:
     struct State {
-        double z = 0, vz = 0;               // filtered range and range rate
-        double p00 = 0, p01 = 0, p11 = 0;   // covariance
+        Eigen::Vector3d x;                  // range, range rate, relative acceleration
+        Eigen::Matrix3d P;                  // covariance
         double t = 0;
         std::deque<std::pair<double, double>> log_w;  // (t, ln width)
     };

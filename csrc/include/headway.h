@@ -72,6 +72,7 @@ typedef struct {
     float range_sigma_m;   /* 1-sigma range uncertainty from the bottom-row uncertainty, NaN if n/a */
     float lateral_m;       /* lateral offset of the rear centre, right positive, NaN if n/a */
     float range_rate_mps;  /* d(range)/dt, negative when closing, NaN if n/a */
+    float range_accel_mps2;/* d2(range)/dt2, negative when the closing speeds up (lead braking), NaN if n/a */
     float ttc_s;           /* range-based time to collision, NaN if n/a or not closing */
     float ttc_scale_s;     /* scale-based TTC = w / (dw/dt), NaN if n/a or not closing */
     int32_t lane_index;    /* 0 ego lane, -1 left, +1 right ...; -1000 if unknown */

@@ -3,15 +3,22 @@
 // As in the thesis the image is split into a left and a right half and a Hough transform finds the
 // lines of each; the many lines found on one marking are grouped by angle and reduced to one, and
 // lines with implausible angles are rejected. Differences, each for a reason:
-//  - the accumulator is centred on the expected vanishing point, so rho is a line's distance from
-//    it and only |rho| <= max_vp_offset is kept: every marking of a straight road passes through the
-//    vanishing point, while vehicle and guard-rail edges rarely do (rejection by position, not only
-//    by angle);
+//  - the accumulator is centred on a vanishing point, so rho is a line's distance from it. A wide
+//    window (|rho| up to max_vp_offset_frac of the width, coarse bins) around the camera's expected
+//    vanishing point finds the strong lines, whose consensus gives the measured vanishing point
+//    (lane_assembly); a narrow window (vp_line_tol_frac) around that point (or the tracked one) then
+//    finds every marking, dashed and dotted ones too: every marking of a straight road passes through
+//    the vanishing point, while vehicle edges and road-side structure rarely do (rejection by
+//    position, not only by angle). A point only votes in the few angle bins whose line can pass that
+//    close, so the narrow search is cheap;
 //  - the halves split at the vanishing-point column and overlap, and each half also accepts lines
 //    that lean slightly the other way, so a marking passing under the camera during a lane change is
 //    still found (the thesis' halves lose it);
-//  - each Hough peak is refined by a least-squares fit to the points near it (sub-bin accuracy), and
-//    lines whose support spans too few rows (one vehicle edge, one dash fragment) are rejected.
+//  - each Hough peak, strongest first, is refined by a least-squares fit to the points near it
+//    (sub-bin accuracy; a tracked vanishing point counts as a few extra points, so a line seen on one
+//    short dash takes its direction from it), and claims those points: a weaker peak sharing them
+//    (a dash plus a tail light) is judged on what is left. Lines with too little support, or support
+//    bunched in a few rows (one vehicle), are rejected.
 #pragma once
 
 #include "core/params.hpp"
@@ -36,7 +43,7 @@ struct HoughLinesParams {
     double min_span_frac = 0.12;      // fraction of the band height the support must span
     double group_angle_deg = 3.0;     // deg; lines closer in angle may be one marking (thesis grouping)
     double group_sep_m = 0.5;         // m; lines closer laterally than this are one marking
-    double vp_anchor_points = 8.0;    // points; pull of a known vanishing point on each line fit
+    double vp_anchor_points = 8.0;    // points; pull of a tracked vanishing point on each line fit
     int max_peaks_per_half = 12;      // Hough peaks examined per half
 
     void bind(ParamMap &m) {

@@ -18,15 +18,6 @@ ImageLine line_of(const LaneBoundary &b) {
     return l;
 }
 
-// The line n lanes to the side of `l` (n < 0 left), all lines meeting at vp:
-// x'(y) = x(y) + n * dk * (y - vp.y).
-ImageLine shifted(const ImageLine &l, float n, float dk, cv::Point2f vp) {
-    ImageLine s = l;
-    s.k = l.k + n * dk;
-    s.x_ref = l.x_ref + n * dk * (l.y_ref - vp.y);
-    return s;
-}
-
 // Point (x, y) minimising sum w_i d_i^2, d_i the distance to line i: with the line written as
 // a x + b y = c, (a, b) = (1, -k) / sqrt(1 + k^2), the 2x2 normal equations.
 bool least_squares_point(const std::vector<LaneCandidate> &c, const std::vector<char> &use, cv::Point2f &p) {
@@ -198,9 +189,9 @@ std::vector<cv::Point> road_polygon(const LaneModel &m, float width_k, cv::Size 
     ImageLine left, right;
     bool have_left = false, have_right = false;
     for (int i = 0; i < 4 && !have_left; ++i)
-        if (order[i]->valid) { left = shifted(line_of(*order[i]), -float(i), dk, vp); have_left = true; }
+        if (order[i]->valid) { left = shifted_by_lanes(line_of(*order[i]), -float(i), dk, vp); have_left = true; }
     for (int i = 3; i >= 0 && !have_right; --i)
-        if (order[i]->valid) { right = shifted(line_of(*order[i]), float(3 - i), dk, vp); have_right = true; }
+        if (order[i]->valid) { right = shifted_by_lanes(line_of(*order[i]), float(3 - i), dk, vp); have_right = true; }
 
     if (!have_left) {
         // Camera model default: ego lane centred on the car (camera lateral_m right of the car's

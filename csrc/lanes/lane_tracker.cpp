@@ -2,99 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <stdexcept>
-#include <string>
 
 namespace hw {
-
-namespace {
-
-void check_frame(const cv::Mat &gray, const CameraParams &cam) {
-    if (gray.empty() || gray.type() != CV_8UC1)
-        throw std::invalid_argument("lanes: expected a non-empty 8-bit gray image");
-    if (gray.cols != cam.width || gray.rows != cam.height)
-        throw std::invalid_argument("lanes: frame is " + std::to_string(gray.cols) + "x" + std::to_string(gray.rows) +
-                                    " but the camera is configured for " + std::to_string(cam.width) + "x" +
-                                    std::to_string(cam.height));
-}
-
-} // namespace
-
-namespace {
-
-std::vector<LaneCandidate> hough_candidates(const std::vector<MarkingPoint> &pts, const ScanBand &band,
-                                            cv::Size size, const CameraParams &cam, const HorizonPrior &hp,
-                                            const LaneParams &p, const HoughWindow &win) {
-    std::vector<LaneCandidate> out;
-    for (const auto &l : hough_lane_lines(pts, band, size, cam, hp, p.hough, win)) {
-        LaneCandidate c;
-        c.line = l.line;
-        c.weight = l.votes;
-        c.fit = l.fit;
-        out.push_back(c);
-    }
-    return out;
-}
-
-// Keeps the lines through the consensus vanishing point (if any), which is written to vp.
-bool keep_consensus(std::vector<LaneCandidate> &lines, const HorizonPrior &hp, cv::Size size,
-                    const LaneAssemblyParams &p, cv::Point2f &vp) {
-    std::vector<char> inlier;
-    if (!consensus_vanishing_point(lines, hp, size, p, vp, inlier)) return false;
-    std::vector<LaneCandidate> kept;
-    for (size_t i = 0; i < lines.size(); ++i)
-        if (inlier[i]) kept.push_back(lines[i]);
-    lines.swap(kept);
-    return true;
-}
-
-} // namespace
-
-// Two passes: the strong lines in a wide window give the vanishing point by consensus (skipped
-// when the caller knows it), then every marking is searched in a narrow window around it.
-LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam,
-                                   const HorizonPrior &hp, const cv::Point2f *known_vp) {
-    check_frame(gray, cam);
-    LaneMeasurement m;
-    const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
-    if (band.rows() < 2) return m;
-    std::vector<MarkingPoint> pts;
-    find_marking_points(gray, band, cam, hp, p.filter, pts);
-
-    // Narrow search around vp: the lines through it, with the vanishing point refined by them.
-    auto narrow = [&](cv::Point2f vp, bool tracked) {
-        m.lines = hough_candidates(pts, band, gray.size(), cam, hp, p, vp_window(vp, tracked, gray.size(), p.hough));
-        cv::Point2f refined;
-        m.vp = keep_consensus(m.lines, hp, gray.size(), p.assembly, refined) ? refined : vp;
-    };
-    if (known_vp) {
-        narrow(*known_vp, true);
-        if (m.lines.size() >= 2) return m;
-    }
-    // The vanishing point of this frame (or the known one found too little: it moved, or the road
-    // changed): consensus of the strong lines of a wide search.
-    std::vector<LaneCandidate> wide =
-        hough_candidates(pts, band, gray.size(), cam, hp, p, wide_window(gray.size(), hp, p.hough));
-    cv::Point2f vp;
-    if (keep_consensus(wide, hp, gray.size(), p.assembly, vp)) {
-        narrow(vp, false);
-        if (m.lines.empty()) m.lines = wide;
-    } else {
-        m.lines = wide;  // no two lines agree: keep them all, vanishing point unknown
-        m.vp = {kNaN, kNaN};
-    }
-    return m;
-}
-
-LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam) {
-    const HorizonPrior hp = camera_horizon(cam, p.assembly.horizon_tolerance_deg);
-    const LaneMeasurement m = measure_lane_lines(gray, p, cam, hp);
-    const LaneAssignment a = assign_lanes(m.lines, cam, p.assembly);
-    LaneModel out;
-    build_lane_model(m.lines, a, m.vp, gray.size(), cam, hp, p.assembly, out);
-    out.frames_since_observed = out.valid ? 0 : 1;
-    return out;
-}
 
 LaneTracker::LaneTracker(const LaneParams &p, const CameraParams &cam) : p_(p), cam_(cam) {
     prior_ = camera_horizon(cam_, p_.assembly.horizon_tolerance_deg);
@@ -217,20 +126,18 @@ void LaneTracker::associate(const LaneMeasurement &m, const HorizonPrior &hp) {
     }
 }
 
-void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
-    check_frame(gray, cam_);
-    // Search around the tracked vanishing point, kept within the camera prior's window.
+// Search around the tracked vanishing point, kept within the camera prior's window.
+HorizonPrior LaneTracker::search_prior() const {
     HorizonPrior hp = prior_;
-    const bool have_vp = std::isfinite(vp_.x) && std::isfinite(vp_.y);
-    if (have_vp) {
+    if (std::isfinite(vp_.x) && std::isfinite(vp_.y)) {
         hp.row = std::clamp(vp_.y, prior_.row - prior_.tol_px, prior_.row + prior_.tol_px);
         hp.vp_x = std::clamp(vp_.x, 0.f, float(cam_.width - 1));
     }
-    const cv::Point2f known_vp(hp.vp_x, hp.row);
-    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp, have_vp ? &known_vp : nullptr);
-    associate(m, hp);
+    return hp;
+}
 
-    // Tracks -> candidates; evidence grows with history and fades while a track coasts.
+// Tracks -> candidates for the assignment; evidence grows with history and fades while coasting.
+std::vector<LaneCandidate> LaneTracker::candidates() const {
     std::vector<LaneCandidate> cands;
     for (const auto &t : tracks_) {
         LaneCandidate c;
@@ -240,62 +147,70 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
         c.id = t.id;
         cands.push_back(c);
     }
-    const bool width_fresh = std::isfinite(width_k_) && width_age_ <= p_.max_missing_frames;
-    LaneAssignment a = assign_lanes(cands, cam_, p_.assembly, ego_left_id_, ego_right_id_,
-                                    width_fresh ? width_k_ : kNaN);
-    const cv::Point2f vp_ref = std::isfinite(vp_.x) ? vp_ : m.vp;
+    return cands;
+}
 
-    if (a.ego_left >= 0 && a.ego_right >= 0) {
+// The tracked ego width learns from frames measuring both boundaries; an ego boundary that is not
+// measured while its partner is moves with the partner at that width (a vehicle hides it while the
+// car drifts), and one with no track at all (just crossed into a new lane) is carried at that width.
+void LaneTracker::carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignment &a, cv::Point2f vp) {
+    const bool width_fresh = std::isfinite(width_k_) && width_age_ <= p_.max_missing_frames;
+    const bool have_l = a.ego_left >= 0, have_r = a.ego_right >= 0;
+    if (have_l && have_r) {
         LaneCandidate &l = cands[size_t(a.ego_left)], &r = cands[size_t(a.ego_right)];
         if (l.observed && r.observed) {
             const float w = r.line.k - l.line.k;
             width_k_ = std::isfinite(width_k_) ? width_k_ + float(p_.width_alpha) * (w - width_k_) : w;
             width_age_ = 0;
-        } else if (width_fresh && std::isfinite(vp_ref.y) && (l.observed || r.observed)) {
-            // One boundary hidden: it moves with the visible one at the tracked width.
+            return;
+        }
+        if (width_fresh && std::isfinite(vp.y) && (l.observed || r.observed)) {
             LaneCandidate &hidden = l.observed ? r : l;
             const LaneCandidate &seen = l.observed ? l : r;
-            const float n = l.observed ? 1.f : -1.f;
-            hidden.line.k = seen.line.k + n * width_k_;
-            hidden.line.x_ref = seen.line.x_ref + n * width_k_ * (seen.line.y_ref - vp_ref.y);
+            hidden.line = shifted_by_lanes(seen.line, l.observed ? 1.f : -1.f, width_k_, vp);
             for (auto &t : tracks_)
                 if (t.id == hidden.id) set_line(t, hidden.line);
         }
-    } else if ((a.ego_left >= 0 || a.ego_right >= 0) && width_fresh && std::isfinite(vp_ref.y)) {
-        // One side has no track at all (just crossed into a new lane, or it timed out while the
-        // width is still known): carry it at the tracked width, as not observed.
-        const bool have_left = a.ego_left >= 0;
-        const LaneCandidate seen = cands[size_t(have_left ? a.ego_left : a.ego_right)];
+    } else if ((have_l || have_r) && width_fresh && std::isfinite(vp.y)) {
         LaneCandidate v;
-        const float n = have_left ? 1.f : -1.f;
-        v.line = seen.line;
-        v.line.k = seen.line.k + n * width_k_;
-        v.line.x_ref = seen.line.x_ref + n * width_k_ * (seen.line.y_ref - vp_ref.y);
+        v.line = shifted_by_lanes(cands[size_t(have_l ? a.ego_left : a.ego_right)].line, have_l ? 1.f : -1.f,
+                                  width_k_, vp);
         v.observed = false;
         cands.push_back(v);
-        (have_left ? a.ego_right : a.ego_left) = int(cands.size() - 1);
+        (have_l ? a.ego_right : a.ego_left) = int(cands.size() - 1);
         a.width_k = width_k_;
     }
-    if (!(a.ego_left >= 0 && a.ego_right >= 0 && cands[size_t(a.ego_left)].observed &&
-          cands[size_t(a.ego_right)].observed))
-        ++width_age_;
+    ++width_age_;
+}
 
-    // Vanishing point: where the tracked ego boundaries meet; else the frame's consensus, smoothed.
+void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
+    const HorizonPrior hp = search_prior();
+    const bool have_vp = std::isfinite(vp_.x) && std::isfinite(vp_.y);
+    const cv::Point2f known_vp(hp.vp_x, hp.row);
+    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp, have_vp ? &known_vp : nullptr);
+    associate(m, hp);
+
+    std::vector<LaneCandidate> cands = candidates();
+    const bool width_fresh = std::isfinite(width_k_) && width_age_ <= p_.max_missing_frames;
+    LaneAssignment a = assign_lanes(cands, cam_, p_.assembly, ego_left_id_, ego_right_id_,
+                                    width_fresh ? width_k_ : kNaN);
+    carry_ego_width(cands, a, have_vp ? vp_ : m.vp);
+    const bool both = a.ego_left >= 0 && a.ego_right >= 0;
+
+    // Vanishing point: where the tracked ego boundaries meet; else this frame's consensus, smoothed.
     cv::Point2f q;
-    if (a.ego_left >= 0 && a.ego_right >= 0 &&
-        intersect(cands[size_t(a.ego_left)].line, cands[size_t(a.ego_right)].line, q) &&
+    if (both && intersect(cands[size_t(a.ego_left)].line, cands[size_t(a.ego_right)].line, q) &&
         std::fabs(q.y - prior_.row) <= prior_.tol_px) {
         vp_ = q;
     } else if (std::isfinite(m.vp.x)) {
-        vp_ = std::isfinite(vp_.x) ? vp_ + 0.5f * (m.vp - vp_) : m.vp;
+        vp_ = have_vp ? vp_ + 0.5f * (m.vp - vp_) : m.vp;
     } else if (tracks_.empty()) {
         vp_ = {kNaN, kNaN};
     }
 
     ego_left_id_ = a.ego_left >= 0 ? cands[size_t(a.ego_left)].id : -1;
     ego_right_id_ = a.ego_right >= 0 ? cands[size_t(a.ego_right)].id : -1;
-    const bool both_observed = a.ego_left >= 0 && a.ego_right >= 0 && cands[size_t(a.ego_left)].observed &&
-                               cands[size_t(a.ego_right)].observed;
+    const bool both_observed = both && cands[size_t(a.ego_left)].observed && cands[size_t(a.ego_right)].observed;
     frames_since_observed_ = both_observed ? 0 : frames_since_observed_ + 1;
 
     out = LaneModel();

@@ -28,12 +28,12 @@ struct LaneParams {
     MarkingFilterParams filter;
     HoughLinesParams hough;
     LaneAssemblyParams assembly;
-    int max_missing_frames = 15;  // frames a boundary is carried over after it was last measured
-    double marking_sigma_px = 1.0;     // px; noise of one marking point (measurement model)
-    double process_accel_frac = 0.0015; // fraction of width per frame^2; how fast a boundary may change
-    double gate_lanes = 0.25;     // lane widths; farthest a measurement may be from its track
-    double width_alpha = 0.2;     // smoothing gain of the tracked ego-lane width
-    int max_tracks = 8;           // markings tracked at most
+    int max_missing_frames = 15;         // frames a boundary is carried after it was last measured
+    double marking_sigma_px = 1.0;       // px; noise of one marking point (measurement model)
+    double process_accel_frac = 0.0015;  // fraction of width per frame^2; how fast a boundary may move
+    double gate_lanes = 0.25;            // lane widths; farthest a measurement may be from its track
+    double width_alpha = 0.2;            // smoothing gain of the tracked ego-lane width
+    int max_tracks = 8;                  // markings tracked at most
 
     void bind(ParamMap &m) {
         filter.bind(m);
@@ -64,7 +64,9 @@ struct LaneMeasurement {
     cv::Point2f vp{kNaN, kNaN};        // consensus vanishing point, NaN if no two lines agree
 };
 
-// known_vp: a vanishing point already known (tracking); null to find it in this frame.
+// One frame's lines (lane_detection.cpp): the wide search and consensus find the vanishing point,
+// the narrow search around it every marking. known_vp: a vanishing point already known (tracking),
+// which skips the wide search unless the narrow one finds fewer than two lines; null: this frame's.
 LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam,
                                    const HorizonPrior &hp, const cv::Point2f *known_vp = nullptr);
 
@@ -94,7 +96,10 @@ private:
     };
     ImageLine line_of(const Track &t) const;
     void set_line(Track &t, const ImageLine &l) const;
+    HorizonPrior search_prior() const;
     void associate(const LaneMeasurement &m, const HorizonPrior &hp);
+    std::vector<LaneCandidate> candidates() const;
+    void carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignment &a, cv::Point2f vp);
 
     LaneParams p_;
     CameraParams cam_;

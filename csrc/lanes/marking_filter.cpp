@@ -74,32 +74,30 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
     const int w = gray.cols;
     if (w < 8) return;
 
-    std::vector<int16_t> g(size_t(w), 0);
+    std::vector<int16_t> g_buf(size_t(w), 0);
+    int16_t *g = g_buf.data();
     std::vector<float> rising, falling;
     const int t_min = int(std::ceil(p.min_edge_contrast));
 
     for (int y = band.y_top; y <= band.y_bottom; y += band.step) {
         const uint8_t *row = gray.ptr<uint8_t>(y);
         // [-1 0 1] correlation: g(x) = I(x+1) - I(x-1); its negative is the [1 0 -1] response.
+        for (int x = 1; x < w - 1; ++x) g[x] = int16_t(int(row[x + 1]) - int(row[x - 1]));
         int sum_abs = 0;
-        for (int x = 1; x < w - 1; ++x) {
-            const int d = int(row[x + 1]) - int(row[x - 1]);
-            g[size_t(x)] = int16_t(d);
-            sum_abs += std::abs(d);
-        }
+        for (int x = 1; x < w - 1; ++x) sum_abs += std::abs(int(g[x]));
         const int t_edge = std::max(t_min, int(std::ceil(p.noise_factor * sum_abs / (w - 2))));
 
         // Edges are the local maxima of each response above the threshold (one per edge).
         rising.clear();
         falling.clear();
+        const unsigned band_t = unsigned(2 * t_edge - 1);
         for (int x = 2; x < w - 2; ++x) {
-            const int v = g[size_t(x)];
-            if (v >= t_edge) {
-                if (v >= g[size_t(x - 1)] && v > g[size_t(x + 1)])
-                    rising.push_back(float(x) + peak_offset(g[size_t(x - 1)], v, g[size_t(x + 1)]));
-            } else if (-v >= t_edge) {
-                if (-v >= -g[size_t(x - 1)] && -v > -g[size_t(x + 1)])
-                    falling.push_back(float(x) + peak_offset(-g[size_t(x - 1)], -v, -g[size_t(x + 1)]));
+            const int v = g[x];
+            if (unsigned(v + t_edge - 1) < band_t) continue;  // |v| < t_edge, the common case
+            if (v > 0) {
+                if (v >= g[x - 1] && v > g[x + 1]) rising.push_back(float(x) + peak_offset(g[x - 1], v, g[x + 1]));
+            } else if (-v >= -g[x - 1] && -v > -g[x + 1]) {
+                falling.push_back(float(x) + peak_offset(-g[x - 1], -v, -g[x + 1]));
             }
         }
         if (rising.empty() || falling.empty()) continue;

@@ -80,6 +80,15 @@ struct LineFit {
     }
 };
 
+// The line n lanes to the side of `l` (n < 0: left) for a lane width of dk in slope, all lines
+// meeting at the vanishing point vp: x'(y) = x(y) + n dk (y - vp.y).
+inline ImageLine shifted_by_lanes(const ImageLine &l, float n, float dk, cv::Point2f vp) {
+    ImageLine s = l;
+    s.k = l.k + n * dk;
+    s.x_ref = l.x_ref + n * dk * (l.y_ref - vp.y);
+    return s;
+}
+
 // Intersection of two image lines; false when they are (nearly) parallel.
 inline bool intersect(const ImageLine &a, const ImageLine &b, cv::Point2f &p) {
     const float dk = a.k - b.k;

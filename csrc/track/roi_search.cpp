@@ -37,16 +37,26 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
     if (!std::isfinite(road)) return m;
     const ShadowThresholds thr = shadow_thresholds(road, shadow);
 
-    // Bottom: inner 70 % of the columns (away from neighbours), rows within the gate.
+    // Bottom: rows within the gate; the shadow-edge profile of the inner 70 % of the columns (away
+    // from neighbours) minus the weaker of two strips beside the vehicle. A shadow edge that runs on
+    // beside the vehicle on both sides (an overpass or tree shadow across the road) is not its
+    // bottom, however strong: without this the band's edge captures the track and drags it along.
     const int gy = std::max(2, int(std::ceil(pred.gate_y)));
-    cv::Rect rows(int(std::lround(pred.x1 + 0.15f * w_pred)), int(std::lround(pred.y1)) - gy,
-                  std::max(2, int(std::lround(0.7f * w_pred))), 2 * gy + 1);
-    rows &= cv::Rect(0, 1, gray.cols, gray.rows - 1);
-    if (rows.width < 2 || rows.height < 3) return m;
-    const std::vector<float> v = shadow_edge_profile(gray, rows, thr.dark);
+    const int y0 = std::max(1, int(std::lround(pred.y1)) - gy), y1r = std::min(gray.rows - 1, int(std::lround(pred.y1)) + gy + 1);
+    if (y1r - y0 < 3) return m;
+    auto profile = [&](float xa, float xb) {
+        cv::Rect r(int(std::lround(xa)), y0, int(std::lround(xb - xa)), y1r - y0);
+        r &= image;
+        if (r.width < 2 || r.height != y1r - y0) return std::vector<float>(size_t(y1r - y0), 0.f);
+        return shadow_edge_profile(gray, r, thr.dark);
+    };
+    std::vector<float> v = profile(pred.x1 + 0.15f * w_pred, pred.x2 - 0.15f * w_pred);
+    const std::vector<float> left = profile(pred.x1 - 0.4f * w_pred, pred.x1 - 0.1f * w_pred);
+    const std::vector<float> right = profile(pred.x2 + 0.1f * w_pred, pred.x2 + 0.4f * w_pred);
+    for (size_t i = 0; i < v.size(); ++i) v[i] -= std::min(left[i], right[i]);
     const int iy = argmax(v, 0, int(v.size()));
     if (v[size_t(iy)] < p.bottom_min_frac * thr.grad / 4.0) return m;  // profile is in gray levels
-    const float y1 = rows.y + peak_position(v, iy);
+    const float y1 = y0 + peak_position(v, iy);
 
     // Sides: ROI on the measured bottom, widened by the margin and the gate.
     const float margin = std::max(float(verify.margin_px), float(verify.margin_frac) * w_pred) + pred.gate_x;
@@ -57,8 +67,19 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
     if (roi.width < 8 || roi.height < 3) return m;
     const std::vector<float> w = vertical_edge_profile(gray, roi);
     const int pl = int(std::lround(pred.x1)) - roi.x, pr = int(std::lround(pred.x2)) - roi.x;
-    const SidePair s = two_threshold_sides(w, pl, pr, (pl + pr) / 2, pred.max_side_change);
+    // Prior of the prediction: each column weighted by N(x; predicted side, sigma_x), so that of two
+    // similar edges in the gate (the vehicle's own side and a neighbour's next to it) the expected
+    // one wins; the two-threshold rule then runs on the weighted profile.
+    std::vector<float> wp(w.size());
+    const float inv = 1.f / std::max(0.5f, pred.sigma_x);
+    for (size_t x = 0; x < w.size(); ++x) {
+        const float d = (int(x) < (pl + pr) / 2 ? int(x) - pl : int(x) - pr) * inv;
+        wp[x] = w[x] * std::exp(-0.5f * d * d);
+    }
+    SidePair s = two_threshold_sides(wp, pl, pr, int(std::ceil(pred.gate_x)) + 1, pred.max_side_change);
     if (!s.found()) return m;
+    s.left_strength = w[size_t(s.left)];
+    s.right_strength = w[size_t(s.right)];
     const float t_side = side_threshold(road, verify);
     if (s.weaker() < t_side) return m;
     const float x1 = roi.x + peak_position(w, s.left), x2 = roi.x + peak_position(w, s.right);

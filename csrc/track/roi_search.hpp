@@ -18,6 +18,7 @@ namespace hw {
 struct RoiPrediction {
     float x1 = 0.f, y1 = 0.f, x2 = 0.f;
     float gate_x = 0.f, gate_y = 0.f;
+    float sigma_x = 1.f;          // innovation standard deviation of a side column (px)
     float max_side_change = 0.f;  // two-threshold rule: largest accepted side change so far (px)
 };
 

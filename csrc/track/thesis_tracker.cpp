@@ -131,7 +131,8 @@ bool ThesisTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
     const KalmanBox::Mat3 S = t.kf.innovation_cov(s[0], s[1]);
     RoiPrediction pred;
     pred.x1 = float(z[0]); pred.y1 = float(z[1]); pred.x2 = float(z[2]);
-    pred.gate_x = float(std::max(kalman_.min_gate_px, kalman_.gate_sigma * std::sqrt(std::max(S(0, 0), S(2, 2)))));
+    pred.sigma_x = float(std::sqrt(std::max(S(0, 0), S(2, 2))));
+    pred.gate_x = float(std::max(kalman_.min_gate_px, kalman_.gate_sigma * pred.sigma_x));
     pred.gate_y = float(std::max(kalman_.min_gate_px, kalman_.gate_sigma * std::sqrt(S(1, 1))));
     pred.max_side_change = std::clamp(t.max_side_change, float(kalman_.side_change_floor_px),
                                       std::max(float(kalman_.side_change_floor_px), pred.gate_x));

@@ -1,0 +1,185 @@
+"""`headway service`: the in-vehicle daemon that systemd runs (systemd/headway.service).
+
+A thin loop: pop results from the core, hand each to the stack (vehicle inputs -> FCW -> CAN -> MCU),
+and several times a second evaluate health, refresh the status file and the status CAN frame, and
+talk to systemd: READY=1 once the camera delivers and the bus is open, WATCHDOG=1 only while the
+core's real-time loop goes round, STATUS= with a one-line summary. SIGTERM or SIGINT stop everything
+within a second, flushing the logs; exit 0.
+"""
+from __future__ import annotations
+
+import logging
+import signal
+import sys
+import threading
+import time
+from contextlib import ExitStack
+from typing import Optional
+
+from app import config as configuration
+from app.core import Pipeline, SourceError
+from app.supervisor.health import HealthMonitor, HealthParams
+from app.supervisor.notify import Notifier
+from app.supervisor.stack import Stack
+from app.supervisor.status_file import write_status
+
+log = logging.getLogger("headway")
+
+LIVE_KINDS = ("v4l2", "firewire", "fifo")
+TICK_S = 0.05  # loop period when no frame arrives: health is evaluated at least this often
+
+
+class JournalFormatter(logging.Formatter):
+    """"<N>" syslog priority prefixes, which the journal turns into log levels; no colour codes."""
+
+    PRIORITY = {logging.CRITICAL: 2, logging.ERROR: 3, logging.WARNING: 4, logging.INFO: 6, logging.DEBUG: 7}
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"<{self.PRIORITY.get(record.levelno, 6)}>{super().format(record)}"
+
+
+def setup_logging(level: int = logging.INFO) -> None:
+    handler = logging.StreamHandler(sys.stderr)
+    fmt = "%(levelname)s %(name)s: %(message)s"
+    handler.setFormatter(logging.Formatter(fmt) if sys.stderr.isatty() else JournalFormatter(fmt))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+
+
+class Service:
+    def __init__(self, cfg: dict, notifier: Optional[Notifier] = None, stop: Optional[threading.Event] = None):
+        self.cfg = cfg
+        self.notifier = notifier or Notifier()
+        self.stop = stop or threading.Event()
+        self.health = HealthMonitor(HealthParams.from_config(cfg["health"]))
+        self.ready_sent = False
+        self.report = None
+        self._status_warned = False
+
+    def _open_mcu(self, stack: ExitStack):
+        port = self.cfg["mcu"]["port"]
+        if not port:
+            return None
+        from firmware_bridge.link import LinkConfig, LinkThread, McuLink
+
+        m = self.cfg["mcu"]
+        link = McuLink(port, LinkConfig(baudrate=m["baudrate"], heartbeat_period_s=m["heartbeat_s"],
+                                        silence_timeout_s=m["silent_after_s"]))
+        thread = LinkThread(link).start()
+        stack.callback(thread.stop)
+        return link
+
+    def run(self) -> int:
+        cfg = self.cfg
+        src = cfg["source"]
+        live = src["kind"] in LIVE_KINDS
+        with ExitStack() as stack:
+            pipe = stack.enter_context(Pipeline(configuration.core_sections(cfg)))
+            can_session = None
+            if cfg["can"]["enabled"]:
+                from app.can import CanBusError, CanSession
+
+                try:
+                    can_session = stack.enter_context(CanSession.for_live(cfg))
+                except CanBusError as exc:
+                    log.error("CAN: %s", exc)
+                    return 1
+            mcu = self._open_mcu(stack)
+            sup = Stack(cfg, can_session, mcu)
+            fifo = None
+            try:
+                if src["kind"] == "fifo":
+                    from app.supervisor.fifo_source import FifoReader
+
+                    pipe.start({"kind": "push"})
+                    cam = cfg["camera"]
+                    fifo = FifoReader(src["path"], cam["width"], cam["height"], pipe.push).start()
+                    stack.callback(fifo.stop)
+                else:
+                    pipe.start(configuration.source_spec(cfg))
+            except SourceError as exc:
+                log.error("camera: %s", exc)
+                return 1
+            stack.callback(pipe.stop)  # runs before the fifo reader stops (LIFO): no push into a stopped core
+            log.info("started: preset %s, source %s, CAN %s, MCU %s", cfg["pipeline"]["preset"], src["kind"],
+                     f"{cfg['can']['interface']}:{cfg['can']['channel']}" if can_session else "off",
+                     cfg["mcu"]["port"] or "none")
+            self.health.start(time.monotonic())
+            self._loop(pipe, sup, can_session, mcu, live)
+            self.notifier.stopping()
+            log.info("stopping")
+        logging.shutdown()
+        return 0
+
+    def _loop(self, pipe: Pipeline, sup: Stack, can_session, mcu, live: bool) -> None:
+        status_every = 1.0 / self.cfg["service"]["status_rate_hz"]
+        watchdog_every = self.notifier.watchdog_interval_s() or 1.0
+        next_status = next_watchdog = time.monotonic()
+        last_state = None
+        tracks = None
+        if self.cfg["service"]["tracks_file"]:
+            from app.tracks_file import TracksWriter
+
+            tracks = TracksWriter(open(self.cfg["service"]["tracks_file"], "a"))
+        while not self.stop.is_set():
+            r = pipe.pop(timeout_s=TICK_S)
+            now = time.monotonic()
+            if r is not None:
+                latency_ms = (now - r.t) * 1000.0 if live else r.total_ms
+                self.health.on_result(now, latency_ms, r.image_stddev, r.image_change)
+                status = self.report.as_dict() if self.report else None
+                decision = sup.step(r, time.time(), pipe, status=status)
+                if tracks:
+                    tracks.write(r, decision.level)
+            if now >= next_status or r is None:
+                h = pipe.health()
+                inputs = can_session.health_inputs(time.time()) if can_session else {}
+                mcu_up = None
+                if mcu is not None:
+                    mcu_up = mcu.health().get("state") == "up"
+                    mcu.set_system_ok(self.report is None or self.report.state != "fault")
+                self.report = self.health.evaluate(now, h["last_alive_s"], h["running"], h["results_dropped"],
+                                                   mcu_up=mcu_up, **inputs)
+                if r is None and can_session is not None:
+                    can_session.publish(time.time(), None, status=self.report.as_dict())
+                if now >= next_status:
+                    next_status = now + status_every
+                    self._publish_status(h)
+                if self.report.state != last_state:
+                    level = logging.WARNING if self.report.state in ("degraded", "fault") else logging.INFO
+                    log.log(level, "%s", self.report.summary())
+                    last_state = self.report.state
+                if not self.ready_sent and self.health.frames > 0:
+                    self.ready_sent = self.notifier.ready(self.report.summary())
+                    log.info("ready: the camera delivers%s", " and the bus is open" if can_session else "")
+                # The watchdog is fed only while the core's loop goes round: a stalled core stops the
+                # pings and systemd restarts the service.
+                if now >= next_watchdog and "core_stalled" not in self.report.faults:
+                    self.notifier.watchdog()
+                    next_watchdog = now + watchdog_every
+        if tracks:
+            tracks.close()
+
+    def _publish_status(self, core_health: dict) -> None:
+        rep = self.report
+        self.notifier.status(rep.summary())
+        st = rep.as_dict()
+        st.update(camera=rep.camera, source_state=core_health["source_state"],
+                  frames_captured=core_health["frames_captured"], fcw=None)
+        try:
+            write_status(self.cfg["service"]["status_file"], st)
+        except OSError as exc:
+            if not self._status_warned:  # once: a missing /run/headway outside systemd is no emergency
+                log.warning("status file %s: %s", self.cfg["service"]["status_file"], exc)
+                self._status_warned = True
+
+
+def main(args) -> int:
+    setup_logging()
+    overrides = {"service": {"tracks_file": args.tracks}} if getattr(args, "tracks", None) else None
+    cfg = configuration.load(args.config, overrides)  # a bad file raises before anything starts (exit 2)
+    service = Service(cfg)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: service.stop.set())
+    return service.run()

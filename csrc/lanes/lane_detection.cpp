@@ -1,0 +1,94 @@
+// lane_detection.cpp - the lane markings of one frame: filter, Hough, consensus, assignment.
+#include "lanes/lane_tracker.hpp"
+
+#include <stdexcept>
+#include <string>
+
+namespace hw {
+
+namespace {
+
+void check_frame(const cv::Mat &gray, const CameraParams &cam) {
+    if (gray.empty() || gray.type() != CV_8UC1)
+        throw std::invalid_argument("lanes: expected a non-empty 8-bit gray image");
+    if (gray.cols != cam.width || gray.rows != cam.height)
+        throw std::invalid_argument("lanes: frame is " + std::to_string(gray.cols) + "x" + std::to_string(gray.rows) +
+                                    " but the camera is configured for " + std::to_string(cam.width) + "x" +
+                                    std::to_string(cam.height));
+}
+
+std::vector<LaneCandidate> hough_candidates(const std::vector<MarkingPoint> &pts, const ScanBand &band,
+                                            cv::Size size, const CameraParams &cam, const HorizonPrior &hp,
+                                            const LaneParams &p, const HoughWindow &win) {
+    std::vector<LaneCandidate> out;
+    for (const auto &l : hough_lane_lines(pts, band, size, cam, hp, p.hough, win)) {
+        LaneCandidate c;
+        c.line = l.line;
+        c.weight = l.votes;
+        c.fit = l.fit;
+        out.push_back(c);
+    }
+    return out;
+}
+
+// Keeps the lines through the consensus vanishing point (if any), which is written to vp.
+bool keep_consensus(std::vector<LaneCandidate> &lines, const HorizonPrior &hp, cv::Size size,
+                    const LaneAssemblyParams &p, cv::Point2f &vp) {
+    std::vector<char> inlier;
+    if (!consensus_vanishing_point(lines, hp, size, p, vp, inlier)) return false;
+    std::vector<LaneCandidate> kept;
+    for (size_t i = 0; i < lines.size(); ++i)
+        if (inlier[i]) kept.push_back(lines[i]);
+    lines.swap(kept);
+    return true;
+}
+
+} // namespace
+
+// Two passes: the strong lines in a wide window give the vanishing point by consensus (skipped
+// when the caller knows it), then every marking is searched in a narrow window around it.
+LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam,
+                                   const HorizonPrior &hp, const cv::Point2f *known_vp) {
+    check_frame(gray, cam);
+    LaneMeasurement m;
+    const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
+    if (band.rows() < 2) return m;
+    std::vector<MarkingPoint> pts;
+    find_marking_points(gray, band, cam, hp, p.filter, pts);
+
+    // Narrow search around vp: the lines through it, with the vanishing point refined by them.
+    auto narrow = [&](cv::Point2f vp, bool tracked) {
+        m.lines = hough_candidates(pts, band, gray.size(), cam, hp, p, vp_window(vp, tracked, gray.size(), p.hough));
+        cv::Point2f refined;
+        m.vp = keep_consensus(m.lines, hp, gray.size(), p.assembly, refined) ? refined : vp;
+    };
+    if (known_vp) {
+        narrow(*known_vp, true);
+        if (m.lines.size() >= 2) return m;
+    }
+    // The vanishing point of this frame (or the known one found too little: it moved, or the road
+    // changed): consensus of the strong lines of a wide search.
+    std::vector<LaneCandidate> wide =
+        hough_candidates(pts, band, gray.size(), cam, hp, p, wide_window(gray.size(), hp, p.hough));
+    cv::Point2f vp;
+    if (keep_consensus(wide, hp, gray.size(), p.assembly, vp)) {
+        narrow(vp, false);
+        if (m.lines.empty()) m.lines = wide;
+    } else {
+        m.lines = wide;  // no two lines agree: keep them all, vanishing point unknown
+        m.vp = {kNaN, kNaN};
+    }
+    return m;
+}
+
+LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam) {
+    const HorizonPrior hp = camera_horizon(cam, p.assembly.horizon_tolerance_deg);
+    const LaneMeasurement m = measure_lane_lines(gray, p, cam, hp);
+    const LaneAssignment a = assign_lanes(m.lines, cam, p.assembly);
+    LaneModel out;
+    build_lane_model(m.lines, a, m.vp, gray.size(), cam, hp, p.assembly, out);
+    out.frames_since_observed = out.valid ? 0 : 1;
+    return out;
+}
+
+} // namespace hw
