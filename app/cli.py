@@ -3,7 +3,13 @@ arguments and turns every expected failure into one clear line on stderr and a n
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+
+# OpenCV and FFmpeg print their own warnings (a file that is not a video, a camera index that does not
+# open) before ours says the same in one line; keep only their errors.
+os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 
 def _cmd_sim(args) -> int:
@@ -121,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--repeats", type=int, default=3, help="passes over the scenario")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    s.add_argument("--latency", action="store_true",
+                   help="measure capture-to-CAN latency and the supervisor's CPU per frame through the live loop")
+    s.add_argument("--seconds", type=float, default=10.0, help="length of the --latency run")
 
     s = sub.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
     s.add_argument("--pipeline", default="thesis", help="preset to evaluate (default thesis)")

@@ -68,15 +68,28 @@ float peak_position(const std::vector<float> &v, int i) {
     return float(i) + std::clamp(0.5f * (a - c) / den, -0.5f, 0.5f);
 }
 
-SidePair strongest_sides(const std::vector<float> &w, int split) {
+SidePair outer_sides(const std::vector<float> &w, int split) {
     SidePair s;
     const int n = int(w.size());
     if (split <= 0 || split >= n) return s;
-    s.left = argmax(w, 0, split);
-    s.right = argmax(w, split, n);
+    const float half_l = 0.5f * w[size_t(argmax(w, 0, split))], half_r = 0.5f * w[size_t(argmax(w, split, n))];
+    for (int x = 0; x < split && s.left < 0; ++x)
+        if (w[size_t(x)] >= half_l) s.left = x;
+    for (int x = n - 1; x >= split && s.right < 0; --x)
+        if (w[size_t(x)] >= half_r) s.right = x;
     s.left_strength = w[size_t(s.left)];
     s.right_strength = w[size_t(s.right)];
     return s;
+}
+
+std::vector<float> side_prior(const std::vector<float> &w, float left, float right, float sigma) {
+    std::vector<float> out(w.size());
+    const float inv = 1.f / std::max(0.25f, sigma), mid = 0.5f * (left + right);
+    for (size_t x = 0; x < w.size(); ++x) {
+        const float d = (float(x) < mid ? float(x) - left : float(x) - right) * inv;
+        out[x] = w[x] * std::exp(-0.5f * d * d);
+    }
+    return out;
 }
 
 SidePair best_side_pair(const std::vector<float> &w, int min_sep, int max_sep) {
@@ -109,7 +122,7 @@ SidePair two_threshold_sides(const std::vector<float> &w, int pred_left, int pre
         if (w[size_t(x)] >= half) s.left = x;
     for (int x = r1 - 1; x >= r0 && s.right < 0; --x)
         if (w[size_t(x)] >= half) s.right = x;
-    // Threshold 2: the largest value itself, for a side that jumped.
+    // Threshold 2: the largest value of the window, for a side that jumped.
     if (s.left < 0 || std::abs(s.left - pred_left) > max_change) s.left = il;
     if (s.right < 0 || std::abs(s.right - pred_right) > max_change) s.right = ir;
     s.left_strength = w[size_t(s.left)];

@@ -36,9 +36,15 @@ struct SidePair {
     float weaker() const { return std::min(left_strength, right_strength); }
 };
 
-// Detection rule (thesis 2.4.2.2): the largest projection searched from the left and from the
-// right, i.e. the strongest column in each part of the profile split at `split`.
-SidePair strongest_sides(const std::vector<float> &w, int split);
+// Detection rule (thesis 2.4.2.2, with the outer-edge choice of 3.6.1): in each part of the profile
+// split at `split`, the outermost column reaching half of that part's largest value. A vehicle's outer
+// edge is not always its strongest one (tail lights, a van's door seams); the outermost clear edge is.
+SidePair outer_sides(const std::vector<float> &w, int split);
+
+// The profile weighted by a Gaussian prior around the expected left and right side columns:
+//     w'(x) = w(x) exp(-(x - c)^2 / (2 sigma^2)),  c = left for x < (left + right) / 2, else right
+// so that a neighbour's edge a few sigma away cannot outweigh the vehicle's own side.
+std::vector<float> side_prior(const std::vector<float> &w, float left, float right, float sigma);
 
 // Long-shadow rule: the pair of columns with separation in [min_sep, max_sep] whose weaker side is
 // strongest (the vehicle stands over part of a shadow that is wider than itself).

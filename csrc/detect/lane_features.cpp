@@ -246,7 +246,7 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
     // Per ring row: horizontal 3-sums of Ix^2, Iy^2, IxIy (separate arrays so the loops vectorise),
     // and the response.
     cv::Mat hxx(3, W, CV_32F), hyy(3, W, CV_32F), hxy(3, W, CV_32F), resp(3, W, CV_32F);
-    std::vector<float> gxx(size_t(W)), gyy(size_t(W)), gxy(size_t(W));
+    std::vector<float> gxx(gray.cols), gyy(gray.cols), gxy(gray.cols);
     std::vector<cv::Vec2i> pruns, rruns;
     struct Cand { float r; int x, y; };
     std::vector<Cand> cand;

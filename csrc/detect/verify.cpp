@@ -40,10 +40,13 @@ bool verify_one(const cv::Mat &gray, const Hypothesis &h, const VerifyParams &p,
     if (long_shadow) {
         s = best_side_pair(w, int(p.box_min_ratio * w_exp), int(p.box_max_ratio * w_exp));
     } else {
-        const int split = int(std::lround(h.box.x + 0.5f * w_shadow)) - roi.x;
-        s = strongest_sides(w, split);
+        // The shadow's ends are where the sides are expected (prior sigma: half the margin).
+        const float left = h.box.x - roi.x, right = left + w_shadow;
+        s = outer_sides(side_prior(w, left, right, 0.5f * margin), int(std::lround(0.5f * (left + right))));
     }
     if (!s.found()) return false;
+    s.left_strength = w[size_t(s.left)];
+    s.right_strength = w[size_t(s.right)];
     // Two sides, each standing out against the road's own contrast level.
     const float t_side = side_threshold(h.road_gray, p);
     if (s.weaker() < t_side) return false;

@@ -67,15 +67,10 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
     if (roi.width < 8 || roi.height < 3) return m;
     const std::vector<float> w = vertical_edge_profile(gray, roi);
     const int pl = int(std::lround(pred.x1)) - roi.x, pr = int(std::lround(pred.x2)) - roi.x;
-    // Prior of the prediction: each column weighted by N(x; predicted side, sigma_x), so that of two
-    // similar edges in the gate (the vehicle's own side and a neighbour's next to it) the expected
-    // one wins; the two-threshold rule then runs on the weighted profile.
-    std::vector<float> wp(w.size());
-    const float inv = 1.f / std::max(0.5f, pred.sigma_x);
-    for (size_t x = 0; x < w.size(); ++x) {
-        const float d = (int(x) < (pl + pr) / 2 ? int(x) - pl : int(x) - pr) * inv;
-        wp[x] = w[x] * std::exp(-0.5f * d * d);
-    }
+    // Prior of the prediction (sigma: the innovation's), so that of two similar edges in the gate
+    // (the vehicle's own side and a neighbour's next to it) the expected one wins; the two-threshold
+    // rule then runs on the weighted profile.
+    const std::vector<float> wp = side_prior(w, float(pl), float(pr), pred.sigma_x);
     SidePair s = two_threshold_sides(wp, pl, pr, int(std::ceil(pred.gate_x)) + 1, pred.max_side_change);
     if (!s.found()) return m;
     s.left_strength = w[size_t(s.left)];
