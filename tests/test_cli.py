@@ -46,7 +46,7 @@ def test_sim_writes_frames_truth_and_ego_speed_log(tmp_path):
     truth = lines(tmp_path / "s" / "truth.jsonl")
     assert len(frames) == len(truth) == 180
     assert cv2.imread(str(frames[0]), cv2.IMREAD_GRAYSCALE).shape == (480, 640)
-    assert (tmp_path / "s" / "ego_speed.log").read_text().count("#") == 300  # 50 Hz over 6 s
+    assert (tmp_path / "s" / "ego_speed.log").read_text().count("#") == 299  # 50 Hz from 0 to the last frame (5.967 s)
 
 
 def test_replay_of_rendered_folder_matches_scenario_replay(tmp_path):
