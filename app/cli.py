@@ -63,6 +63,9 @@ def _cmd_config(args) -> int:
     if args.action == "default":
         print(configuration.default_yaml())
         return 0
+    if args.action == "doc":
+        print(configuration.markdown())
+        return 0
     cfg = configuration.load(args.file)
     from app.core import Pipeline
 
@@ -133,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
     s.add_argument("--pipeline", default="thesis", help="preset to evaluate (default thesis)")
-    s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range (default all)")
+    s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range,fcw (default all)")
     s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
     s.add_argument("--out", help="report folder (default reports/eval-PIPELINE)")
@@ -144,6 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     c = cs.add_parser("check", help="validate FILE; prints what is wrong and exits 2")
     c.add_argument("file")
     cs.add_parser("default", help="print the default configuration with every key documented")
+    cs.add_parser("doc", help="print the configuration reference as markdown (docs/CONFIG.md)")
     return p
 
 

@@ -96,3 +96,9 @@ def test_config_check_command(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2
     assert "pipeline.queue_capacity" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_docs_config_reference_is_current():
+    doc = REPO / "docs" / "CONFIG.md"
+    assert doc.read_text().strip() == configuration.markdown().strip(), (
+        "docs/CONFIG.md is out of date: run `headway config doc > docs/CONFIG.md`")

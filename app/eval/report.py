@@ -11,7 +11,7 @@ import cv2
 
 from app.annotate import annotate
 
-PARTS = ("synthetic", "tusimple", "lanes", "range")
+PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw")
 
 
 def _f(x, nd=3) -> str:
@@ -62,6 +62,21 @@ def markdown(report: dict) -> str:
                            f"{v['rel_error']:+.1%} | {rr} ({v['true_range_rate_mps']:.2f}) |")
             else:
                 out.append(f"| {v['true_range_m']:.1f} | not found | | | |")
+        out.append("")
+    fc = report.get("fcw")
+    if fc:
+        out += ["### Forward-collision warning through the whole stack (CAN output decoded with cantools)", "",
+                "| scenario | first warning at t | TTC used | true TTC then | required | margin | warnings | "
+                "pre-warnings | verdict |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+        for r in fc:
+            req = r.get("required_ttc_s")
+            verdict = "pass" if r["pass"] else "FAIL"
+            if req is None:
+                verdict += " (no warning expected)" if not r["warnings"] else " (false warning)"
+            t_first = "none" if r["first_warning_t_s"] is None else f"{r['first_warning_t_s']:.2f} s"
+            margin = "-" if r.get("margin_s") is None else f"{r['margin_s']:+.2f} s"
+            out.append(f"| {r['scenario']} | {t_first} | {_f(r['ttc_used_s'], 2)} | {_f(r['true_ttc_s'], 2)} | "
+                       f"{'-' if req is None else req} | {margin} | {r['warnings']} | {r['prewarnings']} | {verdict} |")
         out.append("")
     return "\n".join(out)
 
@@ -121,6 +136,13 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
             report["range"] = range_clip.evaluate(str(clip), config_path, preset)
         else:
             report["skipped"]["range"] = f"{clip} not found"
+    if "fcw" in parts:
+        from app.eval import fcw_scenarios
+
+        report["fcw"] = []
+        for name in list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING):
+            say(f"FCW {name}")
+            report["fcw"].append(fcw_scenarios.evaluate(name, config_path))
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
     (out / "report.md").write_text(markdown(report) + "\n")
     return report

@@ -5,7 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
+#include <cstring>
 
 namespace hw {
 
@@ -201,14 +201,17 @@ std::vector<MarkingSegment> marking_segments(const cv::Mat &binary, cv::Range ro
 
 namespace {
 
-// Runs [begin, end) of non-zero bytes of a row.
+// Runs [begin, end) of the 255 bytes of a 0/255 row (memchr scans the empty stretches fast).
 void row_runs(const uint8_t *m, int W, std::vector<cv::Vec2i> &runs) {
     runs.clear();
-    for (int x = 0; x < W;) {
-        if (!m[x]) { ++x; continue; }
-        const int b = x;
-        while (x < W && m[x]) ++x;
-        runs.push_back({b, x});
+    int x = 0;
+    while (x < W) {
+        const void *b = std::memchr(m + x, 255, size_t(W - x));
+        if (!b) break;
+        const int start = int(static_cast<const uint8_t *>(b) - m);
+        const void *e = std::memchr(m + start, 0, size_t(W - start));
+        x = e ? int(static_cast<const uint8_t *>(e) - m) : W;
+        runs.push_back({start, x});
     }
 }
 
@@ -292,7 +295,7 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
                     o[x] = sx * sy - sc * sc - k * tr * tr;
                 }
             for (const auto &run : runs_of(yr))
-                for (int x = run[0]; x < run[1]; ++x)
+                for (int x = std::max(run[0], 2); x < std::min(run[1], W - 2); ++x)
                     if (m[x]) r_max = std::max(r_max, o[x]);
         }
         // 3x3 local maxima of row yn = y - 2 (ties broken toward the first), on region pixels

@@ -23,7 +23,7 @@ struct RoadPriorParams {
     double vehicle_width_m = 1.8;     // m; nominal rear width of a passenger car
     double lane_width_m = 3.6;        // m; nominal lane width that the lane model's pixel width stands for
     double road_half_width_m = 9.0;   // m; fallback scan half-width around the ego-lane centre
-    int adjacent_lanes = 1;           // lanes scanned each side of the ego lane at least
+    int adjacent_lanes = 2;           // lanes scanned each side of the ego lane at least
     double max_range_m = 120.0;       // m; the scan starts at the row of this range below the horizon
     double bottom_ignore_frac = 0.0;  // fraction of the image height at the bottom not scanned (hood)
 

@@ -15,7 +15,7 @@
 namespace hw {
 
 struct TopSearch {
-    double min_aspect = 0.5;   // height / width bounds of the search
+    double min_aspect = 0.9;   // height / width bounds of the search (cars: the fixed aspect)
     double max_aspect = 1.6;
     double keep_frac = 0.35;   // side edge strength, relative to the lower body, that still counts
     int max_gap = 2;           // rows; gaps bridged going up

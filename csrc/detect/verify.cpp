@@ -2,6 +2,8 @@
 
 #include "detect/edge_projection.hpp"
 
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <cmath>
 
@@ -13,6 +15,19 @@ float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
     const float inter = (a & b).area();
     const float uni = a.area() + b.area() - inter;
     return uni > 0.f ? inter / uni : 0.f;
+}
+
+// Texture of the road under a bottom edge: mean (|S_x| + |S_y|) / 4 over a strip 0.15 widths high
+// two rows below it, divided by the strip's mean gray level; NaN when the strip leaves the image.
+float texture_below(const cv::Mat &gray, float left, float right, float bottom) {
+    const int w = int(std::lround(right - left));
+    cv::Rect strip(int(std::lround(left)), int(std::lround(bottom)) + 2, w, std::max(3, int(0.15f * w)));
+    if ((strip & cv::Rect(0, 0, gray.cols, gray.rows)) != strip || strip.width < 3) return kNaN;
+    cv::Mat gx, gy;
+    cv::Sobel(gray(strip), gx, CV_16S, 1, 0, 3);
+    cv::Sobel(gray(strip), gy, CV_16S, 0, 1, 3);
+    const double grad = (cv::sum(cv::abs(gx))[0] + cv::sum(cv::abs(gy))[0]) / (4.0 * strip.area());
+    return float(grad / std::max(1.0, cv::mean(gray(strip))[0]));
 }
 
 // Verifies one hypothesis; false if it is not a vehicle.
@@ -54,7 +69,11 @@ bool verify_one(const cv::Mat &gray, const Hypothesis &h, const VerifyParams &p,
     const float width = right - left;
     if (width < p.box_min_ratio * w_exp || width > p.box_max_ratio * w_exp) return false;
 
-    const float box_h = float(p.aspect_ratio) * width;
+    const float texture = texture_below(gray, left, right, bottom);
+    if (texture > p.road_texture_max) return false;  // not standing on a road
+
+    const float top = p.find_top ? vehicle_top(gray, left, right, bottom, p.top) : kNaN;
+    const float box_h = std::isfinite(top) ? bottom - top : float(p.aspect_ratio) * width;
     out.box = cv::Rect2f(left, bottom - box_h, width, box_h);
     // Score: 0.5 when the weaker side just reaches its threshold, towards 1 as it grows, scaled
     // down for a faint shadow (strength = shadow step / road level; 0.5 is a deep shadow).

@@ -5,16 +5,17 @@
 // take the ROI above the edge, widened by margin_px each side, half the edge length high; project
 // its vertical edges onto the columns and take the strongest column left and right of the centre as
 // the sides. A vehicle is one bottom edge plus two sides that both stand out against the road, at a
-// width that fits the row. The top follows from an aspect ratio (no consistent cue marks the roof).
+// width that fits the row, standing on smooth road. The top follows from an aspect ratio (no consistent cue marks the roof).
 #pragma once
 
 #include "detect/shadow.hpp"
+#include "detect/vehicle_top.hpp"
 
 namespace hw {
 
 struct VerifyParams {
     int margin_px = 6;              // px; ROI widened each side of the bottom edge (thesis: 6)
-    double margin_frac = 0.1;       // fraction of the edge width, when larger than margin_px
+    double margin_frac = 0.3;       // fraction of the edge width, when larger than margin_px
     double roi_height_frac = 0.5;   // ROI height as a fraction of the edge width (thesis: 1/2)
     double shadow_min_ratio = 0.5;  // shadow narrower than this many expected widths: rejected
     double shadow_max_ratio = 1.5;  // wider: a long shadow, the vehicle is searched inside it
@@ -22,7 +23,10 @@ struct VerifyParams {
     double box_max_ratio = 1.6;     // upper bound (trucks and vans are wider than a car)
     double side_rel = 0.06;         // a side's mean vertical-edge step / road gray level, at least
     double side_min_gray = 3.0;     // gray levels; floor of that step on dark roads
-    double aspect_ratio = 0.8;      // box height / width (thesis: 1)
+    double aspect_ratio = 0.8;      // box height / width when the top is not found (thesis: 1)
+    bool find_top = true;           // top from how far up both sides reach (else always the aspect)
+    TopSearch top;                  // its bounds and thresholds
+    double road_texture_max = 0.25; // texture of the strip under the bottom edge / its gray level, at most
     double nms_iou = 0.3;           // overlapping detections: the weaker is dropped
 
     void bind(ParamMap &m) {
@@ -48,8 +52,24 @@ struct VerifyParams {
               "must reach this, else the candidate lacks two sides and is rejected");
         m.add("side_min_gray", side_min_gray, 0.0, 100.0, "gray levels; floor of the side threshold");
         m.add("aspect_ratio", aspect_ratio, 0.2, 3.0,
-              "box height / width; the top is not observed; the thesis used 1, rear views of cars "
-              "measure about 0.8");
+              "box height / width used when the top is not found; the thesis used 1 for every "
+              "vehicle, rear views of cars measure about 0.8");
+        m.add("find_top", find_top,
+              "find the top as the row up to which both side edges reach (vans and trucks are taller "
+              "than the fixed aspect ratio says); false: always aspect_ratio");
+        m.add("top_min_aspect", top.min_aspect, 0.1, 3.0,
+              "height / width; a top found lower than this is not trusted (the aspect ratio is used)");
+        m.add("top_max_aspect", top.max_aspect, 0.2, 5.0,
+              "height / width; the top search stops here (a truck's rear is about 1.6)");
+        m.add("top_keep_frac", top.keep_frac, 0.05, 1.0,
+              "fraction of the side edges' strength on the lower body that still counts as a side "
+              "going up; lower follows faint upper sides further, higher stops at the first weak row");
+        m.add("top_max_gap", top.max_gap, 0, 50, "rows; gaps in the side edges bridged going up (seams)");
+        m.add("road_texture_max", road_texture_max, 0.0, 10.0,
+              "mean gradient magnitude / gray level of the strip just under the bottom edge, at most: "
+              "a vehicle's shadow lies on smooth asphalt, whereas the dark bands under guardrails, "
+              "vegetation and gravel beside the road lie on texture (TuSimple: 90 % of true vehicles "
+              "below 0.19, half of the false ones above 0.18); 10 switches the check off");
         m.add("nms_iou", nms_iou, 0.0, 1.0,
               "IoU; of two overlapping detections the lower-scoring one is dropped");
     }

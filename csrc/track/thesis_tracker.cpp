@@ -66,6 +66,11 @@ void KalmanBoxParams::bind(ParamMap &m) {
           "IoU of a detection with a predicted box above which it measures that vehicle");
     m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
           "IoU above which two tracks are the same vehicle; the one with fewer measurements goes");
+    m.add("min_width_ratio", min_width_ratio, 0.0, 1.0,
+          "expected vehicle widths at its bottom row; a track narrower than this has lost its vehicle "
+          "(squeezed between a neighbour's edges) and is deleted");
+    m.add("max_width_ratio", max_width_ratio, 1.0, 10.0,
+          "expected vehicle widths; a track wider than this is deleted");
     m.add("max_dt_s", max_dt_s, 0.01, 100.0,
           "s; a gap between frames longer than this drops all tracks (the predictions are void)");
 }
@@ -93,9 +98,14 @@ float side_quality(float side_excess) { return 1.f - 0.5f / std::sqrt(std::max(1
 
 } // namespace
 
-cv::Rect2f ThesisTracker::box_of(const KalmanBox::Vec3 &z) const {
-    const float w = float(z[2] - z[0]), h = float(verify_.aspect_ratio) * w;
+cv::Rect2f ThesisTracker::box_of(const KalmanBox::Vec3 &z, float aspect) const {
+    const float w = float(z[2] - z[0]), h = aspect * w;
     return {float(z[0]), float(z[1]) - h, w, h};
+}
+
+// The height is not tracked by the filter: each detection of the vehicle refines its aspect ratio.
+void ThesisTracker::take_aspect(Track &t, const Detection &d) const {
+    if (d.box.width > 0.f) t.aspect = 0.6f * t.aspect + 0.4f * d.box.height / d.box.width;
 }
 
 KalmanBox::Vec3 ThesisTracker::sigma_of(const Track &t) const {
@@ -144,7 +154,7 @@ bool ThesisTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
 }
 
 bool ThesisTracker::measure_by_detection(Track &t, std::vector<Detection> &dets, std::vector<bool> &used) {
-    const cv::Rect2f pred = box_of(t.kf.measurement());
+    const cv::Rect2f pred = box_of(t);
     int best = -1;
     float best_iou = float(kalman_.match_iou);
     for (size_t i = 0; i < dets.size(); ++i) {
@@ -153,6 +163,7 @@ bool ThesisTracker::measure_by_detection(Track &t, std::vector<Detection> &dets,
     }
     if (best < 0) return false;
     used[size_t(best)] = true;
+    take_aspect(t, dets[size_t(best)]);
     const cv::Rect2f &b = dets[size_t(best)].box;
     apply(t, KalmanBox::Vec3(b.x, b.y + b.height, b.x + b.width), 1.f, dets[size_t(best)].score);
     return true;
@@ -162,7 +173,7 @@ bool ThesisTracker::measure_by_template(const cv::Mat &gray, Track &t) {
     if (!t.appearance.usable()) return false;
     // Move the template's box with the predicted motion of the bottom-left corner since it was cut.
     const KalmanBox::Vec3 z = t.kf.measurement();
-    const cv::Rect2f last = box_of(t.appearance_z);
+    const cv::Rect2f last = box_of(t.appearance_z, t.aspect);
     const float dx = float(z[0]) - last.x, dy = float(z[1]) - (last.y + last.height);
     const cv::Rect2f at(t.appearance.box.x + dx, t.appearance.box.y + dy, t.appearance.box.width,
                         t.appearance.box.height);
@@ -181,7 +192,7 @@ void ThesisTracker::start_tracks(const cv::Mat &gray, const std::vector<Detectio
         const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
         bool explained = false;
         for (const Track &t : tracks_) {
-            const cv::Rect2f tb = box_of(t.kf.measurement());
+            const cv::Rect2f tb = box_of(t);
             // A detection on a tracked vehicle's body (window, bumper) is not a new vehicle either.
             explained = explained || iou(tb, b) >= 0.2f ||
                         (foot.x >= tb.x && foot.x <= tb.x + tb.width && foot.y >= tb.y && foot.y <= tb.y + tb.height);
@@ -193,6 +204,7 @@ void ThesisTracker::start_tracks(const cv::Mat &gray, const std::vector<Detectio
                 KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
                           kalman_.init_speed_mps * w / shadow_.road.vehicle_width_m)};
         t.confidence = dets[i].score;
+        t.aspect = b.height / b.width;
         t.appearance = make_template(gray, b, kalman_.ncc_template_px, kalman_.ncc_min_std_gray);
         t.appearance_z = z;
         t.updated = true;
@@ -201,13 +213,15 @@ void ThesisTracker::start_tracks(const cv::Mat &gray, const std::vector<Detectio
     }
 }
 
-void ThesisTracker::prune(const cv::Mat &gray, float horizon) {
+void ThesisTracker::prune(const FrameContext &ctx) {
+    const cv::Mat &gray = ctx.gray;
+    const float horizon = horizon_row(gray.size(), ctx.lanes, ctx.camera);
     // Same vehicle twice (two tracks converged): keep the one with more measurements.
     for (size_t i = 0; i < tracks_.size(); ++i)
         for (size_t j = i + 1; j < tracks_.size(); ++j) {
             Track &a = tracks_[i], &b = tracks_[j];
             if (a.duplicate || b.duplicate) continue;
-            if (iou(box_of(a.kf.measurement()), box_of(b.kf.measurement())) < kalman_.duplicate_iou) continue;
+            if (iou(box_of(a), box_of(b)) < kalman_.duplicate_iou) continue;
             Track &loser = (a.hits > b.hits || (a.hits == b.hits && a.id < b.id)) ? b : a;
             loser.duplicate = true;
         }
@@ -215,8 +229,11 @@ void ThesisTracker::prune(const cv::Mat &gray, float horizon) {
         const KalmanBox::Vec3 z = t.kf.measurement();
         const double w = z[2] - z[0];
         const int limit = t.confirmed ? kalman_.max_misses : kalman_.tentative_max_misses;
-        return t.duplicate || t.misses >= limit || !(w >= 3.0) || z[1] <= horizon + 1.0 || z[2] < 0.0 || z[0] > gray.cols ||
-               z[1] - verify_.aspect_ratio * w > gray.rows;
+        // A box that shrank or grew far from any vehicle at its row lost its vehicle.
+        const float w_exp = expected_vehicle_width(float(z[1]), gray.size(), ctx.lanes, ctx.camera, shadow_.road);
+        const bool implausible = w_exp > 0.f && (w < kalman_.min_width_ratio * w_exp || w > kalman_.max_width_ratio * w_exp);
+        return t.duplicate || implausible || t.misses >= limit || !(w >= 3.0) || z[1] <= horizon + 1.0 || z[2] < 0.0 || z[0] > gray.cols ||
+               z[1] - t.aspect * w > gray.rows;
     };
     tracks_.erase(std::remove_if(tracks_.begin(), tracks_.end(), gone), tracks_.end());
 }
@@ -227,7 +244,7 @@ TrackState ThesisTracker::report(const Track &t) const {
     s.id = t.id;
     s.confirmed = t.confirmed;
     s.age_frames = t.age;
-    s.box = box_of(t.kf.measurement());
+    s.box = box_of(t);
     s.confidence = std::clamp(t.confidence, 0.f, 1.f);
     s.vel_px_s = cv::Point2f(float(0.5 * (x[3] + x[5])), float(x[4]));  // bottom centre
     s.bottom_sigma_px = float(std::sqrt(t.kf.cov()(1, 1)));
@@ -272,8 +289,12 @@ void ThesisTracker::step(const FrameContext &ctx, std::vector<TrackState> &track
                 t.updated = measure_by_detection(t, dets, used);
                 continue;
             }
-            const cv::Rect2f tb = box_of(t.kf.measurement());
-            for (size_t i = 0; i < dets.size(); ++i) used[i] = used[i] || iou(tb, dets[i].box) >= kalman_.match_iou;
+            const cv::Rect2f tb = box_of(t);
+            for (size_t i = 0; i < dets.size(); ++i)
+                if (!used[i] && iou(tb, dets[i].box) >= kalman_.match_iou) {
+                    used[i] = true;
+                    take_aspect(t, dets[i]);
+                }
         }
     }
     frames_since_detection_ = full_detection ? 1 : frames_since_detection_ + 1;
@@ -285,7 +306,7 @@ void ThesisTracker::step(const FrameContext &ctx, std::vector<TrackState> &track
             t.misses = 0;
             t.coast = 0;
             t.confirmed = t.confirmed || t.hits >= kalman_.confirm_hits;
-            t.appearance = make_template(ctx.gray, box_of(t.kf.measurement()), kalman_.ncc_template_px,
+            t.appearance = make_template(ctx.gray, box_of(t), kalman_.ncc_template_px,
                                          kalman_.ncc_min_std_gray);
             t.appearance_z = t.kf.measurement();
         } else if (t.confirmed && measure_by_template(ctx.gray, t)) {
@@ -296,7 +317,7 @@ void ThesisTracker::step(const FrameContext &ctx, std::vector<TrackState> &track
         }
     }
     if (full_detection) start_tracks(ctx.gray, dets, used);
-    prune(ctx.gray, horizon_row(ctx.gray.size(), ctx.lanes, ctx.camera));
+    prune(ctx);
 
     tracks.clear();
     for (const Track &t : tracks_) tracks.push_back(report(t));

@@ -44,6 +44,8 @@ struct KalmanBoxParams {
     int max_coast_frames = 15;        // frames a vehicle may live on NCC alone before misses count
     double match_iou = 0.3;           // detection <-> predicted box overlap that is the same vehicle
     double duplicate_iou = 0.5;       // two tracks overlapping this much: the younger is deleted
+    double min_width_ratio = 0.35;    // track width / expected width at its row, at least
+    double max_width_ratio = 2.5;     // ... at most
     double max_dt_s = 1.0;            // s; a longer gap between frames restarts tracking
 
     void bind(ParamMap &m);
@@ -64,6 +66,7 @@ private:
         bool confirmed = false;
         float max_side_change = 0.f;  // two-threshold rule memory (px)
         float confidence = 0.5f;
+        float aspect = 0.8f;          // box height / width, from the detections
         VehicleTemplate appearance;   // last measured box, for the correlation check
         KalmanBox::Vec3 appearance_z; // the corners it was cut at
         bool updated = false;         // measured (edges or detection) this frame
@@ -75,11 +78,13 @@ private:
     bool measure_by_detection(Track &t, std::vector<Detection> &dets, std::vector<bool> &used);
     bool measure_by_template(const cv::Mat &gray, Track &t);
     void start_tracks(const cv::Mat &gray, const std::vector<Detection> &dets, const std::vector<bool> &used);
-    void prune(const cv::Mat &gray, float horizon);
+    void prune(const FrameContext &ctx);
     TrackState report(const Track &t) const;
 
     void apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality);
-    cv::Rect2f box_of(const KalmanBox::Vec3 &z) const;
+    cv::Rect2f box_of(const KalmanBox::Vec3 &z, float aspect) const;
+    cv::Rect2f box_of(const Track &t) const { return box_of(t.kf.measurement(), t.aspect); }
+    void take_aspect(Track &t, const Detection &d) const;
     KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
     double accel_bound(const Track &t) const;
 

@@ -1,0 +1,244 @@
+#include "detect/parallax_detector.hpp"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+namespace hw {
+
+void ParallaxParams::bind(ParamMap &m) {
+    m.add("level", level, 0, 3,
+          "pyramid level of the aligned difference (0 full resolution, 1 half); 1 warps a quarter of the pixels and "
+          "low-passes the sensor noise, while a vehicle's parallax at 60 m (~0.5 px at full resolution) still shows");
+    m.add("cell_w_px", cell_w_px, 1, 256, "px at full resolution; width of a SAD cell");
+    m.add("cell_h_px", cell_h_px, 1, 256,
+          "px at full resolution; height of a SAD cell; small, because the difference at a vehicle's bottom edge is "
+          "a band a few pixels tall");
+    m.add("sad_min", sad_min, 0.0, 255.0,
+          "gray levels; a cell is hot only if its mean |difference| exceeds this, whatever the road's own residual");
+    m.add("sad_factor", sad_factor, 1.0, 100.0,
+          "a cell is hot above this many times the median |difference| of the road cells (the alignment residual "
+          "of this frame: texture, noise, shake the homography missed)");
+    m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
+    m.add("min_width_frac", min_width_frac, 0.01, 1.0,
+          "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
+          "(entering from the side)");
+    m.add("max_width_frac", max_width_frac, 1.0, 10.0,
+          "expected widths; a wider region is no single vehicle (a shadow band, an overpass edge)");
+    m.add("bottom_band_frac", bottom_band_frac, 0.0, 2.0,
+          "expected widths; a region's width is measured over its lowest rows this tall (the contact zone spans the "
+          "vehicle; a guardrail or marking streak joined to it rises sideways)");
+    m.add("max_aspect", max_aspect, 0.2, 5.0,
+          "expected widths; hot clusters up to this high above a region's bottom belong to its vehicle (trucks "
+          "are ~1.5 widths tall)");
+    m.add("min_aspect", min_aspect, 0.1, 5.0,
+          "box height / width reported at least (a region whose upper edges showed no parallax)");
+    m.add("join_gap_cells", join_gap_cells, 0, 100,
+          "cells; hot clusters this far beside a region's columns still join it (the difference of one vehicle is "
+          "broken at its wheels and plate)");
+    m.add("refine_up_frac", refine_up_frac, 0.0, 2.0,
+          "expected widths above the lowest hot row searched for the shadow step that is the vehicle's bottom");
+    m.add("refine_down_frac", refine_down_frac, 0.0, 2.0,
+          "expected widths below it: a vehicle standing still on the road shows no parallax at its contact zone");
+    m.add("refine_min_step", refine_min_step, 0.0, 255.0,
+          "gray levels; weakest dark-above / bright-below step taken as the bottom; otherwise the hot row stays");
+    m.add("horizon_margin_px", horizon_margin_px, 0.0, 1000.0,
+          "px; a region's bottom must be this far below the horizon (structures above the road start higher)");
+}
+
+namespace {
+
+struct Component {
+    int label;
+    int x0, x1, y0, y1;  // cells, inclusive
+    bool seeded;         // its lowest row touches the road area
+    float sad_sum;
+    int cells;
+};
+
+struct Region {
+    int x0, x1, y0, y1;  // cells, inclusive (y1 = bottom)
+    float sad_sum;
+    int cells;
+    std::vector<int> labels;  // its clusters
+};
+
+// Strongest dark-above / bright-below step (mean over columns c0..c1 of I(y+1) - I(y-1)) in rows y0..y1.
+bool bottom_step(const cv::Mat &gray, int c0, int c1, int y0, int y1, float min_step, float &row) {
+    c0 = std::max(c0, 0);
+    c1 = std::min(c1, gray.cols - 1);
+    y0 = std::max(y0, 1);
+    y1 = std::min(y1, gray.rows - 2);
+    if (c1 < c0 || y1 < y0) return false;
+    float best = min_step;
+    bool found = false;
+    for (int y = y0; y <= y1; ++y) {
+        const uint8_t *a = gray.ptr<uint8_t>(y - 1), *b = gray.ptr<uint8_t>(y + 1);
+        int s = 0;
+        for (int x = c0; x <= c1; ++x) s += int(b[x]) - int(a[x]);
+        const float step = float(s) / float(c1 - c0 + 1);
+        if (step > best) {
+            best = step;
+            row = float(y);
+            found = true;
+        }
+    }
+    return found;
+}
+
+} // namespace
+
+ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
+                              const cv::Matx33d &H, const LaneModel &lanes, float horizon_row, const CameraParams &cam,
+                              const ParallaxParams &p) {
+    CV_Assert(cur_band.type() == CV_8UC1 && prev_band.type() == CV_8UC1 && cur_band.size() == prev_band.size());
+    CV_Assert(cur_full.type() == CV_8UC1 && band_top >= 0 && band_top < cur_full.rows);
+    ParallaxFrame out;
+    const int sc = 1 << p.level;
+    const double f = 1.0 / sc;
+    // Band coordinates at this level: u = f x, v = f (y - band_top); H_s = S H S^-1.
+    const cv::Matx33d S(f, 0, 0, 0, f, -f * band_top, 0, 0, 1);
+    const cv::Matx33d Hs = S * H * S.inv();
+    cv::Mat warped, diff;
+    cv::warpPerspective(prev_band, warped, Hs, cur_band.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    cv::absdiff(cur_band, warped, diff);
+
+    // SAD per cell.
+    const int cw = std::max(1, p.cell_w_px / sc), ch = std::max(1, p.cell_h_px / sc);
+    const int ncx = diff.cols / cw, ncy = diff.rows / ch;
+    if (ncx < 1 || ncy < 1) return out;
+    cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F);
+    for (int y = 0; y < ncy * ch; ++y) {
+        const uint8_t *d = diff.ptr<uint8_t>(y);
+        float *s = sad.ptr<float>(y / ch);
+        for (int x = 0; x < ncx * cw; ++x) s[x / cw] += float(d[x]);
+    }
+    sad *= 1.0 / double(cw * ch);
+
+    // Road cells: inside the lane model's road area (below the horizon when there is none).
+    const float cell_px_w = float(cw * sc), cell_px_h = float(ch * sc);  // cell size in full-resolution px
+    auto cell_x = [&](float c) { return c * cell_px_w; };                   // full-res x of a cell edge
+    auto cell_y = [&](float r) { return float(band_top) + r * cell_px_h; }; // full-res y of a cell edge
+    cv::Mat road = cv::Mat::zeros(ncy, ncx, CV_8UC1);
+    if (lanes.road_polygon.size() >= 3) {
+        std::vector<cv::Point> poly;
+        for (const auto &q : lanes.road_polygon)
+            poly.emplace_back(cvRound(q.x / cell_px_w - 0.5f), cvRound((q.y - band_top) / cell_px_h - 0.5f));
+        cv::fillPoly(road, std::vector<std::vector<cv::Point>>{poly}, cv::Scalar(255));
+    } else {
+        const int r0 = std::clamp(int(std::ceil((horizon_row - band_top) / cell_px_h)), 0, ncy);
+        road.rowRange(r0, ncy).setTo(255);
+    }
+
+    // Threshold from the road cells' own residual.
+    std::vector<float> road_sad;
+    for (int r = 0; r < ncy; ++r)
+        for (int c = 0; c < ncx; ++c)
+            if (road.at<uint8_t>(r, c)) road_sad.push_back(sad.at<float>(r, c));
+    if (road_sad.empty()) return out;
+    std::nth_element(road_sad.begin(), road_sad.begin() + road_sad.size() / 2, road_sad.end());
+    const float thr = std::max(float(p.sad_min), float(p.sad_factor) * road_sad[road_sad.size() / 2]);
+    out.threshold = thr;
+    cv::Mat hot = sad > thr;
+    out.hot_cells = cv::countNonZero(hot);
+    {
+        double sum = 0;
+        int n = 0;
+        for (int r = 0; r < ncy; ++r)
+            for (int c = 0; c < ncx; ++c)
+                if (road.at<uint8_t>(r, c) && !hot.at<uint8_t>(r, c)) { sum += sad.at<float>(r, c); ++n; }
+        out.road_residual = n ? float(sum / n) : kNaN;
+    }
+
+    // Clusters of hot cells, scanned bottom-up.
+    cv::Mat labels, stats, centroids;
+    const int nl = cv::connectedComponentsWithStats(hot, labels, stats, centroids, 8, CV_32S);
+    std::vector<Component> comps;
+    for (int l = 1; l < nl; ++l) {
+        const int x0 = stats.at<int>(l, cv::CC_STAT_LEFT), y0 = stats.at<int>(l, cv::CC_STAT_TOP);
+        Component c{l, x0, x0 + stats.at<int>(l, cv::CC_STAT_WIDTH) - 1, y0, y0 + stats.at<int>(l, cv::CC_STAT_HEIGHT) - 1,
+                    false, 0.f, 0};
+        for (int r = c.y0; r <= c.y1; ++r)
+            for (int x = c.x0; x <= c.x1; ++x)
+                if (labels.at<int>(r, x) == l) {
+                    c.sad_sum += sad.at<float>(r, x);
+                    ++c.cells;
+                    if (r == c.y1 && road.at<uint8_t>(r, x)) c.seeded = true;
+                }
+        comps.push_back(c);
+    }
+    std::sort(comps.begin(), comps.end(), [](const Component &a, const Component &b) {
+        return a.y1 != b.y1 ? a.y1 > b.y1 : a.x0 < b.x0;
+    });
+    // A cluster joins a region when it lies within the region's columns (+- join_gap_cells) and no
+    // higher above its bottom than max_aspect region widths (a vehicle is not wider above its bottom,
+    // nor taller than that); a cluster at the region's bottom rows beside it widens it (one vehicle's
+    // difference broken at the wheels). Any other cluster whose lowest row is on the road starts a
+    // region.
+    std::vector<Region> regions;
+    const float rows_per_col = cell_px_w / cell_px_h;
+    for (const auto &c : comps) {
+        Region *home = nullptr;
+        for (auto &g : regions) {
+            const float tall = float(p.max_aspect) * float(g.x1 - g.x0 + 1) * rows_per_col;
+            const bool beside = c.y1 >= g.y1 - 1 && c.x1 >= g.x0 - p.join_gap_cells && c.x0 <= g.x1 + p.join_gap_cells;
+            const bool above = c.x0 >= g.x0 - p.join_gap_cells && c.x1 <= g.x1 + p.join_gap_cells && c.y0 >= g.y1 - tall;
+            if (beside || above) {
+                home = &g;
+                if (beside) {
+                    home->x0 = std::min(home->x0, c.x0);
+                    home->x1 = std::max(home->x1, c.x1);
+                }
+                break;
+            }
+        }
+        if (home) {
+            home->labels.push_back(c.label);
+            home->y0 = std::min(home->y0, c.y0);
+            home->sad_sum += c.sad_sum;
+            home->cells += c.cells;
+        } else if (c.seeded) {
+            regions.push_back({c.x0, c.x1, c.y0, c.y1, c.sad_sum, c.cells, {c.label}});
+        }
+    }
+
+    for (const auto &g : regions) {
+        float yb = cell_y(float(g.y1 + 1));
+        const float w_exp = float(std::max(0.0, p.vehicle_width_m * cam.fx * (yb - horizon_row) / (cam.fy * cam.height_m)));
+        // The width is that of the region's bottom band (bottom_band_frac expected widths tall): the
+        // contact zone spans the vehicle, while a guardrail or marking streak joined to it rises sideways.
+        const int band_rows = std::max(1, int(std::lround(float(p.bottom_band_frac) * w_exp / cell_px_h)));
+        int bx0 = g.x1, bx1 = g.x0;
+        for (int r = std::max(g.y0, g.y1 - band_rows + 1); r <= g.y1; ++r)
+            for (int x = g.x0; x <= g.x1; ++x)
+                if (hot.at<uint8_t>(r, x) && std::find(g.labels.begin(), g.labels.end(), labels.at<int>(r, x)) != g.labels.end()) {
+                    bx0 = std::min(bx0, x);
+                    bx1 = std::max(bx1, x);
+                }
+        if (bx1 < bx0) continue;
+        const float x0 = cell_x(float(bx0)), x1 = cell_x(float(bx1 + 1));
+        const float w = x1 - x0;
+        if (getenv("PXDBG")) fprintf(stderr, "region x %.0f-%.0f yb %.0f top %.0f w_exp %.0f cells %d sad %.1f\n", x0, x1, yb, cell_y(float(g.y0)), w_exp, g.cells, g.sad_sum / g.cells);
+        if (yb < horizon_row + float(p.horizon_margin_px) || w_exp <= 0.f) continue;
+        if (w < float(p.min_width_frac) * w_exp || w > float(p.max_width_frac) * w_exp) continue;
+        ParallaxMeasurement m;
+        float row = yb;
+        const int c0 = int(x0 + 0.2f * w), c1 = int(x1 - 0.2f * w);
+        if (bottom_step(cur_full, c0, c1, int(yb - float(p.refine_up_frac) * w_exp),
+                        int(yb + float(p.refine_down_frac) * w_exp), float(p.refine_min_step), row)) {
+            yb = row;
+            m.refined = true;
+        }
+        const float h = std::clamp(yb - cell_y(float(g.y0)), float(p.min_aspect) * w, float(p.max_aspect) * w_exp);
+        m.point = {0.5f * (x0 + x1), yb};
+        m.box = cv::Rect2f(x0, yb - h, w, h);
+        m.sad = g.cells ? g.sad_sum / float(g.cells) : 0.f;
+        out.measurements.push_back(m);
+    }
+    return out;
+}
+
+} // namespace hw

@@ -1,0 +1,80 @@
+// parallax_detector.hpp - moving vehicles from the difference of two road-aligned frames (paper 000,
+// section II-C).
+//
+// The previous frame is warped with the road homography H (previous -> current), so every road
+// pixel lands where it is now; the absolute difference |I_k - warp(I_{k-1}, H)| is then near zero on
+// the road and large where something is not on the road plane or moves on it: the vehicles (their
+// contact zone, bumper, window edges) and structures standing above the road. The difference is
+// summed over cells (SAD), cells above max(sad_min, sad_factor x the median road cell) are hot, and
+// the image is scanned bottom-up: the lowest hot cluster that sits on the road area starts a
+// region, and the hot clusters above it within the height a vehicle of that width can have join it.
+// Each region gives one measurement at its mid-lower point, whose row is refined on the current
+// frame to the strongest dark-above / bright-below step near the region's bottom (the shadow under
+// the vehicle; for a vehicle standing still relative to the road the contact zone itself shows no
+// parallax and the lowest difference lies higher up).
+//
+// Structures above the road plane are rejected by measurement, not by masks: a region must start
+// (its bottom) inside the road area of the lane model and below the horizon, and its width must be
+// that of a vehicle at that row (the flat-road scale); what remains of guardrails and signs is left
+// to the temporal coherence the particle filter demands.
+//
+// The difference is taken at pyramid level `level` (1 = half resolution) of the road band: a
+// quarter of the pixels to warp, and a low-pass that removes most of the sensor noise.
+#pragma once
+
+#include "core/params.hpp"
+#include "core/types.hpp"
+#include "geometry/camera.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <vector>
+
+namespace hw {
+
+struct ParallaxParams {
+    int level = 1;                   // pyramid level the difference is taken at (0 = full resolution)
+    int cell_w_px = 8;               // px (full resolution); SAD cell width
+    int cell_h_px = 4;               // px; SAD cell height
+    double sad_min = 5.0;            // gray levels; mean |difference| of a hot cell, floor
+    double sad_factor = 3.0;         // hot above this many times the median road cell
+    double vehicle_width_m = 1.8;    // m; width the scan expects at a row
+    double min_width_frac = 0.3;     // region narrower than this share of the expected width: no vehicle
+    double max_width_frac = 2.2;     // wider: no single vehicle
+    double bottom_band_frac = 0.25;  // rows over which a region's width is measured, in expected widths
+    double max_aspect = 1.6;         // tallest region (height / its width) a vehicle forms
+    double min_aspect = 0.6;         // box height / width reported at least
+    int join_gap_cells = 2;          // cells; hot clusters this far beside a region's span still join it
+    double refine_up_frac = 0.15;    // bottom search above the lowest hot row, in expected widths
+    double refine_down_frac = 0.5;   // and below it (vehicles standing still on the road)
+    double refine_min_step = 8.0;    // gray levels; weakest dark-to-bright step accepted as the bottom
+    double horizon_margin_px = 4.0;  // px; a region's bottom must be this far below the horizon
+
+    void bind(ParamMap &m);
+};
+
+// One region of differences.
+struct ParallaxMeasurement {
+    cv::Point2f point;   // mid-lower point: bottom-centre of the region, px
+    cv::Rect2f box;      // vehicle box: the region's columns, its bottom, a height from the region (clamped)
+    float sad = 0.f;     // mean |difference| of its hot cells, gray levels
+    bool refined = false;  // bottom row moved to a shadow step on the current frame
+};
+
+// Per-frame diagnostics.
+struct ParallaxFrame {
+    std::vector<ParallaxMeasurement> measurements;
+    float road_residual = kNaN;   // gray levels; mean |difference| over road cells that are not hot
+    float threshold = kNaN;       // gray levels; the hot-cell threshold used
+    int hot_cells = 0;
+};
+
+// cur_band / prev_band: the road band (rows band_top .. height-1) of the current and previous frame at
+// pyramid level p.level; cur_full: the whole current frame (bottom refinement); H: road homography
+// previous -> current in full-resolution pixels; lanes: this frame's lane model (road area,
+// vanishing point); horizon_row: row of the horizon in the current frame.
+ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
+                              const cv::Matx33d &H, const LaneModel &lanes, float horizon_row, const CameraParams &cam,
+                              const ParallaxParams &p);
+
+} // namespace hw
