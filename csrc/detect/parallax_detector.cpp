@@ -54,7 +54,6 @@ namespace {
 struct Component {
     int label;
     int x0, x1, y0, y1;  // cells, inclusive
-    bool seeded;         // its lowest row touches the road area
     float sad_sum;
     int cells;
 };
@@ -154,19 +153,21 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     }
 
     // Clusters of hot cells, scanned bottom-up.
+    // Clusters are formed on the road area only, so that what stands beside the road (guardrails,
+    // trees, posts) neither starts a region nor joins vehicles to each other through it.
+    cv::Mat hot_road = hot & road;
     cv::Mat labels, stats, centroids;
-    const int nl = cv::connectedComponentsWithStats(hot, labels, stats, centroids, 8, CV_32S);
+    const int nl = cv::connectedComponentsWithStats(hot_road, labels, stats, centroids, 8, CV_32S);
     std::vector<Component> comps;
     for (int l = 1; l < nl; ++l) {
         const int x0 = stats.at<int>(l, cv::CC_STAT_LEFT), y0 = stats.at<int>(l, cv::CC_STAT_TOP);
         Component c{l, x0, x0 + stats.at<int>(l, cv::CC_STAT_WIDTH) - 1, y0, y0 + stats.at<int>(l, cv::CC_STAT_HEIGHT) - 1,
-                    false, 0.f, 0};
+                    0.f, 0};
         for (int r = c.y0; r <= c.y1; ++r)
             for (int x = c.x0; x <= c.x1; ++x)
                 if (labels.at<int>(r, x) == l) {
                     c.sad_sum += sad.at<float>(r, x);
                     ++c.cells;
-                    if (r == c.y1 && road.at<uint8_t>(r, x)) c.seeded = true;
                 }
         comps.push_back(c);
     }
@@ -176,8 +177,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     // A cluster joins a region when it lies within the region's columns (+- join_gap_cells) and no
     // higher above its bottom than max_aspect region widths (a vehicle is not wider above its bottom,
     // nor taller than that); a cluster at the region's bottom rows beside it widens it (one vehicle's
-    // difference broken at the wheels). Any other cluster whose lowest row is on the road starts a
-    // region.
+    // difference broken at the wheels). Any other cluster starts a region.
     std::vector<Region> regions;
     const float rows_per_col = cell_px_w / cell_px_h;
     for (const auto &c : comps) {
@@ -200,7 +200,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
             home->y0 = std::min(home->y0, c.y0);
             home->sad_sum += c.sad_sum;
             home->cells += c.cells;
-        } else if (c.seeded) {
+        } else {
             regions.push_back({c.x0, c.x1, c.y0, c.y1, c.sad_sum, c.cells, {c.label}});
         }
     }
@@ -232,7 +232,15 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
             yb = row;
             m.refined = true;
         }
-        const float h = std::clamp(yb - cell_y(float(g.y0)), float(p.min_aspect) * w, float(p.max_aspect) * w_exp);
+        // Height: up from the bottom through rows where a quarter of the region's columns are hot
+        // (anywhere, the vehicle's top may stand above the road area), bridging join_gap_cells rows.
+        int top = g.y1, gap = 0;
+        const int max_rows = int(float(p.max_aspect) * w / cell_px_h);
+        for (int r = g.y1; r >= std::max(0, g.y1 - max_rows) && gap <= p.join_gap_cells; --r) {
+            const int n_hot = cv::countNonZero(hot.row(r).colRange(bx0, bx1 + 1));
+            if (4 * n_hot >= bx1 - bx0 + 1) { top = r; gap = 0; } else ++gap;
+        }
+        const float h = std::clamp(yb - cell_y(float(top)), float(p.min_aspect) * w, float(p.max_aspect) * w);
         m.point = {0.5f * (x0 + x1), yb};
         m.box = cv::Rect2f(x0, yb - h, w, h);
         m.sad = g.cells ? g.sad_sum / float(g.cells) : 0.f;
