@@ -22,6 +22,10 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("sad_factor", sad_factor, 1.0, 100.0,
           "a cell is hot above this many times the median |difference| of the road cells (the alignment residual "
           "of this frame: texture, noise, shake the homography missed)");
+    m.add("edge_slack_px", edge_slack_px, 0.0, 10.0,
+          "px at the difference's level; a cell is hot only if its mean |difference| exceeds this times its mean "
+          "gradient, i.e. it shows more displacement than interpolation blur and the last alignment error leave at "
+          "edges (markings, dash ends); a vehicle's parallax near the camera is several pixels; 0 disables");
     m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
@@ -109,13 +113,21 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     const int cw = std::max(1, p.cell_w_px / sc), ch = std::max(1, p.cell_h_px / sc);
     const int ncx = diff.cols / cw, ncy = diff.rows / ch;
     if (ncx < 1 || ncy < 1) return out;
-    cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F);
+    // Per cell: the mean |difference| (SAD / pixels) and the mean gradient magnitude of the current
+    // band, (|I(x+1) - I(x-1)| + |I(y+1) - I(y-1)|) / 4 (central differences, L1, halved).
+    cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F), grad = cv::Mat::zeros(ncy, ncx, CV_32F);
     for (int y = 0; y < ncy * ch; ++y) {
-        const uint8_t *d = diff.ptr<uint8_t>(y);
-        float *s = sad.ptr<float>(y / ch);
-        for (int x = 0; x < ncx * cw; ++x) s[x / cw] += float(d[x]);
+        const uint8_t *d = diff.ptr<uint8_t>(y), *c = cur_band.ptr<uint8_t>(y);
+        const uint8_t *up = cur_band.ptr<uint8_t>(std::max(y - 1, 0)), *dn = cur_band.ptr<uint8_t>(std::min(y + 1, diff.rows - 1));
+        float *s = sad.ptr<float>(y / ch), *gr = grad.ptr<float>(y / ch);
+        for (int x = 0; x < ncx * cw; ++x) {
+            s[x / cw] += float(d[x]);
+            const int xl = std::max(x - 1, 0), xr = std::min(x + 1, diff.cols - 1);
+            gr[x / cw] += float(std::abs(int(c[xr]) - int(c[xl])) + std::abs(int(dn[x]) - int(up[x])));
+        }
     }
     sad *= 1.0 / double(cw * ch);
+    grad *= 0.25 / double(cw * ch);
 
     // Road cells: inside the lane model's road area (below the horizon when there is none).
     const float cell_px_w = float(cw * sc), cell_px_h = float(ch * sc);  // cell size in full-resolution px
@@ -141,7 +153,20 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     std::nth_element(road_sad.begin(), road_sad.begin() + road_sad.size() / 2, road_sad.end());
     const float thr = std::max(float(p.sad_min), float(p.sad_factor) * road_sad[road_sad.size() / 2]);
     out.threshold = thr;
-    cv::Mat hot = sad > thr;
+    // Hot: above the threshold, and more than edge_slack_px of displacement of the local gradient
+    // (a high-contrast marking edge differs by a few gray levels after any warp: interpolation blur
+    // and the last tenths of a pixel of alignment error), and inside what the warp could fill from
+    // the previous band (its border rows are replicated, not seen).
+    cv::Mat hot = (sad > thr) & (sad > float(p.edge_slack_px) * grad);
+    {
+        const cv::Matx33d Hi = Hs.inv();
+        for (int r = 0; r < ncy; ++r)
+            for (int c = 0; c < ncx; ++c) {
+                const cv::Vec3d q = Hi * cv::Vec3d((c + 0.5) * cw, (r + 0.5) * ch, 1.0);
+                const double u = q[0] / q[2], v = q[1] / q[2];
+                if (!(q[2] > 0) || u < 0 || v < 0 || u > prev_band.cols - 1 || v > prev_band.rows - 1) hot.at<uint8_t>(r, c) = 0;
+            }
+    }
     out.hot_cells = cv::countNonZero(hot);
     {
         double sum = 0;

@@ -5,7 +5,9 @@
 // pixel lands where it is now; the absolute difference |I_k - warp(I_{k-1}, H)| is then near zero on
 // the road and large where something is not on the road plane or moves on it: the vehicles (their
 // contact zone, bumper, window edges) and structures standing above the road. The difference is
-// summed over cells (SAD), cells above max(sad_min, sad_factor x the median road cell) are hot, and
+// summed over cells (SAD), cells above max(sad_min, sad_factor x the median road cell, edge_slack_px x
+// the cell's mean gradient) are hot (the last term discounts what any warp leaves at strong edges:
+// interpolation blur and the last tenths of a pixel of alignment error, on markings above all), and
 // the image is scanned bottom-up: the lowest hot cluster that sits on the road area starts a
 // region, and the hot clusters above it within the height a vehicle of that width can have join it.
 // Each region gives one measurement at its mid-lower point, whose row is refined on the current
@@ -38,6 +40,7 @@ struct ParallaxParams {
     int cell_h_px = 4;               // px; SAD cell height
     double sad_min = 5.0;            // gray levels; mean |difference| of a hot cell, floor
     double sad_factor = 3.0;         // hot above this many times the median road cell
+    double edge_slack_px = 0.5;      // px at the level; hot only beyond this displacement of the local gradient
     double vehicle_width_m = 1.8;    // m; width the scan expects at a row
     double min_width_frac = 0.3;     // region narrower than this share of the expected width: no vehicle
     double max_width_frac = 2.2;     // wider: no single vehicle

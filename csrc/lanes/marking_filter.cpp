@@ -99,10 +99,10 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
             row = o;
         }
         // [-1 0 1] correlation: g(x) = I(x+1) - I(x-1); its negative is the [1 0 -1] response.
-        // Row noise: mean |g| on every 4th column (an estimate is enough for a threshold).
-        int sum_abs = 0, n_abs = 0;
-        for (int x = 1; x < w - 1; x += 1, ++n_abs) sum_abs += std::abs(int(row[x + 1]) - int(row[x - 1]));
-        const int t_edge = std::max(t_min, int(std::ceil(p.noise_factor * sum_abs / std::max(1, n_abs))));
+        // Row noise: the mean |g| of the row.
+        int sum_abs = 0;
+        for (int x = 1; x < w - 1; ++x) sum_abs += std::abs(int(row[x + 1]) - int(row[x - 1]));
+        const int t_edge = std::max(t_min, int(std::ceil(p.noise_factor * sum_abs / (w - 2))));
 
         // Edges are the local maxima of each response above the threshold (one per edge); g is
         // computed on the fly in a window (g_prev, g_cur, g_next) around x.
