@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from app.core import Pipeline
+from app.eval.lanes_sample import boundary_on_gt_lane
 from app.eval.tusimple_lanes import bench_image, evaluate_lanes, lane_threshold, segments_to_tusimple
 from app.sim import Camera, frame_count, load_scenario, render
 from app.sim.frames import scenario_camera
@@ -230,29 +231,12 @@ def _lane_sample_results() -> tuple:
     return label_file, tuple(out)
 
 
-def _matches_a_gt_lane(lane, label: dict, width: int) -> bool:
-    """The boundary lies on one ground-truth lane: over the rows both have, on average within that
-    lane's TuSimple threshold (20 px at 1280 wide, divided by the cosine of the lane's angle), and
-    those rows cover at least half of the lane."""
-    pred = segments_to_tusimple([lane], label["h_samples"], width)
-    if not pred:
-        return False
-    for gt in label["lanes"]:
-        gt_rows = [i for i, g in enumerate(gt) if g >= 0]
-        both = [i for i in gt_rows if pred[0][i] >= 0]
-        thresh = lane_threshold(gt, label["h_samples"], 20.0 * width / 1280)
-        if gt_rows and len(both) >= 0.5 * len(gt_rows) and \
-                np.mean([abs(pred[0][i] - gt[i]) for i in both]) < thresh:
-            return True
-    return False
-
-
 def test_tusimple_lane_sample_ego_lanes_found():
     _, results = _lane_sample_results()
     found = 0
     for lab, width, r in results:
         ego = _ego(r)
-        found += set(ego) == {-1, 1} and all(_matches_a_gt_lane(lane, lab, width) for lane in ego.values())
+        found += set(ego) == {-1, 1} and all(boundary_on_gt_lane(lane, lab, width) for lane in ego.values())
     assert found >= 8, f"ego lane found in {found} of {len(results)} frames"
 
 

@@ -6,31 +6,34 @@ from pathlib import Path
 from typing import Callable, Optional
 
 import cv2
+import numpy as np
 
 from app import config as configuration
 from app.core import Pipeline
-from app.eval.tusimple_boxes import TUSIMPLE_CAMERA
-from app.eval.tusimple_lanes import evaluate_lanes, segments_to_tusimple
+from app.eval.tusimple_boxes import tusimple_config
+from app.eval.tusimple_lanes import evaluate_lanes, lane_threshold, segments_to_tusimple
 
-EGO_POINT_SHARE = 0.85  # share of a ground-truth lane's rows within the threshold for a boundary to count
-
-
-def _ego_found(lanes, label: dict, width: int) -> bool:
-    """Both ego boundaries of the model lie on ground-truth lanes (TuSimple point criterion)."""
-    ego = [l for l in lanes if l.position in (-1, 1)]
-    if len(ego) != 2:
+def boundary_on_gt_lane(lane, label: dict, width: int) -> bool:
+    """The boundary lies on one ground-truth lane: over the rows both have, on average within that
+    lane's TuSimple threshold (20 px at 1280 wide, divided by the cosine of the lane's angle), and
+    those rows cover at least half of the lane."""
+    pred = segments_to_tusimple([lane], label["h_samples"], width)
+    if not pred:
         return False
-    thresh = 20.0 * width / 1280
-    h = label["h_samples"]
-    for pred in segments_to_tusimple(ego, h, width):
-        best = 0.0
-        for gt in label["lanes"]:
-            rows = [(p, g) for p, g in zip(pred, gt) if g >= 0]
-            if rows:
-                best = max(best, sum(1 for p, g in rows if p >= 0 and abs(p - g) < thresh) / len(rows))
-        if best < EGO_POINT_SHARE:
-            return False
-    return True
+    for gt in label["lanes"]:
+        gt_rows = [i for i, g in enumerate(gt) if g >= 0]
+        both = [i for i in gt_rows if pred[0][i] >= 0]
+        thresh = lane_threshold(gt, label["h_samples"], 20.0 * width / 1280)
+        if gt_rows and len(both) >= 0.5 * len(gt_rows) and \
+                float(np.mean([abs(pred[0][i] - gt[i]) for i in both])) < thresh:
+            return True
+    return False
+
+
+def ego_lane_found(lanes, label: dict, width: int) -> bool:
+    """Both ego boundaries of the model found, each on a ground-truth lane."""
+    ego = [l for l in lanes if l.position in (-1, 1)]
+    return len({l.position for l in ego}) == 2 and all(boundary_on_gt_lane(l, label, width) for l in ego)
 
 
 def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optional[Callable] = None) -> dict:
@@ -46,12 +49,12 @@ def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optio
                 raise FileNotFoundError(f"{label_file.parent / lab['raw_file']}: cannot be read")
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # the sample is TuSimple's camera scaled down
-                cfg = configuration.load(config_path)
-                cfg["camera"] = configuration.scaled_camera({**cfg["camera"], **TUSIMPLE_CAMERA}, *size)
+                cfg = tusimple_config(configuration.load(config_path))
+                cfg["camera"] = configuration.scaled_camera(cfg["camera"], *size)
                 pipes[size] = Pipeline(configuration.core_sections(cfg))
             r = pipes[size].run_stage("lanes", gray)
             preds[lab["raw_file"]] = r.lanes
-            ego_hits += _ego_found(r.lanes, lab, size[0])
+            ego_hits += ego_lane_found(r.lanes, lab, size[0])
             if on_image:
                 on_image(lab, gray, r)
     finally:

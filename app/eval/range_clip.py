@@ -10,15 +10,14 @@ import cv2
 from app import config as configuration
 from app.core import Pipeline
 from app.eval.matching import match
-from app.eval.tusimple_boxes import TUSIMPLE_CAMERA
+from app.eval.tusimple_boxes import tusimple_config
 
 
 def evaluate(clip_dir: str, config_path: Optional[str] = None, preset: str = "thesis", fps: float = 20.0) -> dict:
     root = Path(clip_dir)
     frames = sorted((root / "imgs").glob("*.jpg"))
     ann = json.loads((root / "annotation.json").read_text())
-    cfg = configuration.load(config_path)
-    cfg["camera"].update(TUSIMPLE_CAMERA)
+    cfg = tusimple_config(configuration.load(config_path))
     cfg["pipeline"]["preset"] = preset
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for i, path in enumerate(frames):

@@ -17,6 +17,10 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("horizon", c.horizon);
     fn("kinematics", c.kinematics);
     fn("lead", c.lead);
+    fn("road_features", c.road_features);
+    fn("homography", c.homography);
+    fn("parallax", c.parallax);
+    fn("particles", c.particles);
 }
 
 } // namespace

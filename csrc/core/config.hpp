@@ -8,6 +8,7 @@
 #include "geometry/track_kinematics.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/lane_tracker.hpp"
+#include "track/parallax_tracker.hpp"
 #include "track/thesis_tracker.hpp"
 
 #include <string>
@@ -25,8 +26,9 @@ struct PipelineParams {
     double debug_stall_after_s = 0.0;   // >0: the loop stops making progress after this many seconds (watchdog tests)
 
     void bind(ParamMap &m) {
-        m.add("preset", preset, "thesis|none",
-              "which detector + tracker runs: thesis (shadow + vertical edges + Kalman), none (lanes only)");
+        m.add("preset", preset, "thesis|parallax|none",
+              "which detector + tracker runs: thesis (shadow + vertical edges + Kalman), parallax (road homography + "
+              "aligned-difference detector + joint particle filter, paper 000), none (lanes only)");
         m.add("queue_capacity", queue_capacity, 1, 1024,
               "results; queue to the supervisor; small so a slow consumer sees fresh results, the oldest is dropped and counted");
         m.add("push_queue_capacity", push_queue_capacity, 1, 1024,
@@ -51,6 +53,10 @@ struct Config {
     HorizonParams horizon;
     KinematicsParams kinematics;
     LeadParams lead;
+    LaneFeatureParams road_features;  // parallax preset: lane-marking features
+    HomographyParams homography;      //   road homography (DLT + Kalman)
+    ParallaxTrackerParams parallax;   //   aligned-difference detector
+    ParticleParams particles;         //   joint particle filter
 
     // Parses the JSON text; throws ConfigError naming the key on any problem.
     static Config from_json(const std::string &text);

@@ -3,6 +3,8 @@
 #include "core/stopwatch.hpp"
 #include "detect/shadow.hpp"
 #include "detect/verify.hpp"
+#include "track/parallax_stage.hpp"
+#include "track/parallax_tracker.hpp"
 #include "track/thesis_tracker.hpp"
 
 #include <stdexcept>
@@ -13,6 +15,8 @@ namespace {
 
 std::unique_ptr<VehicleTracker> make_tracker(const Config &c) {
     if (c.pipeline.preset == "thesis") return std::make_unique<ThesisTracker>(c.shadow, c.verify, c.kalman);
+    if (c.pipeline.preset == "parallax")
+        return std::make_unique<ParallaxTracker>(c.road_features, c.homography, c.parallax, c.particles, c.camera);
     if (c.pipeline.preset == "none") return nullptr;
     throw ConfigError("pipeline.preset: unknown preset '" + c.pipeline.preset + "'");
 }
@@ -56,7 +60,8 @@ FrameOutput Pipeline::process(const Frame &frame) {
         out.times.add("lanes", sw.ms());
     }
     if (tracker_) {
-        FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera};
+        FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera,
+                         EgoMotion{ego_speed_mps_, ego_yaw_rate_rps_}};
         tracker_->step(ctx, out.tracks, out.times, out.full_detection);
     }
     {
@@ -76,13 +81,15 @@ FrameOutput Pipeline::process(const Frame &frame) {
 }
 
 FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
+    // Two-frame units (frames stacked vertically): see track/parallax_stage.hpp.
+    if (is_parallax_stage(stage)) return run_parallax_stage(stage, gray, cfg_);
     check_frame(gray);
     Stopwatch total;
     FrameOutput out;
     out.width = gray.cols;
     out.height = gray.rows;
     if (stage != "lanes" && stage != "hypotheses" && stage != "detect")
-        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect");
+        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, homography, parallax");
     {
         Stopwatch sw;
         out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);

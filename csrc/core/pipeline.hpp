@@ -22,7 +22,8 @@ public:
     // One frame through every stage: lanes -> vehicles (detect + track) -> outputs.
     // Throws std::invalid_argument for a frame of the wrong size or type, or a time going backwards.
     FrameOutput process(const Frame &frame);
-    // Single-image units ("lanes", "hypotheses", "detect") without touching tracking state.
+    // Single-image units ("lanes", "hypotheses", "detect") without touching tracking state; the
+    // two-frame units "homography" and "parallax" take frames stacked vertically (track/parallax_stage.hpp).
     FrameOutput run_stage(const std::string &stage, const cv::Mat &gray);
     void reset();
     // The car's own motion from the vehicle bus; any thread may set it (the loop reads it per frame).

@@ -4,8 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
 namespace hw {
 
@@ -30,6 +28,10 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
           "(entering from the side)");
+    m.add("inside_margin_m", inside_margin_m, -10.0, 10.0,
+          "m; most hot cells of a region's bottom band must lie this far inside the road area of the lane model: a "
+          "vehicle's contact zone is mostly inside its lane, a streak along the road edge or a guardrail sits on the "
+          "border");
     m.add("max_width_frac", max_width_frac, 1.0, 10.0,
           "expected widths; a wider region is no single vehicle (a shadow band, an overpass edge)");
     m.add("bottom_band_frac", bottom_band_frac, 0.0, 2.0,
@@ -68,6 +70,22 @@ struct Region {
     int cells;
     std::vector<int> labels;  // its clusters
 };
+
+// Columns where row y crosses a polygon: [xl, xr] between its leftmost and rightmost crossing
+// (false for no polygon or a row outside it; a point exactly on a vertex counts).
+bool polygon_span(const std::vector<cv::Point> &poly, float y, float &xl, float &xr) {
+    if (poly.size() < 3) return false;
+    xl = 1e9f;
+    xr = -1e9f;
+    for (size_t i = 0; i < poly.size(); ++i) {
+        const cv::Point2f a = poly[i], b = poly[(i + 1) % poly.size()];
+        if ((y < std::min(a.y, b.y)) || (y > std::max(a.y, b.y))) continue;
+        const float x = a.y == b.y ? a.x : a.x + (b.x - a.x) * (y - a.y) / (b.y - a.y);
+        xl = std::min(xl, a.y == b.y ? std::min(a.x, b.x) : x);
+        xr = std::max(xr, a.y == b.y ? std::max(a.x, b.x) : x);
+    }
+    return xl <= xr;
+}
 
 // Strongest dark-above / bright-below step (mean over columns c0..c1 of I(y+1) - I(y-1)) in rows y0..y1.
 bool bottom_step(const cv::Mat &gray, int c0, int c1, int y0, int y1, float min_step, float &row) {
@@ -168,6 +186,8 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
             }
     }
     out.hot_cells = cv::countNonZero(hot);
+    out.hot = hot;
+    out.cell = cv::Size2f(cell_px_w, cell_px_h);
     {
         double sum = 0;
         int n = 0;
@@ -236,17 +256,26 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         // The width is that of the region's bottom band (bottom_band_frac expected widths tall): the
         // contact zone spans the vehicle, while a guardrail or marking streak joined to it rises sideways.
         const int band_rows = std::max(1, int(std::lround(float(p.bottom_band_frac) * w_exp / cell_px_h)));
-        int bx0 = g.x1, bx1 = g.x0;
-        for (int r = std::max(g.y0, g.y1 - band_rows + 1); r <= g.y1; ++r)
+        // Its cells there must mostly lie inside the road area by inside_margin_m (a vehicle's contact
+        // zone is at least half a vehicle inside its lane; a streak along the road's edge is on it).
+        int bx0 = g.x1, bx1 = g.x0, n_band = 0, n_inside = 0;
+        for (int r = std::max(g.y0, g.y1 - band_rows + 1); r <= g.y1; ++r) {
+            const float yr = cell_y(r + 0.5f);
+            float xl = -1e9f, xr = 1e9f;
+            const bool span = polygon_span(lanes.road_polygon, yr, xl, xr);
+            const float margin = float(p.inside_margin_m * cam.fx * (yr - horizon_row) / (cam.fy * cam.height_m));
             for (int x = g.x0; x <= g.x1; ++x)
                 if (hot.at<uint8_t>(r, x) && std::find(g.labels.begin(), g.labels.end(), labels.at<int>(r, x)) != g.labels.end()) {
                     bx0 = std::min(bx0, x);
                     bx1 = std::max(bx1, x);
+                    ++n_band;
+                    const float xc = cell_x(x + 0.5f);
+                    if (!span || (xc - xl >= margin && xr - xc >= margin)) ++n_inside;
                 }
-        if (bx1 < bx0) continue;
+        }
+        if (bx1 < bx0 || 2 * n_inside < n_band) continue;
         const float x0 = cell_x(float(bx0)), x1 = cell_x(float(bx1 + 1));
         const float w = x1 - x0;
-        if (getenv("PXDBG")) fprintf(stderr, "region x %.0f-%.0f yb %.0f top %.0f w_exp %.0f cells %d sad %.1f\n", x0, x1, yb, cell_y(float(g.y0)), w_exp, g.cells, g.sad_sum / g.cells);
         if (yb < horizon_row + float(p.horizon_margin_px) || w_exp <= 0.f) continue;
         if (w < float(p.min_width_frac) * w_exp || w > float(p.max_width_frac) * w_exp) continue;
         ParallaxMeasurement m;

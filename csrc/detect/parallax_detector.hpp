@@ -15,10 +15,11 @@
 // the vehicle; for a vehicle standing still relative to the road the contact zone itself shows no
 // parallax and the lowest difference lies higher up).
 //
-// Structures above the road plane are rejected by measurement, not by masks: a region must start
-// (its bottom) inside the road area of the lane model and below the horizon, and its width must be
-// that of a vehicle at that row (the flat-road scale); what remains of guardrails and signs is left
-// to the temporal coherence the particle filter demands.
+// Structures above the road plane are rejected by measurement, not by masks: clusters are formed on
+// the road area of the lane model only, most of a region's lowest cells must lie inside it by
+// inside_margin_m, its bottom must be below the horizon, and its width must be that of a vehicle at
+// that row (the flat-road scale); what remains of guardrails and signs is left to the temporal
+// coherence the particle filter demands.
 //
 // The difference is taken at pyramid level `level` (1 = half resolution) of the road band: a
 // quarter of the pixels to warp, and a low-pass that removes most of the sensor noise.
@@ -44,6 +45,7 @@ struct ParallaxParams {
     double vehicle_width_m = 1.8;    // m; width the scan expects at a row
     double min_width_frac = 0.3;     // region narrower than this share of the expected width: no vehicle
     double max_width_frac = 2.2;     // wider: no single vehicle
+    double inside_margin_m = 0.5;    // m; most of a region's bottom cells lie this far inside the road area
     double bottom_band_frac = 0.25;  // rows over which a region's width is measured, in expected widths
     double max_aspect = 1.6;         // tallest region (height / its width) a vehicle forms
     double min_aspect = 0.6;         // box height / width reported at least
@@ -70,6 +72,8 @@ struct ParallaxFrame {
     float road_residual = kNaN;   // gray levels; mean |difference| over road cells that are not hot
     float threshold = kNaN;       // gray levels; the hot-cell threshold used
     int hot_cells = 0;
+    cv::Mat hot;                  // CV_8UC1 cell map (255 hot); cell (r, c) covers full-resolution pixels
+    cv::Size2f cell;              //   x in [c, c+1) * cell.width, y in band_top + [r, r+1) * cell.height
 };
 
 // cur_band / prev_band: the road band (rows band_top .. height-1) of the current and previous frame at

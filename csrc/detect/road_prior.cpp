@@ -111,6 +111,14 @@ float horizon_row(cv::Size size, const LaneModel &lanes, const CameraParams &cam
     return float(horizon_row(lanes, scale_camera(cam, size), size));
 }
 
+cv::Point2f vanishing_point(cv::Size size, const LaneModel &lanes, const CameraParams &cam) {
+    const ScaledCamera c = scale_camera(cam, size);
+    const float yh = float(horizon_row(lanes, c, size));
+    const float vx = lanes.vanishing_point.x;
+    if (lanes_usable(lanes) && std::isfinite(vx) && std::abs(vx - 0.5f * size.width) < size.width) return {vx, yh};
+    return {float(c.cx - c.fx * std::tan(c.yaw_rad)), yh};
+}
+
 float expected_vehicle_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam,
                              const RoadPriorParams &p) {
     const ScaledCamera c = scale_camera(cam, size);

@@ -71,6 +71,9 @@ RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraPar
 // Horizon row for an image of `size`: the lane model's vanishing point when valid, else the camera's.
 float horizon_row(cv::Size size, const LaneModel &lanes, const CameraParams &cam);
 
+// Vanishing point of the road direction: the lane model's when valid, else (cx - fx tan(yaw), horizon).
+cv::Point2f vanishing_point(cv::Size size, const LaneModel &lanes, const CameraParams &cam);
+
 // Expected vehicle width in pixels for a box whose bottom is at row y (lane model or camera).
 float expected_vehicle_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam,
                              const RoadPriorParams &p);

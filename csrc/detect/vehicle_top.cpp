@@ -50,7 +50,16 @@ float vehicle_top(const cv::Mat &gray, float left, float right, float bottom, co
     if (last <= y_min) return kNaN;  // still going at the search limit: background edges, not a roof
     const float top = float(last) - 0.5f;
     if (bottom - top < float(p.min_aspect) * w) return kNaN;
-    return top;
+    // A roof closes the two sides: a horizontal edge across the inner columns at the top (within a
+    // row). Without it the "sides" were lines running on (lane markings, poles), not a vehicle.
+    float roof = 0.f;
+    for (int y = std::max(1, last - 1); y <= std::min(gray.rows - 2, last + 1); ++y) {
+        const uint8_t *up = gray.ptr<uint8_t>(y - 1), *down = gray.ptr<uint8_t>(y + 1);
+        float s = 0.f;
+        for (int x = cl + 1; x < cr; ++x) s += 0.5f * std::abs(float(down[x]) - float(up[x]));
+        roof = std::max(roof, s / float(std::max(1, cr - cl - 1)));
+    }
+    return roof >= keep ? top : kNaN;
 }
 
 } // namespace hw

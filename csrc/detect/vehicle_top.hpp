@@ -5,7 +5,8 @@
 // its bottom up to its roof; above the roof the background rarely continues both at once. So, going
 // up from the lower part of the body, the top is the last row at which both side columns still
 // carry a vertical edge of at least `keep_frac` of their typical strength on the lower body
-// (short gaps of `max_gap` rows bridged: a window frame, a seam). The result is kept within
+// (short gaps of `max_gap` rows bridged: a window frame, a seam), provided a horizontal edge (the
+// roof line) closes the sides there. The result is kept within
 // [min_aspect, max_aspect] times the width; when the sides are too weak to say, the caller's
 // fallback aspect applies.
 #pragma once

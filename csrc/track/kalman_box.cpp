@@ -31,12 +31,15 @@ KalmanBox::KalmanBox(const Vec3 &z, double sigma_pos_px, double sigma_vel_px_s) 
     }
 }
 
-void KalmanBox::predict(double dt, double accel_x, double accel_y, double p_max, double p_zero) {
+void KalmanBox::predict(double dt, double accel_x, double accel_y, double p_max, double p_zero, const Vec3 &known) {
     if (!(dt >= 0.0) || !std::isfinite(dt)) throw std::invalid_argument("KalmanBox::predict: dt must be >= 0");
-    // x' = F x
+    if (!known.allFinite()) throw std::invalid_argument("KalmanBox::predict: known acceleration not finite");
+    // x' = F x + B a
     Mat6 F = Mat6::Identity();
     for (int i = 0; i < 3; ++i) F(i, i + 3) = dt;
     x_ = F * x_;
+    x_.head<3>() += 0.5 * dt * dt * known;
+    x_.tail<3>() += dt * known;
     // sigma_u^2 = A^2/3 (1 + 4 P_max - P_0), per axis; Q from piecewise-constant acceleration.
     const double shape = (1.0 + 4.0 * p_max - p_zero) / 3.0;
     const double var[3] = {accel_x * accel_x * shape, accel_y * accel_y * shape, accel_x * accel_x * shape};

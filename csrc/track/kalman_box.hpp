@@ -3,6 +3,7 @@
 // State x = [x1, y1, x2, vx1, vy1, vx2]: bottom-left corner (x1, y1), right corner column x2 (the
 // two corners share the bottom row), and their image velocities in px/s. Constant velocity:
 //     x_k = F x_{k-1} + w,    F = [I  dt I; 0  I]
+// A known image acceleration a (3 components) can enter as a control input: x += [dt^2/2 I; dt I] a.
 // Measurement z = [x1, y1, x2] = H x + v, H = [I 0], R = diag(sigma_x^2, sigma_y^2, sigma_x^2).
 // Process noise from the bounded-acceleration model (thesis eq. 3.24, after Singer): the
 // acceleration u along each axis is uniform in [-A, A] with extra probability P_max at each of +-A
@@ -27,8 +28,10 @@ public:
     KalmanBox(const Vec3 &z, double sigma_pos_px, double sigma_vel_px_s);
 
     // Time update over dt seconds. accel_x/accel_y: the bound A of the image acceleration, px/s^2,
-    // for the columns (x1, x2) and the row (y1); p_max, p_zero: the model's point probabilities.
-    void predict(double dt_s, double accel_x_px_s2, double accel_y_px_s2, double p_max, double p_zero);
+    // for the columns (x1, x2) and the row (y1); p_max, p_zero: the model's point probabilities;
+    // known: a deterministic acceleration of [x1, y1, x2] in px/s^2 (zero for pure constant velocity).
+    void predict(double dt_s, double accel_x_px_s2, double accel_y_px_s2, double p_max, double p_zero,
+                 const Vec3 &known = Vec3::Zero());
 
     // Measurement update with z = [x1, y1, x2] and per-component standard deviations.
     void update(const Vec3 &z, double sigma_x_px, double sigma_y_px);

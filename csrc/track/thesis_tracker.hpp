@@ -73,10 +73,12 @@ private:
         bool duplicate = false;       // another track follows the same vehicle
     };
 
-    void predict_all(double dt);
+    void predict_all(double dt, const cv::Point2f &vp);
+    KalmanBox::Vec3 perspective_accel(const Track &t, const cv::Point2f &vp) const;
     bool measure_by_roi(const cv::Mat &gray, Track &t);
     bool measure_by_detection(Track &t, std::vector<Detection> &dets, std::vector<bool> &used);
     bool measure_by_template(const cv::Mat &gray, Track &t);
+    bool occluded(const Track &t) const;
     void start_tracks(const cv::Mat &gray, const std::vector<Detection> &dets, const std::vector<bool> &used);
     void prune(const FrameContext &ctx);
     TrackState report(const Track &t) const;

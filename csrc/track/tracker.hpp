@@ -5,6 +5,7 @@
 #pragma once
 
 #include "core/types.hpp"
+#include "fcw/lead_selection.hpp"
 #include "geometry/camera.hpp"
 
 #include <memory>
@@ -18,6 +19,7 @@ struct FrameContext {
     int64_t number;               // frame number
     const LaneModel &lanes;       // this frame's lane model (may be invalid)
     const CameraParams &camera;
+    EgoMotion ego;                // the car's own motion from CAN (NaN fields = unknown)
 };
 
 class VehicleTracker {

@@ -1,0 +1,27 @@
+// parallax_stage.hpp - the two-frame units of the parallax pipeline, reachable alone through
+// Pipeline::run_stage (and so through hw_pipeline_run_stage), without touching tracking state.
+//
+// The image passed is K >= 2 frames of the camera's size stacked vertically, oldest on top; a fresh
+// lane tracker and a fresh parallax tracker run over them (nominal 30 fps, no ego speed), and the
+// result describes the last pair:
+//   "homography"  full_detection = the last pair's homography measurement was accepted by the gate;
+//                 image_change   = the alignment residual: mean |I_K - warp(I_{K-1}, H)| over the road
+//                                  area of the lane model, outside the detections (gray levels);
+//                 lanes, vanishing point: the last frame's lane model; no tracks.
+//   "parallax"    as "homography", plus one track per measurement region of the last pair (box from
+//                 the region, confidence = its mean |difference| / 64, capped at 1), unconfirmed.
+// With K > 2 the homography filter has K - 2 frames to settle before the last pair is judged.
+#pragma once
+
+#include "core/config.hpp"
+#include "core/types.hpp"
+
+#include <string>
+
+namespace hw {
+
+bool is_parallax_stage(const std::string &stage);
+
+FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked, const Config &cfg);
+
+} // namespace hw

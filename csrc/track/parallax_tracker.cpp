@@ -1,0 +1,162 @@
+#include "track/parallax_tracker.hpp"
+
+#include "core/stopwatch.hpp"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace hw {
+
+void ParallaxTrackerParams::bind(ParamMap &m) {
+    detect.bind(m);
+    m.add("band_above_horizon", band_above_horizon, 0.0, 1.0,
+          "share of the image height above the horizon kept in the road band (the rows features and differences "
+          "are taken from); the band holds the roofs of near vehicles, the sky above is of no use");
+    m.add("exclude_vehicle_corners", exclude_vehicle_corners,
+          "corners inside the boxes of tracked vehicles are not used for the homography: they are not on the road");
+    m.add("max_dt_s", max_dt_s, 0.001, 100.0,
+          "s; a longer gap between frames (or time going back) starts the homography and the tracks again");
+}
+
+ParallaxTracker::ParallaxTracker(const LaneFeatureParams &features, const HomographyParams &homography,
+                                 const ParallaxTrackerParams &parallax, const ParticleParams &particles,
+                                 const CameraParams &cam)
+    : fp_(features), hp_(homography), pp_(parallax), cam_(cam), kf_(homography.kalman, cam), pf_(particles) {
+    band_top_ = std::clamp(int(std::floor(cam.horizon_row() - pp_.band_above_horizon * cam.height)), 0,
+                           std::max(0, cam.height - 16));
+}
+
+void ParallaxTracker::reset() {
+    kf_.reset();
+    pf_.reset();
+    prev_.release();
+    cur_.release();
+    prev_level_.release();
+    started_ = false;
+    h_step_ = HomographyStep{};
+    detection_ = ParallaxFrame{};
+    last_tracks_.clear();
+}
+
+void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
+                           bool &full_detection) {
+    const cv::Mat &gray = ctx.gray;
+    CV_Assert(gray.type() == CV_8UC1 && gray.cols == cam_.width && gray.rows == cam_.height);
+    double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
+    if (started_ && (dt > pp_.max_dt_s || dt < 0.0)) {
+        reset();
+        dt = 0.0;
+    }
+    started_ = true;
+    last_t_s_ = ctx.t_s;
+    full_detection = false;
+    h_step_ = HomographyStep{};
+    detection_ = ParallaxFrame{};
+
+    // The road's vanishing point: the lane model's, else the camera's horizon and yaw.
+    cv::Point2f vp = ctx.lanes.vanishing_point;
+    if (!std::isfinite(vp.x) || !std::isfinite(vp.y))
+        vp = {float(cam_.cx - cam_.fx * std::tan(cam_.yaw_deg * M_PI / 180.0)), float(cam_.horizon_row())};
+    prev_ = cur_;
+    cur_ = gray.clone();
+
+    // features + homography
+    {
+        Stopwatch sw;
+        const double speed = ctx.ego.speed_mps;
+        kf_.predict(std::isfinite(speed) && dt > 0.0 ? speed * dt : NAN);
+        LaneFeatures f;
+        if (!prev_.empty()) f = lane_correspondences(cur_, prev_, vp, cam_, kf_.predicted_px(), fp_);
+        if (pp_.exclude_vehicle_corners) {
+            // Where the tracked vehicles are now (last estimate moved by its velocity), widened a little.
+            std::vector<cv::Rect2f> boxes;
+            for (const auto &t : last_tracks_) {
+                cv::Rect2f b = t.box;
+                if (std::isfinite(t.vel_px_s.x)) b += cv::Point2f(float(t.vel_px_s.x * dt), float(t.vel_px_s.y * dt));
+                boxes.push_back(cv::Rect2f(b.x - 0.1f * b.width, b.y - 0.1f * b.height, 1.2f * b.width, 1.2f * b.height));
+            }
+            f.matches.erase(std::remove_if(f.matches.begin(), f.matches.end(),
+                                           [&](const Correspondence &c) {
+                                               for (const auto &b : boxes)
+                                                   if (b.contains(c.cur)) return true;
+                                               return false;
+                                           }),
+                            f.matches.end());
+        }
+        times.add("features", sw.ms());
+        Stopwatch sh;
+        std::vector<cv::Point2f> from, to;
+        for (const auto &c : f.matches) {
+            from.push_back(c.prev);
+            to.push_back(c.cur);
+        }
+        const cv::Matx33d pred = kf_.predicted_px();
+        const HomographyFit fit = fit_homography(from, to, hp_.dlt, kf_.has_prediction() ? &pred : nullptr);
+        h_step_.status = prev_.empty() ? HomographyKalman::Status::kNone : kf_.update(fit.ok ? &fit.H : nullptr);
+        h_step_.valid = kf_.valid();
+        h_step_.coast_frames = kf_.coast_frames();
+        h_step_.correspondences = int(f.matches.size());
+        h_step_.used = fit.ok ? fit.used : 0;
+        h_step_.distance = kf_.last_distance();
+        h_step_.H = kf_.H_px();
+        times.add("homography", sh.ms());
+    }
+
+    // parallax detection on the aligned road band
+    std::vector<PointMeasurement> z;
+    {
+        Stopwatch sw;
+        cv::Mat level = cur_.rowRange(band_top_, cur_.rows);
+        for (int l = 0; l < pp_.detect.level; ++l) {
+            cv::Mat down;
+            cv::pyrDown(level, down);
+            level = down;
+        }
+        if (level.data == cur_.data) level = level.clone();  // level 0: keep the band even when cur_ changes
+        if (kf_.valid() && !prev_level_.empty() && prev_level_.size() == level.size()) {
+            detection_ = detect_parallax(level, prev_level_, cur_, band_top_, kf_.H_px(), ctx.lanes, vp.y, cam_,
+                                         pp_.detect);
+            full_detection = true;
+            for (const auto &m : detection_.measurements) z.push_back({m.point, m.box, m.sad});
+        }
+        prev_level_ = level;
+        times.add("parallax", sw.ms());
+    }
+
+    // joint particle filter
+    {
+        Stopwatch sw;
+        pf_.step(dt, z, gray.size(), vp.y);
+        const size_t first = tracks.size();
+        pf_.report(tracks);
+        last_tracks_.assign(tracks.begin() + long(first), tracks.end());
+        times.add("particles", sw.ms());
+    }
+}
+
+float ParallaxTracker::road_residual(const LaneModel &lanes) const {
+    if (prev_.empty() || !h_step_.valid) return kNaN;
+    cv::Mat warped;
+    cv::warpPerspective(prev_, warped, h_step_.H, cur_.size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
+    cv::Mat valid;
+    cv::warpPerspective(cv::Mat(prev_.size(), CV_8UC1, cv::Scalar(255)), valid, h_step_.H, cur_.size(), cv::INTER_NEAREST,
+                        cv::BORDER_CONSTANT, cv::Scalar(0));
+    cv::Mat road = cv::Mat::zeros(cur_.size(), CV_8UC1);
+    if (lanes.road_polygon.size() >= 3)
+        cv::fillPoly(road, std::vector<std::vector<cv::Point>>{lanes.road_polygon}, cv::Scalar(255));
+    else
+        road.rowRange(std::clamp(int(cam_.horizon_row()) + 1, 0, road.rows), road.rows).setTo(255);
+    for (const auto &m : detection_.measurements) {
+        const cv::Rect b(cv::Point(int(m.box.x) - 4, int(m.box.y) - 4), cv::Point(int(m.box.br().x) + 4, int(m.box.br().y) + 4));
+        road(b & cv::Rect(0, 0, road.cols, road.rows)).setTo(0);
+    }
+    road &= valid;
+    cv::Mat diff;
+    cv::absdiff(cur_, warped, diff);
+    const int n = cv::countNonZero(road);
+    return n > 0 ? float(cv::sum(diff & road)[0] / n) : kNaN;
+}
+
+} // namespace hw

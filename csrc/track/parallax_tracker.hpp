@@ -1,0 +1,91 @@
+// parallax_tracker.hpp - the paper-000 pipeline as a VehicleTracker: lane-marking features ->
+// filtered road homography -> aligned-difference detector -> joint particle filter.
+//
+// Per frame:
+//   features    markings, Harris corners, LK correspondences with the previous frame, started from
+//               the predicted homography (ego speed from CAN informs it when known); corners inside
+//               the boxes of tracked vehicles are not used (they are not on the road);
+//   homography  normalised DLT of the correspondences, constant-state Kalman filter with the 2-norm
+//               gate; the prediction carries on when no measurement is accepted;
+//   parallax    while the filter holds an estimate, the previous frame's road band is warped onto the
+//               current one and its differences become measurements;
+//   particles   the joint SIR filter takes the measurements, confirms entries, removes exits.
+// Every frame with an alignment is a full detection: the detector always scans the whole road area.
+// The vehicle boxes come from the measurement regions (bottom edge and width), so the range, TTC and
+// lead stages treat them like any other track.
+#pragma once
+
+#include "detect/lane_features.hpp"
+#include "detect/parallax_detector.hpp"
+#include "geometry/homography_dlt.hpp"
+#include "geometry/homography_kalman.hpp"
+#include "track/particle_filter.hpp"
+#include "track/tracker.hpp"
+
+#include <vector>
+
+namespace hw {
+
+// Section "homography": the DLT measurement and its Kalman filter.
+struct HomographyParams {
+    DltParams dlt;
+    HomographyKalmanParams kalman;
+    void bind(ParamMap &m) {
+        dlt.bind(m);
+        kalman.bind(m);
+    }
+};
+
+// Section "parallax": the detector and how the tracker feeds it.
+struct ParallaxTrackerParams {
+    ParallaxParams detect;
+    double band_above_horizon = 0.08;  // share of the image height above the horizon kept in the road band
+    bool exclude_vehicle_corners = true;  // road features inside tracked vehicles' boxes are not used
+    double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
+
+    void bind(ParamMap &m);
+};
+
+// What the homography stage did in the last frame (for tests, run_stage and evaluation).
+struct HomographyStep {
+    HomographyKalman::Status status = HomographyKalman::Status::kNone;
+    bool valid = false;          // an estimate exists after this frame
+    int coast_frames = 0;
+    int correspondences = 0;     // after the vehicle-box exclusion
+    int used = 0;                // in the DLT fit
+    double distance = NAN;       // ||H_meas - H_pred||_2 (road-band coordinates)
+    cv::Matx33d H = cv::Matx33d::eye();  // estimate, previous -> current pixels
+};
+
+class ParallaxTracker final : public VehicleTracker {
+public:
+    ParallaxTracker(const LaneFeatureParams &features, const HomographyParams &homography,
+                    const ParallaxTrackerParams &parallax, const ParticleParams &particles, const CameraParams &cam);
+    void step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
+              bool &full_detection) override;
+    void reset() override;
+
+    const HomographyStep &homography() const { return h_step_; }
+    const ParallaxFrame &detection() const { return detection_; }
+    // Mean |I_k - warp(I_{k-1}, H)| over the road area (full resolution) outside the detections, for
+    // the last frame; NaN without an alignment.
+    float road_residual(const LaneModel &lanes) const;
+
+private:
+    LaneFeatureParams fp_;
+    HomographyParams hp_;
+    ParallaxTrackerParams pp_;
+    CameraParams cam_;
+    HomographyKalman kf_;
+    JointParticleFilter pf_;
+    cv::Mat prev_, cur_;           // full frames (copies)
+    cv::Mat prev_level_;           // previous road band at the detector's level
+    double last_t_s_ = 0.0;
+    bool started_ = false;
+    HomographyStep h_step_;
+    ParallaxFrame detection_;
+    int band_top_ = 0;
+    std::vector<TrackState> last_tracks_;
+};
+
+} // namespace hw

@@ -1,0 +1,358 @@
+#include "track/particle_filter.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace hw {
+
+void ParticleParams::bind(ParamMap &m) {
+    m.add("particles", particles, 10, 100000,
+          "n_s; particles of the joint filter; the cost per frame is proportional to n_s * N * (M + 1); 500 keeps "
+          "eight vehicles well inside a millisecond");
+    m.add("reserve_share", reserve_share, 0.01, 0.9,
+          "n_r / n_s: share of the particles that get the extra vehicle when a transitory period starts");
+    m.add("end_share", end_share, 0.001, 0.49,
+          "the transitory period ends when the N- or the (N+1)-particles fall below this share: the hypothesised "
+          "vehicle is then confirmed or forgotten");
+    m.add("max_transitory_frames", max_transitory_frames, 1, 1000,
+          "frames; a period still undecided after this long is decided by the majority");
+    m.add("a_u", a_u, 0.0, 1.0,
+          "mixing coefficient of the uniform clutter term in the stationary state (measurements explained by "
+          "noise rather than a vehicle)");
+    m.add("a_u_transitory", a_u_transitory, 0.0, 1.0,
+          "clutter coefficient during a transitory period, raised so that only persistent, coherent measurements "
+          "make a new vehicle (paper III-B)");
+    m.add("p_detect", p_detect, 0.0, 0.999,
+          "detection probability: each vehicle no measurement supports multiplies a particle's weight by "
+          "1 - p_detect; this is what lets unsupported hypotheses fade");
+    m.add("meas_sigma_x_frac", meas_sigma_x_frac, 0.0, 2.0,
+          "region widths; 1-sigma error of a measurement's column (region ends are blurred by spill and wheels)");
+    m.add("meas_sigma_y_frac", meas_sigma_y_frac, 0.0, 2.0,
+          "region widths; 1-sigma error of a measurement's bottom row");
+    m.add("meas_sigma_min_px", meas_sigma_min_px, 0.1, 100.0, "px; floor of both measurement sigmas");
+    m.add("accel_widths_s2", accel_widths_s2, 0.0, 100.0,
+          "vehicle widths / s^2; random image acceleration of a vehicle (a 1.8 m car braking at 3.6 m/s^2 is 2 "
+          "widths/s^2)");
+    m.add("ego_accel_px_s2", ego_accel_px_s2, 0.0, 1e5,
+          "px / s^2; image acceleration of every vehicle from the ego's pitch and yaw shake");
+    m.add("init_speed_px_s", init_speed_px_s, 0.0, 1e4,
+          "px / s; velocity spread of a hypothesised vehicle (vehicles entering from the side cross the image at "
+          "100-300 px/s)");
+    m.add("gate_sigma", gate_sigma, 0.5, 20.0,
+          "Mahalanobis distance beyond which a measurement is explained by no vehicle (it may start a transitory "
+          "period) and does not update a vehicle's box");
+    m.add("size_alpha", size_alpha, 0.0, 1.0,
+          "smoothing gain of a vehicle's box width and height from the measurement regions near it");
+    m.add("max_vehicles", max_vehicles, 1, 64, "N at most; bounds the cost");
+    m.add("max_measurements", max_measurements, 1, 256,
+          "measurements used per frame at most, strongest first; bounds the cost");
+    m.add("max_missed_frames", max_missed_frames, 1, 10000,
+          "frames; a vehicle no measurement came near for this long is removed (it stopped showing parallax)");
+    m.add("roi_margin_px", roi_margin_px, -1000.0, 1000.0,
+          "px; a vehicle whose estimate is this far outside the image (or at the horizon) has left");
+    m.add("duplicate_frac", duplicate_frac, 0.0, 2.0,
+          "vehicle widths; two vehicles whose estimates are this close follow one vehicle: the younger goes");
+    m.add("seed", seed, 0, 2147483647, "random seed of the filter; runs are reproducible");
+}
+
+JointParticleFilter::JointParticleFilter(const ParticleParams &p) : p_(p), rng_(uint32_t(p.seed)) { reset(); }
+
+void JointParticleFilter::reset() {
+    vehicles_.clear();
+    candidate_ = Vehicle{};
+    transitory_frames_ = 0;
+    state_.assign(size_t(p_.particles) * 4, 0.f);
+    extended_.assign(size_t(p_.particles), 0);
+    logw_.assign(size_t(p_.particles), 0.0);
+    rng_.seed(uint32_t(p_.seed));
+    next_id_ = 1;
+}
+
+void JointParticleFilter::propagate(double dt) {
+    std::normal_distribution<float> n01(0.f, 1.f);
+    const int N = int(vehicles_.size());
+    const float t = float(dt), t2 = 0.5f * t * t;
+    auto sigma_a = [&](float w) {
+        return std::sqrt(float(p_.accel_widths_s2 * p_.accel_widths_s2) * w * w +
+                         float(p_.ego_accel_px_s2 * p_.ego_accel_px_s2));
+    };
+    std::vector<float> sa(size_t(N) + 1);
+    for (int i = 0; i < N; ++i) sa[size_t(i)] = sigma_a(vehicles_[size_t(i)].w);
+    sa[size_t(N)] = sigma_a(candidate_.w);
+    for (int s = 0; s < p_.particles; ++s) {
+        float *x = particle(s);
+        const int nv = N + (extended_[size_t(s)] ? 1 : 0);
+        for (int i = 0; i < nv; ++i, x += 4) {
+            // x' = x + vx dt + a dt^2 / 2, vx' = vx + a dt
+            const float ax = sa[size_t(i)] * n01(rng_), ay = sa[size_t(i)] * n01(rng_);
+            x[0] += x[2] * t + ax * t2;
+            x[1] += x[3] * t + ay * t2;
+            x[2] += ax * t;
+            x[3] += ay * t;
+        }
+    }
+}
+
+void JointParticleFilter::weigh(const std::vector<PointMeasurement> &z, cv::Size image) {
+    const int N = int(vehicles_.size());
+    const double a_u = transitory() ? p_.a_u_transitory : p_.a_u;
+    const double U = 1.0 / (double(image.width) * double(image.height));  // uniform clutter density
+    const double pd = p_.p_detect;
+    struct Sig { float ix, iy; double norm; };
+    std::vector<Sig> sig;
+    for (const auto &m : z) {
+        const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * m.box.width);
+        const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * m.box.width);
+        sig.push_back({1.f / sx, 1.f / sy, 1.0 / (2.0 * M_PI * double(sx) * double(sy))});
+    }
+    std::vector<double> g(size_t(N) + 1);
+    for (int s = 0; s < p_.particles; ++s) {
+        const float *x = particle(s);
+        const int nv = N + (extended_[size_t(s)] ? 1 : 0);
+        std::fill(g.begin(), g.end(), 0.0);
+        double lw = 0.0;
+        for (size_t j = 0; j < z.size(); ++j) {
+            double sum_p = 0.0, sum_p2 = 0.0;
+            for (int i = 0; i < nv; ++i) {
+                const float dx = (z[j].z.x - x[4 * i]) * sig[j].ix, dy = (z[j].z.y - x[4 * i + 1]) * sig[j].iy;
+                const float d2 = dx * dx + dy * dy;
+                if (d2 > 60.f) continue;  // exp(-30): nothing
+                const double e = std::exp(-0.5 * double(d2));
+                const double pij = e * sig[j].norm;
+                sum_p += pij;
+                sum_p2 += pij * pij;
+                g[size_t(i)] = std::max(g[size_t(i)], e);
+            }
+            // sum_i a_ij p_ij + a_u U with a_ij = (1 - a_u) p_ij / sum_i p_ij   (eq. 2)
+            const double mix = sum_p > 0.0 ? (1.0 - a_u) * sum_p2 / sum_p : 0.0;
+            lw += std::log(mix + a_u * U);
+        }
+        for (int i = 0; i < nv; ++i) lw += std::log(1.0 - pd + pd * g[size_t(i)]);  // detection term
+        logw_[size_t(s)] = lw;
+    }
+}
+
+void JointParticleFilter::resample() {
+    const int ns = p_.particles;
+    const double mx = *std::max_element(logw_.begin(), logw_.end());
+    std::vector<double> cum(size_t(ns));
+    double acc = 0.0;
+    for (int s = 0; s < ns; ++s) cum[size_t(s)] = (acc += std::exp(logw_[size_t(s)] - mx));
+    // Systematic: one uniform offset, then n_s evenly spaced pointers into the cumulative weights.
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    const double step = acc / ns;
+    double u = u01(rng_) * step;
+    std::vector<float> next(state_.size());
+    std::vector<uint8_t> ext(size_t(ns));
+    const size_t S = size_t(stride());
+    int k = 0;
+    for (int s = 0; s < ns; ++s, u += step) {
+        while (k < ns - 1 && cum[size_t(k)] < u) ++k;
+        std::copy_n(&state_[size_t(k) * S], S, &next[size_t(s) * S]);
+        ext[size_t(s)] = extended_[size_t(k)];
+    }
+    state_.swap(next);
+    extended_.swap(ext);
+}
+
+void JointParticleFilter::estimate() {
+    const int N = int(vehicles_.size());
+    auto mean_of = [&](int i, bool only_extended, Vehicle &v) {
+        cv::Vec4d sum(0, 0, 0, 0);
+        double sy2 = 0.0;
+        int n = 0;
+        for (int s = 0; s < p_.particles; ++s) {
+            if (only_extended && !extended_[size_t(s)]) continue;
+            const float *x = particle(s) + 4 * i;
+            for (int c = 0; c < 4; ++c) sum[c] += x[c];
+            sy2 += double(x[1]) * x[1];
+            ++n;
+        }
+        if (n == 0) return;
+        v.mean = cv::Vec4f(float(sum[0] / n), float(sum[1] / n), float(sum[2] / n), float(sum[3] / n));
+        v.sigma_y = float(std::sqrt(std::max(0.0, sy2 / n - double(v.mean[1]) * v.mean[1])));
+    };
+    for (int i = 0; i < N; ++i) mean_of(i, false, vehicles_[size_t(i)]);
+    if (transitory()) mean_of(N, true, candidate_);
+}
+
+void JointParticleFilter::end_transitory() {
+    if (!transitory()) return;
+    ++transitory_frames_;
+    const int ns = p_.particles;
+    const int n_ext = int(std::count(extended_.begin(), extended_.end(), uint8_t(1)));
+    const double share = double(n_ext) / ns;
+    const bool decide = transitory_frames_ >= p_.max_transitory_frames;
+    if (share < p_.end_share || (decide && share < 0.5)) {
+        std::fill(extended_.begin(), extended_.end(), uint8_t(0));  // the hypothesis fades
+        candidate_ = Vehicle{};
+        transitory_frames_ = 0;
+        return;
+    }
+    if (share > 1.0 - p_.end_share || decide) {
+        // The (N+1)-particles won: every particle gets the new vehicle (copied from one that has it).
+        const int N = int(vehicles_.size());
+        std::vector<int> with;
+        for (int s = 0; s < ns; ++s)
+            if (extended_[size_t(s)]) with.push_back(s);
+        std::uniform_int_distribution<int> pick(0, int(with.size()) - 1);
+        const size_t S = size_t(stride()), S2 = S + 4;
+        std::vector<float> next(size_t(ns) * S2, 0.f);
+        for (int s = 0; s < ns; ++s) {
+            std::copy_n(&state_[size_t(s) * S], S, &next[size_t(s) * S2]);
+            if (!extended_[size_t(s)])
+                std::copy_n(&state_[size_t(with[size_t(pick(rng_))]) * S + 4 * size_t(N)], 4, &next[size_t(s) * S2 + 4 * size_t(N)]);
+        }
+        state_.swap(next);
+        std::fill(extended_.begin(), extended_.end(), uint8_t(0));
+        vehicles_.push_back(candidate_);
+        candidate_ = Vehicle{};
+        transitory_frames_ = 0;
+    }
+}
+
+void JointParticleFilter::remove_vehicle(int i) {
+    const size_t S = size_t(stride()), S2 = S - 4;
+    std::vector<float> next(size_t(p_.particles) * S2);
+    for (int s = 0; s < p_.particles; ++s) {
+        const float *src = &state_[size_t(s) * S];
+        float *dst = &next[size_t(s) * S2];
+        std::copy_n(src, 4 * size_t(i), dst);
+        std::copy(src + 4 * size_t(i) + 4, src + S, dst + 4 * size_t(i));
+    }
+    state_.swap(next);
+    vehicles_.erase(vehicles_.begin() + i);
+}
+
+void JointParticleFilter::bookkeeping(const std::vector<PointMeasurement> &z, cv::Size image, float horizon_row) {
+    // Each vehicle (and the candidate) takes its size from the nearest measurement within the gate.
+    auto update = [&](Vehicle &v) {
+        int best = -1;
+        float best_d2 = float(p_.gate_sigma * p_.gate_sigma);
+        for (size_t j = 0; j < z.size(); ++j) {
+            const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * z[j].box.width);
+            const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * z[j].box.width);
+            const float dx = (z[j].z.x - v.mean[0]) / sx, dy = (z[j].z.y - v.mean[1]) / sy;
+            if (dx * dx + dy * dy < best_d2) { best_d2 = dx * dx + dy * dy; best = int(j); }
+        }
+        ++v.age;
+        if (best < 0) { ++v.missed; return; }
+        v.missed = 0;
+        ++v.hits;
+        const float a = float(p_.size_alpha);
+        v.w += a * (z[size_t(best)].box.width - v.w);
+        v.h += a * (z[size_t(best)].box.height - v.h);
+    };
+    for (auto &v : vehicles_) update(v);
+    if (transitory()) update(candidate_);
+
+    // Exits: out of the image, up at the horizon, or unsupported for too long.
+    const float m = float(p_.roi_margin_px);
+    for (int i = int(vehicles_.size()) - 1; i >= 0; --i) {
+        const Vehicle &v = vehicles_[size_t(i)];
+        const bool out = v.mean[0] < -m || v.mean[0] > float(image.width) + m || v.mean[1] > float(image.height) + m ||
+                         v.mean[1] < horizon_row + 2.f;
+        if (out || v.missed > p_.max_missed_frames) remove_vehicle(i);
+    }
+    // Two vehicles on one: the one measured fewer times goes.
+    for (int i = 0; i < int(vehicles_.size()); ++i)
+        for (int k = i + 1; k < int(vehicles_.size()); ++k) {
+            const Vehicle &a = vehicles_[size_t(i)], &b = vehicles_[size_t(k)];
+            const float lim = float(p_.duplicate_frac) * std::max(a.w, b.w);
+            if (std::fabs(a.mean[0] - b.mean[0]) < lim && std::fabs(a.mean[1] - b.mean[1]) < lim) {
+                remove_vehicle(a.hits < b.hits ? i : k);
+                i = -1;  // restart: indices moved
+                break;
+            }
+        }
+}
+
+void JointParticleFilter::start_transitory(const std::vector<PointMeasurement> &z) {
+    if (transitory() || int(vehicles_.size()) >= p_.max_vehicles) return;
+    // The strongest measurement that no vehicle explains (not within the gate of an estimate, nor on
+    // a vehicle's box: a second region on one vehicle is not a new vehicle).
+    int pick = -1;
+    for (size_t j = 0; j < z.size() && pick < 0; ++j) {
+        bool explained = false;
+        for (const auto &v : vehicles_) {
+            const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * z[j].box.width);
+            const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * z[j].box.width);
+            const float dx = (z[j].z.x - v.mean[0]) / sx, dy = (z[j].z.y - v.mean[1]) / sy;
+            const bool on_box = std::fabs(z[j].z.x - v.mean[0]) < 0.6f * v.w && z[j].z.y <= v.mean[1] + 0.1f * v.w &&
+                                z[j].z.y >= v.mean[1] - v.h;
+            if (dx * dx + dy * dy < float(p_.gate_sigma * p_.gate_sigma) || on_box) { explained = true; break; }
+        }
+        if (!explained) pick = int(j);
+    }
+    if (pick < 0) return;
+    const PointMeasurement &m = z[size_t(pick)];
+    candidate_ = Vehicle{};
+    candidate_.id = next_id_++;
+    candidate_.w = m.box.width;
+    candidate_.h = m.box.height;
+    candidate_.hits = 1;
+    candidate_.mean = cv::Vec4f(m.z.x, m.z.y, 0.f, 0.f);
+    transitory_frames_ = 0;
+    // n_r particles (any: after resampling all weigh the same) get the new vehicle at the measurement.
+    const int N = int(vehicles_.size());
+    const int nr = std::max(1, int(std::lround(p_.reserve_share * p_.particles)));
+    const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * m.box.width);
+    const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * m.box.width);
+    std::normal_distribution<float> n01(0.f, 1.f);
+    for (int k = 0; k < nr; ++k) {
+        const int s = int((long(k) * p_.particles) / nr);
+        float *x = particle(s) + 4 * N;
+        x[0] = m.z.x + sx * n01(rng_);
+        x[1] = m.z.y + sy * n01(rng_);
+        x[2] = float(p_.init_speed_px_s) * n01(rng_);
+        x[3] = float(p_.init_speed_px_s) * n01(rng_);
+        extended_[size_t(s)] = 1;
+    }
+}
+
+void JointParticleFilter::step(double dt_s, const std::vector<PointMeasurement> &z_in, cv::Size image, float horizon_row) {
+    CV_Assert(dt_s >= 0.0 && image.width > 0 && image.height > 0);
+    std::vector<PointMeasurement> z = z_in;
+    std::stable_sort(z.begin(), z.end(), [](const PointMeasurement &a, const PointMeasurement &b) {
+        return a.strength > b.strength;
+    });
+    if (int(z.size()) > p_.max_measurements) z.resize(size_t(p_.max_measurements));
+    if (!vehicles_.empty() || transitory()) {
+        // Perspective: a vehicle's box scales with its row's distance below the horizon.
+        auto rescale = [&](Vehicle &v, float y_before) {
+            const float d0 = y_before - horizon_row, d1 = v.mean[1] - horizon_row;
+            if (d0 > 1.f && d1 > 1.f) { v.w *= d1 / d0; v.h *= d1 / d0; }
+        };
+        std::vector<float> y_before;
+        for (const auto &v : vehicles_) y_before.push_back(v.mean[1]);
+        const float cand_y = candidate_.mean[1];
+        propagate(dt_s);
+        weigh(z, image);
+        resample();
+        estimate();
+        for (size_t i = 0; i < vehicles_.size(); ++i) rescale(vehicles_[i], y_before[i]);
+        if (transitory()) rescale(candidate_, cand_y);
+        end_transitory();
+        bookkeeping(z, image, horizon_row);
+    }
+    start_transitory(z);
+}
+
+void JointParticleFilter::report(std::vector<TrackState> &out) const {
+    auto one = [&](const Vehicle &v, bool confirmed) {
+        TrackState t;
+        t.id = v.id;
+        t.confirmed = confirmed;
+        t.age_frames = v.age;
+        t.box = cv::Rect2f(v.mean[0] - 0.5f * v.w, v.mean[1] - v.h, v.w, v.h);
+        t.vel_px_s = cv::Point2f(v.mean[2], v.mean[3]);
+        t.bottom_sigma_px = v.sigma_y;
+        t.confidence = float(v.hits) / float(v.hits + v.missed + 1);
+        out.push_back(t);
+    };
+    for (const auto &v : vehicles_) one(v, true);
+    if (transitory()) one(candidate_, false);
+}
+
+} // namespace hw

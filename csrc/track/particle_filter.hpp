@@ -1,0 +1,124 @@
+// particle_filter.hpp - one SIR particle filter over the joint state of all vehicles, with entries
+// and exits managed by the filter itself (paper 000, section III).
+//
+// State of a particle: (x, y, vx, vy) of each of the N vehicles stacked, x/y the image position of
+// the bottom-centre (px), vx/vy its image velocity (px/s). Motion: constant velocity with a random
+// acceleration a ~ N(0, sigma_a^2) per axis over each step,
+//     x' = x + vx dt + a dt^2 / 2,   vx' = vx + a dt,
+// sigma_a^2 = (accel_widths * w)^2 + ego_accel^2 (w the vehicle's image width: near vehicles move
+// faster in the image; the ego's pitch and yaw shake moves everything).
+// Likelihood of the M measurements z_j (paper eq. 2):
+//     p(z | x) = prod_j [ sum_i a_ij p_i(z_j | x_i) + a_u U(z_j) ],
+//     a_ij = (1 - a_u) p_i(z_j | x_i) / sum_i p_i(z_j | x_i),
+// p_i a bivariate Gaussian around vehicle i (sigma from the measurement's width), U uniform over the
+// image. With those mixing weights the bracket is (1 - a_u) sum_i p_ij^2 / sum_i p_ij + a_u U.
+// Eq. 2 alone never penalises a hypothesised vehicle that no measurement supports (a vehicle far
+// from every measurement only lowers its own mixing weights), so the transitory period could not end
+// in favour of the N-particles as the paper describes. We multiply by a detection term per vehicle,
+//     prod_i (1 - p_d + p_d g_i),   g_i = max_j exp(-d_ij^2 / 2)   (d_ij the Mahalanobis distance),
+// which is 1 for a vehicle on a measurement and 1 - p_d for one without.
+// SIR: propagate, weight, resample (systematic) every step; estimates are particle means.
+//
+// Entries (transitory period): when a measurement is farther than gate_sigma from every estimate
+// and no period runs, n_r = reserve_share * n_s particles get dimension N+1, the new vehicle at the
+// measurement (velocity spread init_speed_px_s), and a_u is raised to a_u_transitory so that only
+// persistent measurements win. Both populations are propagated and weighted together; the period
+// ends when either falls below end_share of the particles: the N+1-particles take over (the vehicle
+// is confirmed, with the id it was given at the start) or vanish. A measurement seen in one frame
+// only therefore never becomes a confirmed vehicle.
+// Exits: a vehicle whose estimate leaves the image (by roi_margin_px) or rises to the horizon is
+// removed; so is one that no measurement has come near for max_missed_frames (the paper removes
+// vehicles at the border only, but a vehicle whose motion stops showing parallax would otherwise
+// drift on its last velocity forever).
+// Cost per step: O(n_s * N * (M + 1)) for weighting and O(n_s * N) for propagation and resampling,
+// i.e. linear in N for a fixed particle count and quadratic when M grows with N; bounded by
+// max_vehicles and max_measurements.
+#pragma once
+
+#include "core/params.hpp"
+#include "core/types.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <random>
+#include <vector>
+
+namespace hw {
+
+struct ParticleParams {
+    int particles = 500;               // n_s
+    double reserve_share = 0.2;        // n_r / n_s devoted to a hypothesised vehicle
+    double end_share = 0.1;            // a population below this share ends the transitory period
+    int max_transitory_frames = 15;    // the period is decided by majority after this many frames
+    double a_u = 0.1;                  // clutter mixing coefficient, stationary state
+    double a_u_transitory = 0.5;       // raised during a transitory period
+    double p_detect = 0.8;             // detection probability in the per-vehicle detection term
+    double meas_sigma_x_frac = 0.15;   // measurement sigma across, in region widths
+    double meas_sigma_y_frac = 0.08;   // measurement sigma of the bottom row, in region widths
+    double meas_sigma_min_px = 2.0;    // px; floor of both
+    double accel_widths_s2 = 2.0;      // vehicle widths / s^2; random image acceleration of a vehicle
+    double ego_accel_px_s2 = 300.0;    // px / s^2; image acceleration from the ego's shake
+    double init_speed_px_s = 150.0;    // px / s; velocity spread of a new vehicle
+    double gate_sigma = 3.0;           // measurement farther than this (Mahalanobis) from all vehicles: unexplained
+    double size_alpha = 0.3;           // smoothing gain of a vehicle's box size from its measurements
+    int max_vehicles = 16;             // N at most (cost bound)
+    int max_measurements = 16;         // measurements used per frame at most, strongest first (cost bound)
+    int max_missed_frames = 12;        // frames without a measurement near it before a vehicle is removed
+    double roi_margin_px = 0.0;        // px; an estimate this far outside the image has left
+    double duplicate_frac = 0.3;       // two vehicles closer than this many widths: the younger goes
+    int seed = 1;                      // random seed (runs are reproducible)
+
+    void bind(ParamMap &m);
+};
+
+// A measurement for the filter: mid-lower point and the region's box.
+struct PointMeasurement {
+    cv::Point2f z;
+    cv::Rect2f box;
+    float strength = 0.f;  // orders measurements when there are too many
+};
+
+class JointParticleFilter {
+public:
+    explicit JointParticleFilter(const ParticleParams &p);
+
+    // One step: propagate over dt, weight with the measurements, resample, estimate, manage entries
+    // and exits. image: frame size; horizon_row: estimates above it have left.
+    void step(double dt_s, const std::vector<PointMeasurement> &z, cv::Size image, float horizon_row);
+    // Every vehicle (confirmed) and the hypothesised one (not confirmed), as tracks.
+    void report(std::vector<TrackState> &out) const;
+    int vehicles() const { return int(vehicles_.size()); }
+    bool transitory() const { return candidate_.id > 0; }
+    void reset();
+
+private:
+    struct Vehicle {
+        int id = -1;
+        float w = 0.f, h = 0.f;    // box size, px
+        int age = 0, missed = 0, hits = 0;
+        cv::Vec4f mean;            // particle mean (x, y, vx, vy)
+        float sigma_y = 0.f;       // particle spread of y
+    };
+    int stride() const { return 4 * (int(vehicles_.size()) + 1); }
+    float* particle(int s) { return &state_[size_t(s) * size_t(stride())]; }
+    void propagate(double dt);
+    void weigh(const std::vector<PointMeasurement> &z, cv::Size image);
+    void resample();
+    void estimate();
+    void end_transitory();
+    void bookkeeping(const std::vector<PointMeasurement> &z, cv::Size image, float horizon_row);
+    void remove_vehicle(int i);
+    void start_transitory(const std::vector<PointMeasurement> &z);
+
+    ParticleParams p_;
+    std::vector<Vehicle> vehicles_;
+    Vehicle candidate_;                 // id > 0 during a transitory period
+    int transitory_frames_ = 0;
+    std::vector<float> state_;          // n_s particles x stride floats; slot N is the candidate's
+    std::vector<uint8_t> extended_;     // particle carries the candidate
+    std::vector<double> logw_;
+    std::mt19937 rng_;
+    int next_id_ = 1;
+};
+
+} // namespace hw
