@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Callable, Iterator, Optional
 
 import cv2
-import numpy as np
 
 from app import config as configuration
 from app.annotate import VideoOut, annotate

@@ -1,7 +1,6 @@
 """The door to the C++ core: versions, errors as exceptions, offline processing, the loop's queue."""
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np

@@ -12,7 +12,7 @@ import pytest
 
 from app.core import Pipeline
 from app.eval.lanes_sample import boundary_on_gt_lane
-from app.eval.tusimple_lanes import bench_image, evaluate_lanes, lane_threshold, segments_to_tusimple
+from app.eval.tusimple_lanes import bench_image, evaluate_lanes, segments_to_tusimple
 from app.sim import Camera, frame_count, load_scenario, render
 from app.sim.frames import scenario_camera
 from tests.conftest import data_path

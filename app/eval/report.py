@@ -23,7 +23,7 @@ def markdown(report: dict) -> str:
     syn = report.get("synthetic")
     if syn:
         o = syn["overall"]
-        out += [f"### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5)", "",
+        out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5)", "",
                 "| scenario | precision | recall | MOTA | IDF1 | id switches | fragments |",
                 "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
         for name, m in syn["per_scenario"].items():

@@ -7,7 +7,6 @@ one of them is neither a hit nor a false positive. Tracks are the confirmed ones
 from __future__ import annotations
 
 import dataclasses
-from collections import defaultdict
 from typing import Callable, Optional
 
 import motmetrics as mm

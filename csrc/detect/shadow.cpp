@@ -177,6 +177,30 @@ float boundary_row(const cv::Mat &gy, int row0, int col0, const Edge &e) {
     return float(lo) + peak_position(v, argmax(v, 0, int(v.size())));
 }
 
+// Share of dark pixels (at most `dark`) just above row y over columns [xa, xb] (clipped to the
+// scanned interval of that row); -1 when nothing of the range is scanned.
+float dark_share(const cv::Mat &gray, const RoadPrior &road, int y, int xa, int xb, int dark) {
+    int n = 0, d = 0;
+    for (int r = std::max(road.y_top, y - 2); r <= y - 1; ++r) {
+        const uint8_t *row = gray.ptr<uint8_t>(r);
+        for (int x = std::max(xa, road.left(r)); x <= std::min(xb, road.right(r)); ++x, ++n) d += row[x] <= dark;
+    }
+    return n ? float(d) / float(n) : -1.f;
+}
+
+// A vehicle's shadow ends with the vehicle: beside it lies lit road. The edge of a shadow across the
+// road (an overpass, a row of trees) only breaks where lane markings or vehicles interrupt it, and
+// its dark side goes on past the ends of each piece. Such a piece is no vehicle's bottom edge.
+bool part_of_band(const cv::Mat &gray, const RoadPrior &road, const Edge &e, const ShadowParams &p) {
+    const int reach = std::max(3, int(0.5f * road.expected_width(e.y_bottom)));
+    const int dark = int(p.dark_rel * e.road_gray);
+    const float left = dark_share(gray, road, e.y_bottom, e.x1 - reach, e.x1 - 1, dark);
+    const float right = dark_share(gray, road, e.y_bottom, e.x2 + 1, e.x2 + reach, dark);
+    if (left < 0.f && right < 0.f) return false;  // nothing scanned beside it: cannot tell
+    // Unscanned on one side (image or road border): the band may go on there.
+    return (left < 0.f || left >= p.band_dark_frac) && (right < 0.f || right >= p.band_dark_frac);
+}
+
 } // namespace
 
 ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p) {
@@ -225,9 +249,10 @@ std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &
         if (!(w_exp > 0.f)) continue;
         if (e.width() < p.min_width_frac * w_exp) continue;
         if (e.width() > p.max_width_ratio * w_exp) continue;  // a dark band across the road
-        e.bottom = boundary_row(gy, road.y_top, xmin, e);
         e.road_gray = levels.level(levels.cell(e.y_bottom, (e.x1 + e.x2) / 2, road.left(e.y_bottom),
                                                road.right(e.y_bottom)));
+        if (part_of_band(gray, road, e, p)) continue;
+        e.bottom = boundary_row(gy, road.y_top, xmin, e);
         kept.push_back(e);
     }
 

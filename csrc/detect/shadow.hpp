@@ -9,7 +9,8 @@
 // thresholds here follow the road's own gray level, measured in every frame in cells of the road
 // area (bands of rows x thirds across): an edge pixel needs a step of at least grad_rel times the
 // local road level, and the pixel above it must be darker than dark_rel times that level. A dark band
-// much wider than a vehicle (an overpass or tree shadow across the road) is dropped here; an edge
+// much wider than a vehicle (an overpass or tree shadow across the road) is dropped here, also when
+// lane markings break it into vehicle-sized pieces (its dark side goes on past their ends); an edge
 // moderately wider than a vehicle (a long shadow at low sun) is kept for verification to find the
 // vehicle's sides inside it.
 #pragma once
@@ -36,6 +37,7 @@ struct ShadowParams {
     double dark_rel = 0.8;          // the shadow side must be darker than this fraction of the road level
     int level_bands = 8;            // row bands for the road level
     int level_columns = 3;          // cells across the road per band
+    double band_dark_frac = 0.5;    // dark share beside both ends that marks a piece of a band across the road
     double reduce_height_ratio = 0.8;  // edges up to this many widths above a lower edge belong to its vehicle
     int max_hypotheses = 48;        // cap per frame (strongest kept), bounds the verification cost
 
@@ -69,6 +71,10 @@ struct ShadowParams {
               "row bands in which the road gray level is measured; the level changes with range");
         m.add("level_columns", level_columns, 1, 16,
               "cells across the road per band; shaded and sunlit lanes get their own level");
+        m.add("band_dark_frac", band_dark_frac, 0.0, 1.01,
+              "share of dark pixels just above the edge, over half a vehicle width beyond each end; "
+              "when both sides reach it the edge is a piece of a shadow across the road (an overpass "
+              "broken by lane markings), not a vehicle's; above 1 switches the check off");
         m.add("reduce_height_ratio", reduce_height_ratio, 0.0, 3.0,
               "vehicle widths; an edge this far above a lower, overlapping edge is part of the same "
               "vehicle (bumper, window) and is dropped, leaving one bottom edge per vehicle");
