@@ -10,7 +10,7 @@ import numpy as np
 
 from app import config as configuration
 from app.core import Pipeline
-from app.eval.tusimple_boxes import tusimple_config
+from app.eval.tusimple_boxes import TUSIMPLE_LANE_PITCH_DEG, tusimple_config
 from app.eval.tusimple_lanes import evaluate_lanes, lane_threshold, segments_to_tusimple
 
 def boundary_on_gt_lane(lane, label: dict, width: int) -> bool:
@@ -49,7 +49,7 @@ def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optio
                 raise FileNotFoundError(f"{label_file.parent / lab['raw_file']}: cannot be read")
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # the sample is TuSimple's camera scaled down
-                cfg = tusimple_config(configuration.load(config_path))
+                cfg = tusimple_config(configuration.load(config_path), TUSIMPLE_LANE_PITCH_DEG)
                 cfg["camera"] = configuration.scaled_camera(cfg["camera"], *size)
                 pipes[size] = Pipeline(configuration.core_sections(cfg))
             r = pipes[size].run_stage("lanes", gray)

@@ -42,7 +42,8 @@ def markdown(report: dict) -> str:
                 "| box height | ground truth | detected | false positives | recall | precision |",
                 "| --- | ---: | ---: | ---: | ---: | ---: |"]
         for band, b in tu["bands"].items():
-            out.append(f"| {band} px | {b['gt']} | {b['tp']} | {b['fp']} | {_f(b['recall'])} | {_f(b['precision'])} |")
+            label = "all" if band == "overall" else f"{band} px"
+            out.append(f"| {label} | {b['gt']} | {b['tp']} | {b['fp']} | {_f(b['recall'])} | {_f(b['precision'])} |")
         out.append("")
     ln = report.get("lanes")
     if ln:

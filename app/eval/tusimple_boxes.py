@@ -19,16 +19,19 @@ from app.eval.matching import match
 
 BANDS = ((0, 20), (20, 40), (40, 80), (80, 10_000))
 
-# The TuSimple clips come with one calibration (train_clip1/calibration.txt): the same camera. Its
-# pitch is not given; the ground-truth ego lanes of the lane sample meet at about 34 % of the image
-# height, 10.5 deg above the principal point's row, so the camera looks down by about that much.
+# The TuSimple vehicle images come with one calibration (train_clip1/calibration.txt). Its pitch is
+# not given: the annotated boxes' bottom rows reach zero width at row 344, 2.6 deg above the principal
+# point, so the camera looks down by about that much.
 TUSIMPLE_CAMERA = {"width": 1280, "height": 720, "fx": 714.1526, "fy": 710.3725, "cx": 675.5754, "cy": 376.2563,
-                   "height_m": 1.80, "pitch_deg": 10.5}
+                   "height_m": 1.80, "pitch_deg": 2.6}
+# The lane sample was taken by another TuSimple car: its ground-truth ego lanes meet at 34 % of the image
+# height, 10.5 deg above the principal point's row.
+TUSIMPLE_LANE_PITCH_DEG = 10.5
 
 
-def tusimple_config(cfg: dict) -> dict:
+def tusimple_config(cfg: dict, pitch_deg: float = TUSIMPLE_CAMERA["pitch_deg"]) -> dict:
     """`cfg` set up for the TuSimple recordings: their camera, and the bonnet in the bottom 8 % masked."""
-    cfg["camera"].update(TUSIMPLE_CAMERA)
+    cfg["camera"].update(TUSIMPLE_CAMERA, pitch_deg=pitch_deg)
     cfg["lanes"]["hood_frac"] = 0.08
     return cfg
 

@@ -201,6 +201,26 @@ bool part_of_band(const cv::Mat &gray, const RoadPrior &road, const Edge &e, con
     return (left < 0.f || left >= p.band_dark_frac) && (right < 0.f || right >= p.band_dark_frac);
 }
 
+// One bottom edge per vehicle: lowest first; an edge above a kept one, overlapping it by half the
+// shorter of the two and within reduce_height_ratio vehicle widths above it (the vehicle's width:
+// the edge's own, but at most 1.5 expected widths for a long shadow), lies on the same vehicle.
+std::vector<Edge> one_per_vehicle(std::vector<Edge> edges, const RoadPrior &road, const ShadowParams &p) {
+    std::sort(edges.begin(), edges.end(), [](const Edge &a, const Edge &b) {
+        return a.y_bottom != b.y_bottom ? a.y_bottom > b.y_bottom : a.width() > b.width();
+    });
+    std::vector<Edge> bottoms;
+    for (const Edge &e : edges) {
+        bool same = false;
+        for (const Edge &k : bottoms) {
+            const float vehicle_w = std::min(float(k.width()), 1.5f * road.expected_width(k.y_bottom));
+            same = same || (overlap(e.x1, e.x2, k.x1, k.x2) * 2 >= std::min(e.width(), k.width()) &&
+                            k.y_bottom - e.y_bottom <= p.reduce_height_ratio * vehicle_w);
+        }
+        if (!same) bottoms.push_back(e);
+    }
+    return bottoms;
+}
+
 } // namespace
 
 ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p) {
@@ -256,24 +276,7 @@ std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &
         kept.push_back(e);
     }
 
-    // One bottom edge per vehicle: lowest first; an edge above a kept one, overlapping it by half the
-    // shorter of the two and within reduce_height_ratio of its width, lies on the same vehicle.
-    std::sort(kept.begin(), kept.end(), [](const Edge &a, const Edge &b) {
-        return a.y_bottom != b.y_bottom ? a.y_bottom > b.y_bottom : a.width() > b.width();
-    });
-    std::vector<Edge> bottoms;
-    for (const Edge &e : kept) {
-        bool same = false;
-        for (const Edge &k : bottoms) {
-            const int ov = overlap(e.x1, e.x2, k.x1, k.x2);
-            const float reach = float(p.reduce_height_ratio * std::min(k.width(), int(road.expected_width(k.y_bottom) * 1.5f)));
-            if (ov * 2 >= std::min(e.width(), k.width()) && k.y_bottom - e.y_bottom <= reach) {
-                same = true;
-                break;
-            }
-        }
-        if (!same) bottoms.push_back(e);
-    }
+    const std::vector<Edge> bottoms = one_per_vehicle(kept, road, p);
 
     std::vector<Hypothesis> out;
     for (const Edge &e : bottoms) {

@@ -58,7 +58,9 @@ struct VerifyParams {
               "find the top as the row up to which both side edges reach (vans and trucks are taller "
               "than the fixed aspect ratio says); false: always aspect_ratio");
         m.add("top_min_aspect", top.min_aspect, 0.1, 3.0,
-              "height / width; a top found lower than this is not trusted (the aspect ratio is used)");
+              "height / width; a top found lower than this is not trusted and aspect_ratio is used: "
+              "0.9 leaves cars (whose upper sides fade into the rear window) to the fixed aspect and "
+              "measures vans and trucks");
         m.add("top_max_aspect", top.max_aspect, 0.2, 5.0,
               "height / width; the top search stops here (a truck's rear is about 1.6)");
         m.add("top_keep_frac", top.keep_frac, 0.05, 1.0,

@@ -11,7 +11,9 @@ namespace hw {
 void KalmanBoxParams::bind(ParamMap &m) {
     m.add("detect_every_n", detect_every_n, 1, 1000,
           "frames; the full shadow + vertical-edge detector runs on every n-th frame to find new "
-          "vehicles, the frames between only search around the predictions (thesis: 10)");
+          "vehicles, the frames between only search around the predictions (thesis: 10; on the "
+          "synthetic suite 3 tracked best: 99.2 % of vehicle-frames, 1 id switch, vs 98.2 % and 9 "
+          "switches at 10, and fewer false tracks than 1)");
     m.add("accel_mps2", accel_mps2, 0.0, 50.0,
           "m/s^2; bound A of a vehicle's acceleration relative to the ego, converted to px/s^2 with the "
           "vehicle's image width; sets the Kalman process noise (bounded-acceleration model)");
@@ -228,9 +230,8 @@ void ThesisTracker::start_tracks(const cv::Mat &gray, const std::vector<Detectio
         if (explained) continue;
         const KalmanBox::Vec3 z(b.x, b.y + b.height, b.x + b.width);
         const double w = b.width;
-        Track t{next_id_++,
-                KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
-                          kalman_.init_speed_mps * w / shadow_.road.vehicle_width_m)};
+        Track t(next_id_++, KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
+                                      kalman_.init_speed_mps * w / shadow_.road.vehicle_width_m));
         t.confidence = dets[i].score;
         t.aspect = b.height / b.width;
         t.appearance = make_template(gray, b, kalman_.ncc_template_px, kalman_.ncc_min_std_gray);

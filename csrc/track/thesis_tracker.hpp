@@ -8,6 +8,14 @@
 // checked by normalised correlation of its last box before it counts as missed. Tracks are confirmed
 // after confirm_hits measurements and deleted after max_misses missed frames (tentative ones after
 // tentative_max_misses). Ids are never reused until reset().
+//
+// Beyond the thesis: the ROI search weighs edges by the prediction (a neighbour's side in the gate
+// cannot take the vehicle's), rejects bottom edges that run on beside the vehicle (an overpass
+// shadow's edge would capture the track); the prediction adds the image acceleration of constant
+// 3D closing speed (perspective_accel) so near, closing vehicles stay inside their gate; a vehicle
+// hidden behind a nearer tracked one is not kept alive by correlating the occluder; tracks whose
+// width leaves [min_width_ratio, max_width_ratio] expected widths are dropped. The scan and the
+// search need no lane model (the detector falls back to the camera's flat-road model).
 #pragma once
 
 #include "detect/verify.hpp"
@@ -60,6 +68,7 @@ public:
 
 private:
     struct Track {
+        Track(int id_, const KalmanBox &kf_) : id(id_), kf(kf_) {}
         int id;
         KalmanBox kf;
         int age = 1, hits = 1, misses = 0, coast = 0;
@@ -68,7 +77,7 @@ private:
         float confidence = 0.5f;
         float aspect = 0.8f;          // box height / width, from the detections
         VehicleTemplate appearance;   // last measured box, for the correlation check
-        KalmanBox::Vec3 appearance_z; // the corners it was cut at
+        KalmanBox::Vec3 appearance_z = KalmanBox::Vec3::Zero();  // the corners it was cut at
         bool updated = false;         // measured (edges or detection) this frame
         bool duplicate = false;       // another track follows the same vehicle
     };
