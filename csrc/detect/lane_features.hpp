@@ -57,13 +57,15 @@ struct LaneFeatureParams {
     double grow_across = 1.0;        // region half-width in marking widths
     int grow_min_px = 4;             // px; smallest region half-width
     int grow_max_px = 20;            // px; largest region half-width
-    int max_corners = 150;           // Harris corners at most
-    double harris_quality = 0.001;   // fraction of the strongest corner
+    int max_corners = 50;            // Harris corners at most
+    double harris_quality = 1e-5;    // fraction of the strongest corner
     double harris_k = 0.04;          // Harris free parameter
     int min_corner_distance_px = 5;  // px
     int lk_window_px = 11;           // px; Lucas-Kanade window side
     int lk_levels = 1;               // pyramid levels above the base
     int lk_patch_px = 31;            // px; side of the pre-warped patch (window + the prediction's error)
+    int lk_search_patch_px = 121;    // px; patch side without a prediction (first frames, after a loss)
+    int lk_search_levels = 3;        // pyramid levels then
     double fb_max_px = 0.7;          // px; forward-backward error kept
 
     void bind(ParamMap &m);
@@ -105,13 +107,15 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
                                         const LaneFeatureParams &p);
 
 // Lucas-Kanade correspondences of `corners` (current frame) in the previous frame, on patches
-// pre-warped with H_guess (previous -> current pixels; identity if unknown), forward-backward checked.
+// pre-warped with H_guess (previous -> current pixels), forward-backward checked. predicted: H_guess is
+// a real prediction; otherwise (identity, first frames) larger patches and more levels search for
+// the motion a car at speed gives near the camera.
 std::vector<Correspondence> patch_lk(const cv::Mat &cur, const cv::Mat &prev, const std::vector<cv::Point2f> &corners,
-                                     const cv::Matx33d &H_guess, const LaneFeatureParams &p);
+                                     const cv::Matx33d &H_guess, bool predicted, const LaneFeatureParams &p);
 
 // The whole unit on two frames: markings of `cur`, their corners, and the corners' correspondences
 // in `prev`. vp: the road's vanishing point in `cur`; H_guess: predicted homography prev -> cur.
 LaneFeatures lane_correspondences(const cv::Mat &cur, const cv::Mat &prev, cv::Point2f vp, const CameraParams &cam,
-                                  const cv::Matx33d &H_guess, const LaneFeatureParams &p);
+                                  const cv::Matx33d &H_guess, bool predicted, const LaneFeatureParams &p);
 
 } // namespace hw

@@ -37,9 +37,20 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("bottom_band_frac", bottom_band_frac, 0.0, 2.0,
           "expected widths; a region's width is measured over its lowest rows this tall (the contact zone spans the "
           "vehicle; a guardrail or marking streak joined to it rises sideways)");
+    m.add("side_frac", side_frac, 0.0, 1.0,
+          "a region's sides are the outermost columns of its bottom band whose mean |difference| reaches this share "
+          "of the band's strong columns (90th percentile)");
+    m.add("body_min_frac", body_min_frac, 0.0, 1.0,
+          "the sides are taken from the region's body (above its bottom band) when the body's difference spans at "
+          "least this share of the band's width; the band is widened by what moves beside the vehicle on the road "
+          "(its cast shadow)");
     m.add("max_aspect", max_aspect, 0.2, 5.0,
           "expected widths; hot clusters up to this high above a region's bottom belong to its vehicle (trucks "
           "are ~1.5 widths tall)");
+    m.add("height_hot_frac", height_hot_frac, 0.0, 1.0,
+          "share of a region's columns that must be hot for a row to count towards its height");
+    m.add("height_gap_frac", height_gap_frac, 0.0, 2.0,
+          "widths; rows without difference bridged while measuring the height (the flat back of a truck)");
     m.add("min_aspect", min_aspect, 0.1, 5.0,
           "box height / width reported at least (a region whose upper edges showed no parallax)");
     m.add("join_gap_cells", join_gap_cells, 0, 100,
@@ -85,6 +96,26 @@ bool polygon_span(const std::vector<cv::Point> &poly, float y, float &xl, float 
         xr = std::max(xr, a.y == b.y ? std::max(a.x, b.x) : x);
     }
     return xl <= xr;
+}
+
+// Narrows the columns [a, b) of `diff` to the outermost ones whose mean |difference| over rows
+// [r0, r1) reaches `frac` of the strong columns (the 90th percentile).
+void side_extent(const cv::Mat &diff, int r0, int r1, float frac, int &a, int &b) {
+    r0 = std::max(r0, 0);
+    r1 = std::min(r1, diff.rows);
+    a = std::max(a, 0);
+    b = std::min(b, diff.cols);
+    if (r1 <= r0 || b <= a) return;
+    cv::Mat prof;
+    cv::reduce(diff(cv::Range(r0, r1), cv::Range(a, b)), prof, 0, cv::REDUCE_AVG, CV_32F);
+    std::vector<float> v(prof.begin<float>(), prof.end<float>()), sorted = v;
+    std::sort(sorted.begin(), sorted.end());
+    const float lim = frac * sorted[size_t(0.9 * double(sorted.size() - 1))];
+    int i = 0, j = int(v.size()) - 1;
+    while (i < j && v[size_t(i)] < lim) ++i;
+    while (j > i && v[size_t(j)] < lim) --j;
+    b = a + j + 1;
+    a = a + i;
 }
 
 // Strongest dark-above / bright-below step (mean over columns c0..c1 of I(y+1) - I(y-1)) in rows y0..y1.
@@ -274,25 +305,41 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
                 }
         }
         if (bx1 < bx0 || 2 * n_inside < n_band) continue;
-        const float x0 = cell_x(float(bx0)), x1 = cell_x(float(bx1 + 1));
-        const float w = x1 - x0;
+        // Sides to a pixel of the level from the bottom band first (trims cell quantisation).
+        const int band_r0 = std::max(g.y0, g.y1 - band_rows + 1) * ch, band_r1 = (g.y1 + 1) * ch;
+        int la = bx0 * cw, lb = (bx1 + 1) * cw;  // level columns [la, lb)
+        side_extent(diff, band_r0, band_r1, float(p.side_frac), la, lb);
+        float x0 = float(la * sc), x1 = float(lb * sc);
+        float w = x1 - x0;
         if (yb < horizon_row + float(p.horizon_margin_px) || w_exp <= 0.f) continue;
         if (w < float(p.min_width_frac) * w_exp || w > float(p.max_width_frac) * w_exp) continue;
         ParallaxMeasurement m;
         float row = yb;
-        const int c0 = int(x0 + 0.2f * w), c1 = int(x1 - 0.2f * w);
-        if (bottom_step(cur_full, c0, c1, int(yb - float(p.refine_up_frac) * w_exp),
+        if (bottom_step(cur_full, int(x0 + 0.2f * w), int(x1 - 0.2f * w), int(yb - float(p.refine_up_frac) * w_exp),
                         int(yb + float(p.refine_down_frac) * w_exp), float(p.refine_min_step), row)) {
             yb = row;
             m.refined = true;
         }
-        // Height: up from the bottom through rows where a quarter of the region's columns are hot
-        // (anywhere, the vehicle's top may stand above the road area), bridging join_gap_cells rows.
+        // Height: up from the bottom through rows where height_hot_frac of the region's columns are hot
+        // (anywhere: the vehicle's top may stand above the road area), bridging gaps of up to
+        // height_gap_frac widths (the flat back of a truck shows no difference).
         int top = g.y1, gap = 0;
         const int max_rows = int(float(p.max_aspect) * w / cell_px_h);
-        for (int r = g.y1; r >= std::max(0, g.y1 - max_rows) && gap <= p.join_gap_cells; --r) {
+        const int max_gap = std::max(p.join_gap_cells, int(float(p.height_gap_frac) * w / cell_px_h));
+        for (int r = g.y1; r >= std::max(0, g.y1 - max_rows) && gap <= max_gap; --r) {
             const int n_hot = cv::countNonZero(hot.row(r).colRange(bx0, bx1 + 1));
-            if (4 * n_hot >= bx1 - bx0 + 1) { top = r; gap = 0; } else ++gap;
+            if (float(n_hot) >= float(p.height_hot_frac) * float(bx1 - bx0 + 1)) { top = r; gap = 0; } else ++gap;
+        }
+        // The body above the bottom band gives the sides when it differs enough: the band is widened by
+        // what moves with the vehicle on the road beside it (its cast shadow, the smear of its contact zone).
+        if (top * ch < band_r0 - 1) {
+            int ba = la, bb = lb;
+            side_extent(diff, top * ch, band_r0, float(p.side_frac), ba, bb);
+            if (bb - ba >= int(float(p.body_min_frac) * float(lb - la))) {
+                x0 = float(ba * sc);
+                x1 = float(bb * sc);
+                w = x1 - x0;
+            }
         }
         const float h = std::clamp(yb - cell_y(float(top)), float(p.min_aspect) * w, float(p.max_aspect) * w);
         m.point = {0.5f * (x0 + x1), yb};

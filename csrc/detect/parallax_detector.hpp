@@ -47,8 +47,12 @@ struct ParallaxParams {
     double max_width_frac = 2.2;     // wider: no single vehicle
     double inside_margin_m = 0.5;    // m; most of a region's bottom cells lie this far inside the road area
     double bottom_band_frac = 0.25;  // rows over which a region's width is measured, in expected widths
+    double side_frac = 0.6;          // side columns reach this share of the band's strong columns
+    double body_min_frac = 0.6;      // the body gives the sides when it spans this share of the band
     double max_aspect = 1.6;         // tallest region (height / its width) a vehicle forms
     double min_aspect = 0.6;         // box height / width reported at least
+    double height_hot_frac = 0.25;   // share of the columns hot for a row to count towards the height
+    double height_gap_frac = 0.15;   // widths of rows without difference bridged for the height
     int join_gap_cells = 2;          // cells; hot clusters this far beside a region's span still join it
     double refine_up_frac = 0.15;    // bottom search above the lowest hot row, in expected widths
     double refine_down_frac = 0.5;   // and below it (vehicles standing still on the road)

@@ -1,6 +1,7 @@
 #include "geometry/homography_dlt.hpp"
 
 #include <Eigen/Dense>
+#include <opencv2/calib3d.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -24,6 +25,9 @@ void DltParams::bind(ParamMap &m) {
           "refit once; 0 keeps the plain DLT of the paper");
     m.add("trim_floor_px", trim_floor_px, 0.0, 100.0,
           "px; a correspondence is never trimmed for an error below this (LK is good to a fraction of a pixel)");
+    m.add("ransac_px", ransac_px, 0.1, 100.0,
+          "px; without a prediction the correspondences are first filtered by a RANSAC homography with this inlier "
+          "distance (LK is good to a fraction of a pixel; a wrong dash is tens of pixels off)");
     m.add("max_rms_px", max_rms_px, 0.01, 100.0,
           "px; a fit whose rms transfer error is larger is not a plane (points on vehicles, slid along markings) "
           "and gives no measurement");
@@ -87,8 +91,11 @@ HomographyFit fit_homography(const std::vector<cv::Point2f> &from, const std::ve
         return pts.empty() ? 0.f : hi - lo;
     };
     std::vector<cv::Point2f> f, t;
+    std::vector<uint8_t> inlier(from.size(), 1);
+    if (!predicted && int(from.size()) >= std::max(4, p.min_points))
+        cv::findHomography(from, to, cv::RANSAC, p.ransac_px, inlier, 500, 0.999);
     for (size_t i = 0; i < from.size(); ++i)
-        if (!predicted || p.point_gate_px <= 0 || transfer_error(*predicted, from[i], to[i]) <= p.point_gate_px) {
+        if (inlier[i] && (!predicted || p.point_gate_px <= 0 || transfer_error(*predicted, from[i], to[i]) <= p.point_gate_px)) {
             f.push_back(from[i]);
             t.push_back(to[i]);
         }

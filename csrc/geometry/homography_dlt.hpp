@@ -11,7 +11,9 @@
 // the next dash, 12 m on) has so much leverage that the DLT fits it exactly and spoils the rest:
 // correspondences farther than point_gate_px from where the predicted homography puts them are
 // dropped first (when a prediction exists), and one trimming pass refits without those whose
-// transfer error is far above the median.
+// transfer error is far above the median. Without a prediction (the first frames, no ego speed)
+// nothing tells a near dash end from the next dash 12 m on, so the inliers of a RANSAC homography
+// (OpenCV's, minimal DLT samples) take the place of the prediction gate.
 #pragma once
 
 #include "core/params.hpp"
@@ -29,6 +31,7 @@ struct DltParams {
     double trim_factor = 3.0;      // transfer errors above this many medians are trimmed (0: no trimming)
     double trim_floor_px = 1.0;    // px; never trim below this transfer error
     double max_rms_px = 2.5;       // px; a fit with a larger rms transfer error is no measurement
+    double ransac_px = 2.0;        // px; RANSAC inlier distance when there is no prediction
 
     void bind(ParamMap &m);
 };

@@ -84,8 +84,10 @@ void HomographyKalman::predict(double step_m) {
     step_prev_ = step_;
     step_ = p_.use_ego_speed ? step_m : NAN;
     if (!initialised_) {
-        // Without a state the best guess is the road moving by the known travel (or not at all).
-        pred_ = std::isfinite(step_) ? to_normalised(travel_homography(cam_, step_)) : cv::Matx33d::eye();
+        // Without a state the best guess is the last measurement (the road moves much the same from one
+        // frame to the next), else the road moving by the known travel, else not at all.
+        pred_ = agreeing_ > 0 ? candidate_
+                : std::isfinite(step_) ? to_normalised(travel_homography(cam_, step_)) : cv::Matx33d::eye();
         return;
     }
     // x^- = x_{k-1}, with the travel part swapped for this frame's when the ego speed is known.
@@ -95,6 +97,12 @@ void HomographyKalman::predict(double step_m) {
         pred_ = pred_ * (1.0 / pred_(2, 2));
     }
     P_ += p_.q;  // P^- = P + Q
+}
+
+void HomographyKalman::guess_travel(double step_m) {
+    if (initialised_ || agreeing_ > 0 || !std::isfinite(step_m)) return;
+    step_ = step_m;
+    pred_ = to_normalised(travel_homography(cam_, step_m));
 }
 
 HomographyKalman::Status HomographyKalman::update(const cv::Matx33d *H_meas_px) {

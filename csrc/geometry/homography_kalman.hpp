@@ -15,7 +15,8 @@
 //     update    K = P^- / (P^- + R)   x = x^- + K (z - x^-)   P = (1 - K) P^-   (R = r I)
 // A measurement outside the gate is not used and the prediction carries on; coast_frames counts
 // the frames since a measurement was last accepted. The filter starts from two consecutive
-// measurements that agree within the gate. Because a constant-state filter never leaves a wrong
+// measurements that agree within the gate (before it has started, the last measurement serves as
+// the prediction that guides the next frame's features). Because a constant-state filter never leaves a wrong
 // state by itself (every good measurement is then gated out), it also restarts from the newest
 // measurement when restart_agreeing consecutive rejected measurements agree with each other within
 // the gate (they, not the state, describe the road), and it is dropped after max_coast_frames.
@@ -64,11 +65,15 @@ public:
 
     // Time update for a new frame; step_m = ego travel since the previous frame (NaN = unknown).
     void predict(double step_m);
+    // Without a state or a previous measurement, a guess of this frame's travel (found from the images)
+    // stands in for the ego speed as the prediction.
+    void guess_travel(double step_m);
     // Measurement update (pixel coordinates); null = no measurement this frame.
     Status update(const cv::Matx33d *H_meas_px);
 
     bool valid() const { return initialised_; }             // an estimate exists (measured or coasting)
-    bool has_prediction() const { return initialised_ || std::isfinite(step_); }  // predicted_px() means something
+    // predicted_px() means something: a state, a previous measurement or the ego speed
+    bool has_prediction() const { return initialised_ || agreeing_ > 0 || std::isfinite(step_); }
     cv::Matx33d H_px() const;                              // current estimate, pixels, prev -> cur
     cv::Matx33d predicted_px() const;                      // last prediction, pixels (identity if none)
     int coast_frames() const { return coast_; }

@@ -9,6 +9,30 @@
 
 namespace hw {
 
+namespace {
+
+// The travel s in [0, s_max] whose flat-road homography G(s) best aligns the previous road band with
+// the current one (mean |difference| over the lower half of the band, at the given pyramid level).
+double search_travel(const cv::Mat &cur_level, const cv::Mat &prev_level, int band_top, int level,
+                     const CameraParams &cam, double s_max, int steps) {
+    const double f = 1.0 / (1 << level);
+    const cv::Matx33d S(f, 0, 0, 0, f, -f * band_top, 0, 0, 1);
+    const cv::Rect lower(0, cur_level.rows / 2, cur_level.cols, cur_level.rows - cur_level.rows / 2);
+    double best = NAN, best_err = 1e300;
+    cv::Mat warped, diff;
+    for (int i = 0; i < steps; ++i) {
+        const double s = s_max * i / (steps - 1);
+        cv::warpPerspective(prev_level, warped, S * travel_homography(cam, s) * S.inv(), cur_level.size(),
+                            cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+        cv::absdiff(cur_level(lower), warped(lower), diff);
+        const double err = cv::mean(diff)[0];
+        if (err < best_err) { best_err = err; best = s; }
+    }
+    return best;
+}
+
+} // namespace
+
 void ParallaxTrackerParams::bind(ParamMap &m) {
     detect.bind(m);
     m.add("band_above_horizon", band_above_horizon, 0.0, 1.0,
@@ -16,6 +40,9 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
           "are taken from); the band holds the roofs of near vehicles, the sky above is of no use");
     m.add("exclude_vehicle_corners", exclude_vehicle_corners,
           "corners inside the boxes of tracked vehicles are not used for the homography: they are not on the road");
+    m.add("search_max_speed_mps", search_max_speed_mps, 1.0, 100.0,
+          "m/s; without a prediction the travel since the previous frame is searched up to this speed");
+    m.add("search_steps", search_steps, 2, 1000, "travels tried in that search (0 .. max speed * dt)");
     m.add("max_dt_s", max_dt_s, 0.001, 100.0,
           "s; a longer gap between frames (or time going back) starts the homography and the tracks again");
 }
@@ -61,14 +88,27 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
         vp = {float(cam_.cx - cam_.fx * std::tan(cam_.yaw_deg * M_PI / 180.0)), float(cam_.horizon_row())};
     prev_ = cur_;
     cur_ = gray.clone();
+    // This frame's road band at the detector's level (the search below and the detector use it).
+    cv::Mat level = cur_.rowRange(band_top_, cur_.rows);
+    for (int l = 0; l < pp_.detect.level; ++l) {
+        cv::Mat down;
+        cv::pyrDown(level, down);
+        level = down;
+    }
+    if (level.data == cur_.data) level = level.clone();  // level 0: keep the band even when cur_ changes
+    const bool have_prev_level = !prev_level_.empty() && prev_level_.size() == level.size();
 
     // features + homography
     {
         Stopwatch sw;
         const double speed = ctx.ego.speed_mps;
         kf_.predict(std::isfinite(speed) && dt > 0.0 ? speed * dt : NAN);
+        if (!kf_.has_prediction() && have_prev_level && dt > 0.0)
+            kf_.guess_travel(search_travel(level, prev_level_, band_top_, pp_.detect.level, cam_,
+                                           pp_.search_max_speed_mps * dt, pp_.search_steps));
         LaneFeatures f;
-        if (!prev_.empty()) f = lane_correspondences(cur_, prev_, vp, cam_, kf_.predicted_px(), fp_);
+        if (!prev_.empty())
+            f = lane_correspondences(cur_, prev_, vp, cam_, kf_.predicted_px(), kf_.has_prediction(), fp_);
         if (pp_.exclude_vehicle_corners) {
             // Where the tracked vehicles are now (last estimate moved by its velocity), widened a little.
             std::vector<cv::Rect2f> boxes;
@@ -108,14 +148,7 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
     std::vector<PointMeasurement> z;
     {
         Stopwatch sw;
-        cv::Mat level = cur_.rowRange(band_top_, cur_.rows);
-        for (int l = 0; l < pp_.detect.level; ++l) {
-            cv::Mat down;
-            cv::pyrDown(level, down);
-            level = down;
-        }
-        if (level.data == cur_.data) level = level.clone();  // level 0: keep the band even when cur_ changes
-        if (kf_.valid() && !prev_level_.empty() && prev_level_.size() == level.size()) {
+        if (kf_.valid() && have_prev_level) {
             detection_ = detect_parallax(level, prev_level_, cur_, band_top_, kf_.H_px(), ctx.lanes, vp.y, cam_,
                                          pp_.detect);
             full_detection = true;

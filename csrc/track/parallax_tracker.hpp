@@ -10,6 +10,12 @@
 //   parallax    while the filter holds an estimate, the previous frame's road band is warped onto the
 //               current one and its differences become measurements;
 //   particles   the joint SIR filter takes the measurements, confirms entries, removes exits.
+// Without any prediction (first frames with no CAN speed, after the filter was lost) the features
+// would start from the identity, and near the camera a dash end then finds the next dash, 12 m on,
+// as readily as its own (a consistent, wrong homography). So the travel is first found directly:
+// the previous road band is warped with the flat-road homography of each travel in
+// [0, search_max_speed_mps * dt] and the one leaving the smallest mean difference becomes the
+// prediction (the dash period is far longer than a frame's travel, so this search cannot alias).
 // Every frame with an alignment is a full detection: the detector always scans the whole road area.
 // The vehicle boxes come from the measurement regions (bottom edge and width), so the range, TTC and
 // lead stages treat them like any other track.
@@ -42,10 +48,11 @@ struct ParallaxTrackerParams {
     double band_above_horizon = 0.08;  // share of the image height above the horizon kept in the road band
     bool exclude_vehicle_corners = true;  // road features inside tracked vehicles' boxes are not used
     double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
+    double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction
+    int search_steps = 24;             // travels tried between 0 and that
 
     void bind(ParamMap &m);
 };
-
 // What the homography stage did in the last frame (for tests, run_stage and evaluation).
 struct HomographyStep {
     HomographyKalman::Status status = HomographyKalman::Status::kNone;

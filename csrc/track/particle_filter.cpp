@@ -22,7 +22,8 @@ void ParticleParams::bind(ParamMap &m) {
           "noise rather than a vehicle)");
     m.add("a_u_transitory", a_u_transitory, 0.0, 1.0,
           "clutter coefficient during a transitory period, raised so that only persistent, coherent measurements "
-          "make a new vehicle (paper III-B)");
+          "make a new vehicle (paper III-B); 0.97 needs about three coherent frames and kept the synthetic empty "
+          "road and guardrails free of vehicles, 0.5 confirms after one but adopts artifacts");
     m.add("p_detect", p_detect, 0.0, 0.999,
           "detection probability: each vehicle no measurement supports multiplies a particle's weight by "
           "1 - p_detect; this is what lets unsupported hypotheses fade");
@@ -136,7 +137,7 @@ void JointParticleFilter::weigh(const std::vector<PointMeasurement> &z, cv::Size
 void JointParticleFilter::resample() {
     const int ns = p_.particles;
     const double mx = *std::max_element(logw_.begin(), logw_.end());
-    std::vector<double> cum(size_t(ns));
+    std::vector<double> cum(static_cast<size_t>(ns));
     double acc = 0.0;
     for (int s = 0; s < ns; ++s) cum[size_t(s)] = (acc += std::exp(logw_[size_t(s)] - mx));
     // Systematic: one uniform offset, then n_s evenly spaced pointers into the cumulative weights.
@@ -144,7 +145,7 @@ void JointParticleFilter::resample() {
     const double step = acc / ns;
     double u = u01(rng_) * step;
     std::vector<float> next(state_.size());
-    std::vector<uint8_t> ext(size_t(ns));
+    std::vector<uint8_t> ext(static_cast<size_t>(ns));
     const size_t S = size_t(stride());
     int k = 0;
     for (int s = 0; s < ns; ++s, u += step) {
