@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -17,10 +19,14 @@ def test_every_unit_verifies_clean(tmp_path):
         pytest.skip("systemd-analyze not installed (Debian package systemd)")
     units = [p for p in UNITS.iterdir() if p.suffix in UNIT_SUFFIXES]
     assert units, "no unit files in systemd/"
+    # as installed: a checkout whose .venv/bin/headway is the console script of the environment running
+    # the tests (verify checks that ExecStart is executable)
+    install_dir = tmp_path / "headway"
+    (install_dir / ".venv" / "bin").mkdir(parents=True)
+    (install_dir / ".venv" / "bin" / "headway").symlink_to(Path(sys.executable).parent / "headway")
     for unit in units:
-        # as installed: this checkout's path in place of @HEADWAY_DIR@
         out = tmp_path / unit.name
-        out.write_text(render_unit(unit.read_text()))
+        out.write_text(render_unit(unit.read_text(), repo=install_dir))
         r = subprocess.run(["systemd-analyze", "verify", str(out)], capture_output=True, text=True, timeout=60)
         assert r.returncode == 0 and not (r.stdout + r.stderr).strip(), f"{unit.name}:\n{r.stdout}{r.stderr}"
 

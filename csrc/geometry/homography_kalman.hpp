@@ -37,9 +37,9 @@
 namespace hw {
 
 struct HomographyKalmanParams {
-    double q = 1e-6;              // process noise variance per entry (paper: 1e-6)
-    double r = 1e-3;              // measurement noise variance per entry (paper: 1e-3)
-    double gate = 0.02;           // t_a on the 2-norm of H_meas - H_pred (road-band coordinates)
+    double q = 1e-5;              // process noise variance per entry (paper: 1e-6)
+    double r = 1e-5;              // measurement noise variance per entry (paper: 1e-3)
+    double gate = 0.05;           // t_a on the 2-norm of H_meas - H_pred (road-band coordinates)
     int max_coast_frames = 15;    // frames on the prediction alone before the filter is lost
     int restart_agreeing = 3;     // consecutive rejected measurements agreeing with each other restart the filter
     bool use_ego_speed = true;    // CAN speed informs the prediction when known
@@ -68,6 +68,7 @@ public:
     // Without a state or a previous measurement, a guess of this frame's travel (found from the images)
     // stands in for the ego speed as the prediction.
     void guess_travel(double step_m);
+    bool guessed() const { return guessed_; }  // the prediction is only such a guess (searched, not measured)
     // Measurement update (pixel coordinates); null = no measurement this frame.
     Status update(const cv::Matx33d *H_meas_px);
 
@@ -93,6 +94,7 @@ private:
     double P_ = 0.0;                          // variance of every entry
     double step_ = NAN, step_prev_ = NAN;     // ego travel of this and the previous frame
     int agreeing_ = 0;                        // consecutive measurements agreeing with each other, not with x
+    bool guessed_ = false;                    // pred_ came from guess_travel()
     cv::Matx33d candidate_;                   // the last of them
     int coast_ = 0;
     double distance_ = NAN;

@@ -40,7 +40,9 @@ FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked,
                                                                    : float(cfg.camera.horizon_row());
     out.horizon_row = vp_y;
     out.full_detection = tracker.homography().status == HomographyKalman::Status::kAccepted;
-    out.image_change = tracker.road_residual(out.lanes);
+    const auto res = tracker.road_residual(out.lanes);
+    out.image_change = res.first;
+    out.image_mean = res.second;
     if (stage == "parallax")
         for (const auto &m : tracker.detection().measurements) {
             TrackState t;

@@ -38,6 +38,9 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
     m.add("band_above_horizon", band_above_horizon, 0.0, 1.0,
           "share of the image height above the horizon kept in the road band (the rows features and differences "
           "are taken from); the band holds the roofs of near vehicles, the sky above is of no use");
+    m.add("hood_frac", hood_frac, 0.0, 0.5,
+          "share of the image height at the bottom taken by the car's own bonnet: it moves with the camera, not "
+          "with the road, so it gives no features and no differences; 0 for none");
     m.add("exclude_vehicle_corners", exclude_vehicle_corners,
           "corners inside the boxes of tracked vehicles are not used for the homography: they are not on the road");
     m.add("search_max_speed_mps", search_max_speed_mps, 1.0, 100.0,
@@ -107,8 +110,12 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
             kf_.guess_travel(search_travel(level, prev_level_, band_top_, pp_.detect.level, cam_,
                                            pp_.search_max_speed_mps * dt, pp_.search_steps));
         LaneFeatures f;
-        if (!prev_.empty())
-            f = lane_correspondences(cur_, prev_, vp, cam_, kf_.predicted_px(), kf_.has_prediction(), fp_);
+        // A searched travel only starts the features (large patches); the DLT then relies on RANSAC.
+        const bool predicted = kf_.has_prediction() && !kf_.guessed();
+        if (!prev_.empty()) f = lane_correspondences(cur_, prev_, vp, cam_, kf_.predicted_px(), predicted, fp_);
+        f.matches.erase(std::remove_if(f.matches.begin(), f.matches.end(),
+                                       [&](const Correspondence &c) { return c.cur.y >= float(hood_row()); }),
+                        f.matches.end());
         if (pp_.exclude_vehicle_corners) {
             // Where the tracked vehicles are now (last estimate moved by its velocity), widened a little.
             std::vector<cv::Rect2f> boxes;
@@ -133,7 +140,7 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
             to.push_back(c.cur);
         }
         const cv::Matx33d pred = kf_.predicted_px();
-        const HomographyFit fit = fit_homography(from, to, hp_.dlt, kf_.has_prediction() ? &pred : nullptr);
+        const HomographyFit fit = fit_homography(from, to, hp_.dlt, predicted ? &pred : nullptr);
         h_step_.status = prev_.empty() ? HomographyKalman::Status::kNone : kf_.update(fit.ok ? &fit.H : nullptr);
         h_step_.valid = kf_.valid();
         h_step_.coast_frames = kf_.coast_frames();
@@ -149,8 +156,15 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
     {
         Stopwatch sw;
         if (kf_.valid() && have_prev_level) {
-            detection_ = detect_parallax(level, prev_level_, cur_, band_top_, kf_.H_px(), ctx.lanes, vp.y, cam_,
-                                         pp_.detect);
+            // The bonnet is no road: the road area stops above it.
+            LaneModel road = ctx.lanes;
+            if (hood_row() < cam_.height) {
+                if (road.road_polygon.empty())
+                    road.road_polygon = {{0, band_top_}, {cam_.width - 1, band_top_}, {cam_.width - 1, cam_.height - 1},
+                                         {0, cam_.height - 1}};
+                for (auto &q : road.road_polygon) q.y = std::min(q.y, hood_row() - 1);
+            }
+            detection_ = detect_parallax(level, prev_level_, cur_, band_top_, kf_.H_px(), road, vp.y, cam_, pp_.detect);
             full_detection = true;
             for (const auto &m : detection_.measurements) z.push_back({m.point, m.box, m.sad});
         }
@@ -169,27 +183,40 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
     }
 }
 
-float ParallaxTracker::road_residual(const LaneModel &lanes) const {
-    if (prev_.empty() || !h_step_.valid) return kNaN;
+std::pair<float, float> ParallaxTracker::road_residual(const LaneModel &lanes) const {
+    if (prev_.empty() || !h_step_.valid) return {kNaN, kNaN};
     cv::Mat warped;
     cv::warpPerspective(prev_, warped, h_step_.H, cur_.size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
     cv::Mat valid;
     cv::warpPerspective(cv::Mat(prev_.size(), CV_8UC1, cv::Scalar(255)), valid, h_step_.H, cur_.size(), cv::INTER_NEAREST,
                         cv::BORDER_CONSTANT, cv::Scalar(0));
+    // The ego lane up to 40 m (mostly plain road: the rest of the road area holds more vehicles and, where
+    // a lane was extrapolated, the verge and guardrail); the road area when the ego lane is not known.
     cv::Mat road = cv::Mat::zeros(cur_.size(), CV_8UC1);
-    if (lanes.road_polygon.size() >= 3)
+    const float y_far = float(lanes.vanishing_point.y + cam_.fy * cam_.height_m / 40.0);
+    if (lanes.valid && std::isfinite(y_far) && y_far < float(cur_.rows - 1)) {
+        const float y_near = float(cur_.rows - 1);
+        const std::vector<cv::Point> lane{
+            cv::Point(cvRound(lanes.ego_left.x_at(y_far)), cvRound(y_far)), cv::Point(cvRound(lanes.ego_right.x_at(y_far)), cvRound(y_far)),
+            cv::Point(cvRound(lanes.ego_right.x_at(y_near)), cvRound(y_near)), cv::Point(cvRound(lanes.ego_left.x_at(y_near)), cvRound(y_near))};
+        cv::fillConvexPoly(road, lane, cv::Scalar(255));
+    } else if (lanes.road_polygon.size() >= 3) {
         cv::fillPoly(road, std::vector<std::vector<cv::Point>>{lanes.road_polygon}, cv::Scalar(255));
-    else
+    } else {
         road.rowRange(std::clamp(int(cam_.horizon_row()) + 1, 0, road.rows), road.rows).setTo(255);
+    }
     for (const auto &m : detection_.measurements) {
         const cv::Rect b(cv::Point(int(m.box.x) - 4, int(m.box.y) - 4), cv::Point(int(m.box.br().x) + 4, int(m.box.br().y) + 4));
         road(b & cv::Rect(0, 0, road.cols, road.rows)).setTo(0);
     }
+    road.rowRange(hood_row(), road.rows).setTo(0);
     road &= valid;
-    cv::Mat diff;
-    cv::absdiff(cur_, warped, diff);
     const int n = cv::countNonZero(road);
-    return n > 0 ? float(cv::sum(diff & road)[0] / n) : kNaN;
+    if (n == 0) return {kNaN, kNaN};
+    cv::Mat aligned, unaligned;
+    cv::absdiff(cur_, warped, aligned);
+    cv::absdiff(cur_, prev_, unaligned);
+    return {float(cv::sum(aligned & road)[0] / n), float(cv::sum(unaligned & road)[0] / n)};
 }
 
 } // namespace hw

@@ -46,6 +46,7 @@ struct HomographyParams {
 struct ParallaxTrackerParams {
     ParallaxParams detect;
     double band_above_horizon = 0.08;  // share of the image height above the horizon kept in the road band
+    double hood_frac = 0.0;            // share of the image height at the bottom that is the car's bonnet
     bool exclude_vehicle_corners = true;  // road features inside tracked vehicles' boxes are not used
     double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
     double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction
@@ -74,9 +75,10 @@ public:
 
     const HomographyStep &homography() const { return h_step_; }
     const ParallaxFrame &detection() const { return detection_; }
-    // Mean |I_k - warp(I_{k-1}, H)| over the road area (full resolution) outside the detections, for
-    // the last frame; NaN without an alignment.
-    float road_residual(const LaneModel &lanes) const;
+    // Mean |I_k - warp(I_{k-1}, H)| (first) and |I_k - I_{k-1}| (second) over the same road pixels (full
+    // resolution: the ego lane up to 40 m, or the road area without a lane model, outside the detections
+    // and the bonnet) for the last frame; NaN without an alignment.
+    std::pair<float, float> road_residual(const LaneModel &lanes) const;
 
 private:
     LaneFeatureParams fp_;
@@ -92,6 +94,7 @@ private:
     HomographyStep h_step_;
     ParallaxFrame detection_;
     int band_top_ = 0;
+    int hood_row() const { return cam_.height - int(std::lround(pp_.hood_frac * cam_.height)); }
     std::vector<TrackState> last_tracks_;
 };
 

@@ -1,0 +1,110 @@
+"""The parallax pipeline's two-frame units (paper 000): the filtered road homography and the aligned
+difference, driven through run_stage on frames stacked vertically (csrc/track/parallax_stage.hpp)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from app.core import ConfigError, InvalidArgument, Pipeline, core_schema
+from app.sim import load_scenario, render
+from app.sim.frames import scenario_camera
+from app.sim.world import World
+
+SCENARIOS = Path(__file__).resolve().parent.parent / "app" / "sim" / "scenarios"
+
+
+def shaken_scenario(tmp_path: Path, name: str, pitch_deg: float, duration_s: float = 3.0):
+    """A shipped scenario with stronger camera shake (yaw a third of the pitch amplitude)."""
+    doc = yaml.safe_load((SCENARIOS / f"{name}.yaml").read_text())
+    doc["shake"] = {"pitch_deg": pitch_deg, "yaw_deg": pitch_deg / 3}
+    doc["duration_s"] = duration_s
+    path = tmp_path / f"{name}_shake.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return load_scenario(path)
+
+
+def road_residuals(scenario, prev, cur):
+    """Mean |difference| on the road 4-40 m ahead (no vehicles) after warping prev with the true
+    road homography, and without warping."""
+    world = World(scenario)
+    cam0 = scenario_camera(scenario)
+    cp = cam0.shaken(prev.pitch_deg - cam0.pitch_deg, prev.yaw_deg - cam0.yaw_deg)
+    cc = cam0.shaken(cur.pitch_deg - cam0.pitch_deg, cur.yaw_deg - cam0.yaw_deg)
+    s = world.frame_state(cur.index).ego_odometer_m - world.frame_state(prev.index).ego_odometer_m
+    h = cc.ground_to_image() @ np.array([[1, 0, 0], [0, 1, -s], [0, 0, 1.0]]) @ np.linalg.inv(cp.ground_to_image())
+    v, u = np.mgrid[0:cur.image.shape[0], 0:cur.image.shape[1]]
+    x, z = cc.ground_from_pixel(u, v)
+    road = np.isfinite(z) & (z > 4) & (z < 40) & (np.abs(x) < 5)
+    for veh in cur.truth + prev.truth:
+        l, t, r, b = veh["box"]
+        road &= ~((u >= l - 3) & (u <= r + 3) & (v >= t - 3) & (v <= b + 3))
+    warped = cv2.warpPerspective(prev.image, h, (cur.image.shape[1], cur.image.shape[0])).astype(float)
+    return np.abs(warped - cur.image)[road].mean(), np.abs(prev.image.astype(float) - cur.image)[road].mean()
+
+
+def test_every_parallax_key_is_documented_and_the_preset_exists():
+    schema = core_schema()
+    for section in ("road_features", "homography", "parallax", "particles"):
+        assert schema[section], section
+        for key, spec in schema[section].items():
+            assert spec["doc"].strip(), f"{section}.{key}"
+    assert "parallax" in schema["pipeline"]["preset"]["choices"]
+    with Pipeline({"pipeline": {"preset": "parallax"}, "homography": {"q": 1e-6, "r": 1e-3}}) as p:
+        assert p.config["homography"]["r"] == 1e-3
+    with pytest.raises(ConfigError, match=r"homography\.gate"):
+        Pipeline({"homography": {"gate": -1.0}})
+
+
+@pytest.mark.parametrize("pitch_deg", [0.15, 0.4])
+def test_estimated_homography_aligns_the_shaken_road(tmp_path, pitch_deg):
+    """Measured: residual 2.3-3.4 gray levels (true homography 2.1-2.2, none 4.6-6.4) at 0.4 deg."""
+    scenario = shaken_scenario(tmp_path, "empty_road", pitch_deg)
+    frames = list(render(scenario, frames=range(0, 60)))
+    residuals = []
+    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
+        for end in range(10, 61, 10):  # windows of 6 frames: 4 to settle, the last pair judged
+            r = p.run_stage("homography", np.vstack([f.image for f in frames[end - 6:end]]))
+            true, unwarped = road_residuals(scenario, frames[end - 2], frames[end - 1])
+            assert r.image_change is not None, f"no alignment at frame {end - 1}"
+            assert r.image_change < 0.75 * unwarped, (end, r.image_change, unwarped)
+            assert r.image_change < true + 1.5, (end, r.image_change, true)
+            residuals.append(r.image_change)
+    assert np.median(residuals) < 3.0, residuals
+
+
+def test_measurement_outside_the_gate_is_not_accepted():
+    """A pair that is not two consecutive views of one road (a jump of 2 s) gives a homography far
+    from the prediction: the filter keeps its prediction."""
+    frames = [f.image for f in render(load_scenario("steady_following"), frames=list(range(30, 36)) + [96])]
+    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
+        settled = p.run_stage("homography", np.vstack(frames[:6]))
+        jumped = p.run_stage("homography", np.vstack(frames[:5] + [frames[6]]))
+    assert settled.full_detection
+    assert not jumped.full_detection
+
+
+def test_two_frame_stages_reject_a_single_frame():
+    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
+        with pytest.raises(InvalidArgument, match="K >= 2 frames"):
+            p.run_stage("homography", np.zeros((480, 640), np.uint8))
+        with pytest.raises(InvalidArgument, match="homography, parallax"):
+            p.run_stage("warp", np.zeros((480, 640), np.uint8))
+
+
+def test_aligned_difference_finds_an_overtaking_car_at_its_bottom_edge():
+    """The mid-lower point of the region of differences sits on the car's contact row."""
+    scenario = load_scenario("overtaking_from_side")
+    frames = list(render(scenario, frames=range(70, 76)))
+    car = next(v for v in frames[-1].truth if v["id"] == 1)
+    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
+        r = p.run_stage("parallax", np.vstack([f.image for f in frames]))
+    l, t, rr, b = car["box_clipped"]
+    found = [tr for tr in r.tracks if tr.box[0] < rr and tr.box[2] > l]
+    assert found, [tr.box for tr in r.tracks]
+    best = min(found, key=lambda tr: abs(tr.box[3] - b))
+    assert abs(best.box[3] - b) <= 4.0, (best.box, car["box_clipped"])
+    assert abs(0.5 * (best.box[0] + best.box[2]) - 0.5 * (l + rr)) < 0.25 * (rr - l), (best.box, car["box_clipped"])
