@@ -17,22 +17,12 @@ import yaml
 from app.can.config_schema import CAN_SCHEMA
 from app.core import core_schema
 from app.fcw import FCW_SCHEMA
+from app.schema import key as _key
 from app.supervisor.health import HEALTH_SCHEMA
 
 
 class ConfigFileError(ValueError):
     """A configuration that cannot be used; the message names the file and the key."""
-
-
-def _key(default: Any, doc: str, min: Any = None, max: Any = None, choices: Optional[str] = None,
-         type: Optional[str] = None) -> dict:
-    t = type or {bool: "bool", int: "int", float: "float", str: "str"}[default.__class__]
-    d = {"default": default, "type": t, "doc": doc}
-    if min is not None:
-        d["min"], d["max"] = min, max
-    if choices:
-        d["choices"] = choices
-    return d
 
 
 # The supervisor's sections. Units in the names or first word of each doc.

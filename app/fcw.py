@@ -17,16 +17,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Optional
 
+from app.schema import key as _key
+
 NONE, PREWARNING, WARNING = 0, 1, 2
 LEVEL_NAMES = {NONE: "none", PREWARNING: "prewarning", WARNING: "warning"}
-
-
-def _key(default, doc, lo=None, hi=None):
-    t = {bool: "bool", int: "int", float: "float"}[type(default)]
-    d = {"default": default, "type": t, "doc": doc}
-    if lo is not None:
-        d["min"], d["max"] = lo, hi
-    return d
 
 
 # The configuration section `fcw` (merged into app/config.py's registry).

@@ -9,6 +9,8 @@ Vehicle inputs are flat: for each input NAME in INPUTS, ``NAME_message`` (empty 
 """
 from __future__ import annotations
 
+from app.schema import key
+
 INTERFACES = ("socketcan|virtual|slcan|socketcand|pcan|kvaser|vector|ixxat|gs_usb|neovi|nican|nixnet|"
               "iscan|systec|usb2can|cantact|canalystii|seeedstudio|robotell|serial|udp_multicast|etas|neousys")
 
@@ -28,14 +30,7 @@ INPUTS = {
 }
 
 
-def _k(default, doc, type=None, min=None, max=None, choices=None) -> dict:
-    d = {"default": default, "type": type or {bool: "bool", int: "int", float: "float", str: "str"}[default.__class__],
-         "doc": doc}
-    if min is not None:
-        d["min"], d["max"] = min, max
-    if choices:
-        d["choices"] = choices
-    return d
+_k = key
 
 
 def _input_keys(name: str) -> dict:

@@ -11,15 +11,11 @@ from typing import Optional
 
 import numpy as np
 
+from app.schema import key as _key
 from app.supervisor.faults import BY_NAME, DEGRADED, FAULT, fault_bits
 
 STARTING, OK, DEGRADED_STATE, FAULT_STATE = "starting", "ok", "degraded", "fault"
 STATE_CODES = {STARTING: 0, OK: 1, DEGRADED_STATE: 2, FAULT_STATE: 3}
-
-
-def _key(default, doc, lo, hi):
-    return {"default": default, "type": "int" if isinstance(default, int) else "float", "doc": doc, "min": lo,
-            "max": hi}
 
 
 # The configuration section `health`.
