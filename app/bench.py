@@ -135,5 +135,12 @@ def main(args) -> int:
         print(json.dumps(report, indent=2) if args.json else format_latency(report))
         return 0
     report = run_bench(args.scenario, args.preset, args.width, args.height, args.repeats, args.config)
+    if report["preset"] == "parallax" and (args.width, args.height) == (640, 480):
+        from app import bench_particles  # the joint particle filter's cost against the vehicles it holds
+
+        report["particles_by_vehicles"] = bench_particles.particle_cost()
     print(json.dumps(report, indent=2) if args.json else format_table(report))
+    if "particles_by_vehicles" in report and not args.json:
+        print("\nparallax: joint particle filter against N (synthetic patches, app/bench_particles.py)\n")
+        print(bench_particles.format_table(report["particles_by_vehicles"]))
     return 0

@@ -11,7 +11,7 @@ import cv2
 
 from app.annotate import annotate
 
-PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw")
+PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion")
 
 
 def _f(x, nd=3) -> str:
@@ -64,6 +64,11 @@ def markdown(report: dict) -> str:
             else:
                 out.append(f"| {v['true_range_m']:.1f} | not found | | | |")
         out.append("")
+    rm = report.get("road_motion")
+    if rm:
+        from app.eval import road_motion
+
+        out += [road_motion.markdown(rm), ""]
     fc = report.get("fcw")
     if fc:
         out += ["### Forward-collision warning through the whole stack (CAN output decoded with cantools)", "",
@@ -144,6 +149,11 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
         for name in list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING):
             say(f"FCW {name}")
             report["fcw"].append(fcw_scenarios.evaluate(name, config_path))
+    if "road_motion" in parts:
+        from app.eval import road_motion
+
+        say("road homography and track continuity on TME / Udacity")
+        report["road_motion"] = road_motion.evaluate(str(data), preset)
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
     (out / "report.md").write_text(markdown(report) + "\n")
     return report

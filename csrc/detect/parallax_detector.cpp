@@ -56,12 +56,21 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("join_gap_cells", join_gap_cells, 0, 100,
           "cells; hot clusters this far beside a region's columns still join it (the difference of one vehicle is "
           "broken at its wheels and plate)");
+    m.add("streak_elongation", streak_elongation, 1.0, 1000.0,
+          "a region whose road cells are this elongated (sqrt of the eigenvalue ratio of their scatter) ... (5: "
+          "guardrail streaks are longer; a vehicle's smear along the road from its own motion is shorter)");
+    m.add("streak_angle_deg", streak_angle_deg, 0.0, 90.0,
+          "... and whose long axis points within this angle at the vanishing point is a structure along the road "
+          "(guardrail, kerb, an edge line's residual), not a vehicle");
     m.add("refine_up_frac", refine_up_frac, 0.0, 2.0,
           "expected widths above the lowest hot row searched for the shadow step that is the vehicle's bottom");
     m.add("refine_down_frac", refine_down_frac, 0.0, 2.0,
           "expected widths below it: a vehicle standing still on the road shows no parallax at its contact zone");
     m.add("refine_min_step", refine_min_step, 0.0, 255.0,
           "gray levels; weakest dark-above / bright-below step taken as the bottom; otherwise the hot row stays");
+    m.add("bottom_margin_px", bottom_margin_px, 0.0, 1000.0,
+          "px; a region reaching this close to the bottom of the road area (image bottom or bonnet) is cut by it: "
+          "the near road's residual, not a vehicle (whose contact zone is in view from 3-4 m on)");
     m.add("horizon_margin_px", horizon_margin_px, 0.0, 1000.0,
           "px; a region's bottom must be this far below the horizon (structures above the road start higher)");
 }
@@ -144,8 +153,9 @@ bool bottom_step(const cv::Mat &gray, int c0, int c1, int y0, int y1, float min_
 } // namespace
 
 ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
-                              const cv::Matx33d &H, const LaneModel &lanes, float horizon_row, const CameraParams &cam,
+                              const cv::Matx33d &H, const LaneModel &lanes, cv::Point2f vp, const CameraParams &cam,
                               const ParallaxParams &p) {
+    const float horizon_row = vp.y, vp_x = vp.x;
     CV_Assert(cur_band.type() == CV_8UC1 && prev_band.type() == CV_8UC1 && cur_band.size() == prev_band.size());
     CV_Assert(cur_full.type() == CV_8UC1 && band_top >= 0 && band_top < cur_full.rows);
     ParallaxFrame out;
@@ -164,15 +174,28 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     if (ncx < 1 || ncy < 1) return out;
     // Per cell: the mean |difference| (SAD / pixels) and the mean gradient magnitude of the current
     // band, (|I(x+1) - I(x-1)| + |I(y+1) - I(y-1)|) / 4 (central differences, L1, halved).
+    // Row sums first (plain loops over whole rows, which vectorise), then per cell.
     cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F), grad = cv::Mat::zeros(ncy, ncx, CV_32F);
+    const int W = ncx * cw;
+    std::vector<int> g_row(size_t(W) + 1);
     for (int y = 0; y < ncy * ch; ++y) {
         const uint8_t *d = diff.ptr<uint8_t>(y), *c = cur_band.ptr<uint8_t>(y);
         const uint8_t *up = cur_band.ptr<uint8_t>(std::max(y - 1, 0)), *dn = cur_band.ptr<uint8_t>(std::min(y + 1, diff.rows - 1));
+        int *g = g_row.data();
+        g[0] = std::abs(int(c[1]) - int(c[0])) + std::abs(int(dn[0]) - int(up[0]));
+        for (int x = 1; x < W; ++x) {
+            const int xr = x + 1 < diff.cols ? x + 1 : x;
+            g[x] = std::abs(int(c[xr]) - int(c[x - 1])) + std::abs(int(dn[x]) - int(up[x]));
+        }
         float *s = sad.ptr<float>(y / ch), *gr = grad.ptr<float>(y / ch);
-        for (int x = 0; x < ncx * cw; ++x) {
-            s[x / cw] += float(d[x]);
-            const int xl = std::max(x - 1, 0), xr = std::min(x + 1, diff.cols - 1);
-            gr[x / cw] += float(std::abs(int(c[xr]) - int(c[xl])) + std::abs(int(dn[x]) - int(up[x])));
+        for (int cc = 0; cc < ncx; ++cc) {
+            int sd = 0, sg = 0;
+            for (int x = cc * cw; x < (cc + 1) * cw; ++x) {
+                sd += d[x];
+                sg += g[x];
+            }
+            s[cc] += float(sd);
+            gr[cc] += float(sg);
         }
     }
     sad *= 1.0 / double(cw * ch);
@@ -183,7 +206,10 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     auto cell_x = [&](float c) { return c * cell_px_w; };                   // full-res x of a cell edge
     auto cell_y = [&](float r) { return float(band_top) + r * cell_px_h; }; // full-res y of a cell edge
     cv::Mat road = cv::Mat::zeros(ncy, ncx, CV_8UC1);
+    float road_bottom = float(cur_full.rows - 1);
     if (lanes.road_polygon.size() >= 3) {
+        road_bottom = 0.f;
+        for (const auto &q : lanes.road_polygon) road_bottom = std::max(road_bottom, float(q.y));
         std::vector<cv::Point> poly;
         for (const auto &q : lanes.road_polygon)
             poly.emplace_back(cvRound(q.x / cell_px_w - 0.5f), cvRound((q.y - band_top) / cell_px_h - 0.5f));
@@ -305,13 +331,45 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
                 }
         }
         if (bx1 < bx0 || 2 * n_inside < n_band) continue;
+        // Shape of the region's road cells: a structure along the road (guardrail, kerb, the edge line's
+        // residual) leaves a thin streak pointing at the vanishing point; a vehicle a compact blob, or
+        // bands across its rear (bumper, contact zone) that run across the road, not along it.
+        float elong = 1.f, along = 0.f;
+        {
+            double n = 0, sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0;
+            for (int r = g.y0; r <= g.y1; ++r)
+                for (int x = g.x0; x <= g.x1; ++x)
+                    if (hot_road.at<uint8_t>(r, x) &&
+                        std::find(g.labels.begin(), g.labels.end(), labels.at<int>(r, x)) != g.labels.end()) {
+                        const double u = cell_x(x + 0.5f), v = cell_y(r + 0.5f);
+                        n += 1; sx += u; sy += v; sxx += u * u; syy += v * v; sxy += u * v;
+                    }
+            if (n > 2) {
+                const double mx = sx / n, my = sy / n;
+                const double cxx = sxx / n - mx * mx, cyy = syy / n - my * my, cxy = sxy / n - mx * my;
+                const double tr = cxx + cyy, det = cxx * cyy - cxy * cxy;
+                const double disc = std::sqrt(std::max(0.0, tr * tr / 4 - det));
+                const double l1 = tr / 2 + disc, l2 = std::max(1e-6, tr / 2 - disc);
+                elong = float(std::sqrt(l1 / l2));
+                // major axis (eigenvector of l1) against the direction to the vanishing point
+                double ax = cxy, ay = l1 - cxx;
+                if (std::fabs(ax) + std::fabs(ay) < 1e-9) { ax = 1; ay = 0; }
+                const double vx = vp_x - mx, vy = horizon_row - my;
+                along = float(std::fabs(ax * vx + ay * vy) / (std::hypot(ax, ay) * std::hypot(vx, vy) + 1e-9));
+            }
+        }
+        if (elong >= float(p.streak_elongation) && along >= float(std::cos(p.streak_angle_deg * M_PI / 180.0))) continue;
         // Sides to a pixel of the level from the bottom band first (trims cell quantisation).
         const int band_r0 = std::max(g.y0, g.y1 - band_rows + 1) * ch, band_r1 = (g.y1 + 1) * ch;
         int la = bx0 * cw, lb = (bx1 + 1) * cw;  // level columns [la, lb)
         side_extent(diff, band_r0, band_r1, float(p.side_frac), la, lb);
         float x0 = float(la * sc), x1 = float(lb * sc);
         float w = x1 - x0;
+        // Below the horizon, and not cut by the bottom of the road band: a vehicle whose contact zone is
+        // out of view would be nearer than the camera sees the road (3-4 m); what is cut there is the near
+        // road's own residual.
         if (yb < horizon_row + float(p.horizon_margin_px) || w_exp <= 0.f) continue;
+        if (g.y1 >= ncy - 1 || cell_y(float(g.y1 + 1)) >= road_bottom - float(p.bottom_margin_px)) continue;
         if (w < float(p.min_width_frac) * w_exp || w > float(p.max_width_frac) * w_exp) continue;
         ParallaxMeasurement m;
         float row = yb;

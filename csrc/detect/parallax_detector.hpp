@@ -17,9 +17,10 @@
 //
 // Structures above the road plane are rejected by measurement, not by masks: clusters are formed on
 // the road area of the lane model only, most of a region's lowest cells must lie inside it by
-// inside_margin_m, its bottom must be below the horizon, and its width must be that of a vehicle at
-// that row (the flat-road scale); what remains of guardrails and signs is left to the temporal
-// coherence the particle filter demands.
+// inside_margin_m, its bottom must be below the horizon, its width must be that of a vehicle at that
+// row (the flat-road scale), and a region that is a long thin streak pointing at the vanishing point
+// (a guardrail or kerb running along the road, where the lane model extrapolated a lane over the
+// verge) is no vehicle; what remains is left to the temporal coherence the particle filter demands.
 //
 // The difference is taken at pyramid level `level` (1 = half resolution) of the road band: a
 // quarter of the pixels to warp, and a low-pass that removes most of the sensor noise.
@@ -54,10 +55,13 @@ struct ParallaxParams {
     double height_hot_frac = 0.25;   // share of the columns hot for a row to count towards the height
     double height_gap_frac = 0.15;   // widths of rows without difference bridged for the height
     int join_gap_cells = 2;          // cells; hot clusters this far beside a region's span still join it
+    double streak_elongation = 5.0;  // elongation of a region's cells beyond which ...
+    double streak_angle_deg = 12.0;  // ... a long axis this close to the vanishing point's direction is no vehicle
     double refine_up_frac = 0.15;    // bottom search above the lowest hot row, in expected widths
     double refine_down_frac = 0.5;   // and below it (vehicles standing still on the road)
     double refine_min_step = 8.0;    // gray levels; weakest dark-to-bright step accepted as the bottom
     double horizon_margin_px = 4.0;  // px; a region's bottom must be this far below the horizon
+    double bottom_margin_px = 4.0;   // px; a region reaching this close to the road area's bottom is cut by it
 
     void bind(ParamMap &m);
 };
@@ -83,9 +87,9 @@ struct ParallaxFrame {
 // cur_band / prev_band: the road band (rows band_top .. height-1) of the current and previous frame at
 // pyramid level p.level; cur_full: the whole current frame (bottom refinement); H: road homography
 // previous -> current in full-resolution pixels; lanes: this frame's lane model (road area,
-// vanishing point); horizon_row: row of the horizon in the current frame.
+// vanishing point); vp: the road's vanishing point in the current frame (its row is the horizon).
 ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
-                              const cv::Matx33d &H, const LaneModel &lanes, float horizon_row, const CameraParams &cam,
+                              const cv::Matx33d &H, const LaneModel &lanes, cv::Point2f vp, const CameraParams &cam,
                               const ParallaxParams &p);
 
 } // namespace hw

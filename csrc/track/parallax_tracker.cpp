@@ -46,6 +46,11 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
     m.add("search_max_speed_mps", search_max_speed_mps, 1.0, 100.0,
           "m/s; without a prediction the travel since the previous frame is searched up to this speed");
     m.add("search_steps", search_steps, 2, 1000, "travels tried in that search (0 .. max speed * dt)");
+    m.add("long_gap", long_gap, 0, 10,
+          "frames; besides the previous frame, the frame is compared with the one this many frames back "
+          "(homographies chained) and its regions are added where the short difference has none: a vehicle "
+          "keeping its distance 50 m ahead shows ~0.3 px of parallax per frame at 30 fps, long_gap times more "
+          "here (the paper ran at 5-10 fps); 0 or 1 disables (saves one warp per frame)");
     m.add("max_dt_s", max_dt_s, 0.001, 100.0,
           "s; a longer gap between frames (or time going back) starts the homography and the tracks again");
 }
@@ -53,7 +58,7 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
 ParallaxTracker::ParallaxTracker(const LaneFeatureParams &features, const HomographyParams &homography,
                                  const ParallaxTrackerParams &parallax, const ParticleParams &particles,
                                  const CameraParams &cam)
-    : fp_(features), hp_(homography), pp_(parallax), cam_(cam), kf_(homography.kalman, cam), pf_(particles) {
+    : fp_(features), hp_(homography), pp_(parallax), cam_(cam), kf_(homography.kalman, cam), pf_(particles, cam) {
     band_top_ = std::clamp(int(std::floor(cam.horizon_row() - pp_.band_above_horizon * cam.height)), 0,
                            std::max(0, cam.height - 16));
 }
@@ -64,6 +69,7 @@ void ParallaxTracker::reset() {
     prev_.release();
     cur_.release();
     prev_level_.release();
+    history_.clear();
     started_ = false;
     h_step_ = HomographyStep{};
     detection_ = ParallaxFrame{};
@@ -155,6 +161,9 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
     std::vector<PointMeasurement> z;
     {
         Stopwatch sw;
+        // Differences against the previous frame and, for vehicles keeping their distance (a fraction of
+        // a pixel of parallax per frame when far), against the frame long_gap frames back, through the
+        // chained homographies H_k H_{k-1} ... of the bands kept in history_ (newest last).
         if (kf_.valid() && have_prev_level) {
             // The bonnet is no road: the road area stops above it.
             LaneModel road = ctx.lanes;
@@ -164,9 +173,36 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
                                          {0, cam_.height - 1}};
                 for (auto &q : road.road_polygon) q.y = std::min(q.y, hood_row() - 1);
             }
-            detection_ = detect_parallax(level, prev_level_, cur_, band_top_, kf_.H_px(), road, vp.y, cam_, pp_.detect);
+            detection_ = detect_parallax(level, prev_level_, cur_, band_top_, kf_.H_px(), road, vp, cam_, pp_.detect);
             full_detection = true;
             for (const auto &m : detection_.measurements) z.push_back({m.point, m.box, m.sad});
+            if (pp_.long_gap > 1 && int(history_.size()) >= pp_.long_gap - 1) {
+                cv::Matx33d H = kf_.H_px();
+                cv::Mat old_level;
+                for (int i = 0; i < pp_.long_gap - 1; ++i) {
+                    const auto &e = history_[history_.size() - 1 - size_t(i)];
+                    H = H * e.second;
+                    old_level = e.first;
+                }
+                const ParallaxFrame far = detect_parallax(level, old_level, cur_, band_top_, H, road, vp, cam_, pp_.detect);
+                // A long-gap region is used where the short gap saw nothing (the near, fast vehicles are
+                // measured sharper against the previous frame).
+                for (const auto &m : far.measurements) {
+                    bool seen = false;
+                    for (const auto &n : detection_.measurements) seen = seen || (m.box & n.box).area() > 0.f;
+                    if (!seen) {
+                        z.push_back({m.point, m.box, m.sad});
+                        detection_.measurements.push_back(m);
+                    }
+                }
+            }
+        }
+        // Keep the bands of the last long_gap - 1 frames before this one with the homography to the next.
+        if (pp_.long_gap > 1 && have_prev_level && kf_.valid()) {
+            history_.emplace_back(prev_level_, kf_.H_px());
+            while (int(history_.size()) > pp_.long_gap - 1) history_.pop_front();
+        } else {
+            history_.clear();
         }
         prev_level_ = level;
         times.add("parallax", sw.ms());
@@ -175,7 +211,7 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
     // joint particle filter
     {
         Stopwatch sw;
-        pf_.step(dt, z, gray.size(), vp.y);
+        pf_.step(dt, z, gray.size(), vp);
         const size_t first = tracks.size();
         pf_.report(tracks);
         last_tracks_.assign(tracks.begin() + long(first), tracks.end());

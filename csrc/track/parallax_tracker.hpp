@@ -16,6 +16,10 @@
 // the previous road band is warped with the flat-road homography of each travel in
 // [0, search_max_speed_mps * dt] and the one leaving the smallest mean difference becomes the
 // prediction (the dash period is far longer than a frame's travel, so this search cannot alias).
+// A second difference is taken against the frame long_gap frames back, warped with the product of the
+// filtered homographies since: long_gap times the parallax of a vehicle keeping its distance (far
+// vehicles at 30 fps move a fraction of a pixel per frame; the paper ran at 5-10 fps); its regions
+// count where the one-frame difference found none (fast vehicles smear over long gaps).
 // Every frame with an alignment is a full detection: the detector always scans the whole road area.
 // The vehicle boxes come from the measurement regions (bottom edge and width), so the range, TTC and
 // lead stages treat them like any other track.
@@ -28,6 +32,7 @@
 #include "track/particle_filter.hpp"
 #include "track/tracker.hpp"
 
+#include <deque>
 #include <vector>
 
 namespace hw {
@@ -49,6 +54,7 @@ struct ParallaxTrackerParams {
     double hood_frac = 0.0;            // share of the image height at the bottom that is the car's bonnet
     bool exclude_vehicle_corners = true;  // road features inside tracked vehicles' boxes are not used
     double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
+    int long_gap = 3;                  // frames back of the second, long-gap difference (0, 1: none)
     double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction
     int search_steps = 24;             // travels tried between 0 and that
 
@@ -89,6 +95,7 @@ private:
     JointParticleFilter pf_;
     cv::Mat prev_, cur_;           // full frames (copies)
     cv::Mat prev_level_;           // previous road band at the detector's level
+    std::deque<std::pair<cv::Mat, cv::Matx33d>> history_;  // older bands at the level, each with H to the next
     double last_t_s_ = 0.0;
     bool started_ = false;
     HomographyStep h_step_;

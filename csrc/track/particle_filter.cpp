@@ -28,9 +28,9 @@ void ParticleParams::bind(ParamMap &m) {
           "detection probability: each vehicle no measurement supports multiplies a particle's weight by "
           "1 - p_detect; this is what lets unsupported hypotheses fade");
     m.add("meas_sigma_x_frac", meas_sigma_x_frac, 0.0, 2.0,
-          "region widths; 1-sigma error of a measurement's column (region ends are blurred by spill and wheels)");
-    m.add("meas_sigma_y_frac", meas_sigma_y_frac, 0.0, 2.0,
-          "region widths; 1-sigma error of a measurement's bottom row");
+          "vehicle widths; 1-sigma error of a measurement's column for that vehicle (region ends are blurred by "
+          "spill and wheels)");
+    m.add("meas_sigma_y_frac", meas_sigma_y_frac, 0.0, 2.0, "vehicle widths; 1-sigma error of a measurement's bottom row");
     m.add("meas_sigma_min_px", meas_sigma_min_px, 0.1, 100.0, "px; floor of both measurement sigmas");
     m.add("accel_widths_s2", accel_widths_s2, 0.0, 100.0,
           "vehicle widths / s^2; random image acceleration of a vehicle (a 1.8 m car braking at 3.6 m/s^2 is 2 "
@@ -50,14 +50,38 @@ void ParticleParams::bind(ParamMap &m) {
           "measurements used per frame at most, strongest first; bounds the cost");
     m.add("max_missed_frames", max_missed_frames, 1, 10000,
           "frames; a vehicle no measurement came near for this long is removed (it stopped showing parallax)");
+    // A vehicle's support is the running average of "a measurement came near it this frame".
+    m.add("support_alpha", support_alpha, 0.0, 1.0, "gain of a vehicle's support (running average, see above)");
+    m.add("min_support", min_support, 0.0, 1.0,
+          "a vehicle whose support falls below this is removed (once min_support_age old): an artifact that now "
+          "and then lands near it keeps no ghost alive, while a vehicle measured in most frames stays");
+    m.add("min_support_age", min_support_age, 0, 10000, "frames; age before the support rule applies");
     m.add("roi_margin_px", roi_margin_px, -1000.0, 1000.0,
           "px; a vehicle whose estimate is this far outside the image (or at the horizon) has left");
     m.add("duplicate_frac", duplicate_frac, 0.0, 2.0,
           "vehicle widths; two vehicles whose estimates are this close follow one vehicle: the younger goes");
+    m.add("max_lateral_mps", max_lateral_mps, 0.1, 100.0,
+          "m/s; a hypothesis whose image motion means moving sideways on the road faster than this is a chain of "
+          "artifacts, not a vehicle (a lane change is ~2 m/s)");
+    m.add("max_closing_mps", max_closing_mps, 1.0, 1000.0,
+          "m/s; nor one whose range would change faster than this (two cars at 250 km/h head-on: 140)");
     m.add("seed", seed, 0, 2147483647, "random seed of the filter; runs are reproducible");
 }
 
-JointParticleFilter::JointParticleFilter(const ParticleParams &p) : p_(p), rng_(uint32_t(p.seed)) { reset(); }
+JointParticleFilter::JointParticleFilter(const ParticleParams &p, const CameraParams &cam)
+    : p_(p), cam_(cam), rng_(uint32_t(p.seed)) {
+    reset();
+}
+
+bool JointParticleFilter::plausible(const Vehicle &v, cv::Point2f vp) const {
+    const double dy = double(v.mean[1]) - vp.y;
+    if (dy <= 1.0) return false;
+    const double fh = cam_.fy * cam_.height_m;
+    const double Z = fh / dy, X = (double(v.mean[0]) - vp.x) * Z / cam_.fx;
+    const double dZ = -double(v.mean[3]) * Z * Z / fh;                      // dZ/dt = -vy Z^2 / (fy h)
+    const double dX = (double(v.mean[2]) + cam_.fx * X * dZ / (Z * Z)) * Z / cam_.fx;  // from vx
+    return std::fabs(dX) <= p_.max_lateral_mps && std::fabs(dZ) <= p_.max_closing_mps;
+}
 
 void JointParticleFilter::reset() {
     vehicles_.clear();
@@ -100,11 +124,14 @@ void JointParticleFilter::weigh(const std::vector<PointMeasurement> &z, cv::Size
     const double a_u = transitory() ? p_.a_u_transitory : p_.a_u;
     const double U = 1.0 / (double(image.width) * double(image.height));  // uniform clutter density
     const double pd = p_.p_detect;
+    // p_i is vehicle i's own measurement model: its sigmas scale with its width (a wide artifact region
+    // must not pass for a near measurement of every vehicle).
     struct Sig { float ix, iy; double norm; };
     std::vector<Sig> sig;
-    for (const auto &m : z) {
-        const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * m.box.width);
-        const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * m.box.width);
+    for (int i = 0; i <= N; ++i) {
+        const float w = i < N ? vehicles_[size_t(i)].w : candidate_.w;
+        const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * w);
+        const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * w);
         sig.push_back({1.f / sx, 1.f / sy, 1.0 / (2.0 * M_PI * double(sx) * double(sy))});
     }
     std::vector<double> g(size_t(N) + 1);
@@ -116,11 +143,11 @@ void JointParticleFilter::weigh(const std::vector<PointMeasurement> &z, cv::Size
         for (size_t j = 0; j < z.size(); ++j) {
             double sum_p = 0.0, sum_p2 = 0.0;
             for (int i = 0; i < nv; ++i) {
-                const float dx = (z[j].z.x - x[4 * i]) * sig[j].ix, dy = (z[j].z.y - x[4 * i + 1]) * sig[j].iy;
+                const float dx = (z[j].z.x - x[4 * i]) * sig[size_t(i)].ix, dy = (z[j].z.y - x[4 * i + 1]) * sig[size_t(i)].iy;
                 const float d2 = dx * dx + dy * dy;
                 if (d2 > 60.f) continue;  // exp(-30): nothing
                 const double e = std::exp(-0.5 * double(d2));
-                const double pij = e * sig[j].norm;
+                const double pij = e * sig[size_t(i)].norm;
                 sum_p += pij;
                 sum_p2 += pij * pij;
                 g[size_t(i)] = std::max(g[size_t(i)], e);
@@ -178,20 +205,21 @@ void JointParticleFilter::estimate() {
     if (transitory()) mean_of(N, true, candidate_);
 }
 
-void JointParticleFilter::end_transitory() {
+void JointParticleFilter::end_transitory(cv::Point2f vp) {
     if (!transitory()) return;
     ++transitory_frames_;
     const int ns = p_.particles;
     const int n_ext = int(std::count(extended_.begin(), extended_.end(), uint8_t(1)));
     const double share = double(n_ext) / ns;
     const bool decide = transitory_frames_ >= p_.max_transitory_frames;
-    if (share < p_.end_share || (decide && share < 0.5)) {
+    const bool wins = share > 1.0 - p_.end_share || (decide && share >= 0.5);
+    if (share < p_.end_share || (decide && share < 0.5) || (wins && !plausible(candidate_, vp))) {
         std::fill(extended_.begin(), extended_.end(), uint8_t(0));  // the hypothesis fades
         candidate_ = Vehicle{};
         transitory_frames_ = 0;
         return;
     }
-    if (share > 1.0 - p_.end_share || decide) {
+    if (wins) {
         // The (N+1)-particles won: every particle gets the new vehicle (copied from one that has it).
         const int N = int(vehicles_.size());
         std::vector<int> with;
@@ -231,13 +259,15 @@ void JointParticleFilter::bookkeeping(const std::vector<PointMeasurement> &z, cv
     auto update = [&](Vehicle &v) {
         int best = -1;
         float best_d2 = float(p_.gate_sigma * p_.gate_sigma);
+        const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * v.w);
+        const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * v.w);
         for (size_t j = 0; j < z.size(); ++j) {
-            const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * z[j].box.width);
-            const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * z[j].box.width);
             const float dx = (z[j].z.x - v.mean[0]) / sx, dy = (z[j].z.y - v.mean[1]) / sy;
             if (dx * dx + dy * dy < best_d2) { best_d2 = dx * dx + dy * dy; best = int(j); }
         }
         ++v.age;
+        // support: a slow average of "measured this frame"
+        v.support += float(p_.support_alpha) * ((best >= 0 ? 1.f : 0.f) - v.support);
         if (best < 0) { ++v.missed; return; }
         v.missed = 0;
         ++v.hits;
@@ -254,7 +284,8 @@ void JointParticleFilter::bookkeeping(const std::vector<PointMeasurement> &z, cv
         const Vehicle &v = vehicles_[size_t(i)];
         const bool out = v.mean[0] < -m || v.mean[0] > float(image.width) + m || v.mean[1] > float(image.height) + m ||
                          v.mean[1] < horizon_row + 2.f;
-        if (out || v.missed > p_.max_missed_frames) remove_vehicle(i);
+        const bool unsupported = v.age >= p_.min_support_age && v.support < float(p_.min_support);
+        if (out || v.missed > p_.max_missed_frames || unsupported) remove_vehicle(i);
     }
     // Two vehicles on one: the one measured fewer times goes.
     for (int i = 0; i < int(vehicles_.size()); ++i)
@@ -277,8 +308,8 @@ void JointParticleFilter::start_transitory(const std::vector<PointMeasurement> &
     for (size_t j = 0; j < z.size() && pick < 0; ++j) {
         bool explained = false;
         for (const auto &v : vehicles_) {
-            const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * z[j].box.width);
-            const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * z[j].box.width);
+            const float sx = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_x_frac) * v.w);
+            const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * v.w);
             const float dx = (z[j].z.x - v.mean[0]) / sx, dy = (z[j].z.y - v.mean[1]) / sy;
             const bool on_box = std::fabs(z[j].z.x - v.mean[0]) < 0.6f * v.w && z[j].z.y <= v.mean[1] + 0.1f * v.w &&
                                 z[j].z.y >= v.mean[1] - v.h;
@@ -293,6 +324,7 @@ void JointParticleFilter::start_transitory(const std::vector<PointMeasurement> &
     candidate_.w = m.box.width;
     candidate_.h = m.box.height;
     candidate_.hits = 1;
+    candidate_.support = 1.f;
     candidate_.mean = cv::Vec4f(m.z.x, m.z.y, 0.f, 0.f);
     transitory_frames_ = 0;
     // n_r particles (any: after resampling all weigh the same) get the new vehicle at the measurement.
@@ -312,7 +344,8 @@ void JointParticleFilter::start_transitory(const std::vector<PointMeasurement> &
     }
 }
 
-void JointParticleFilter::step(double dt_s, const std::vector<PointMeasurement> &z_in, cv::Size image, float horizon_row) {
+void JointParticleFilter::step(double dt_s, const std::vector<PointMeasurement> &z_in, cv::Size image, cv::Point2f vp) {
+    const float horizon_row = vp.y;
     CV_Assert(dt_s >= 0.0 && image.width > 0 && image.height > 0);
     std::vector<PointMeasurement> z = z_in;
     std::stable_sort(z.begin(), z.end(), [](const PointMeasurement &a, const PointMeasurement &b) {
@@ -334,7 +367,7 @@ void JointParticleFilter::step(double dt_s, const std::vector<PointMeasurement> 
         estimate();
         for (size_t i = 0; i < vehicles_.size(); ++i) rescale(vehicles_[i], y_before[i]);
         if (transitory()) rescale(candidate_, cand_y);
-        end_transitory();
+        end_transitory(vp);
         bookkeeping(z, image, horizon_row);
     }
     start_transitory(z);

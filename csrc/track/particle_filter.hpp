@@ -10,7 +10,7 @@
 // Likelihood of the M measurements z_j (paper eq. 2):
 //     p(z | x) = prod_j [ sum_i a_ij p_i(z_j | x_i) + a_u U(z_j) ],
 //     a_ij = (1 - a_u) p_i(z_j | x_i) / sum_i p_i(z_j | x_i),
-// p_i a bivariate Gaussian around vehicle i (sigma from the measurement's width), U uniform over the
+// p_i a bivariate Gaussian around vehicle i (sigma from the vehicle's width), U uniform over the
 // image. With those mixing weights the bracket is (1 - a_u) sum_i p_ij^2 / sum_i p_ij + a_u U.
 // Eq. 2 alone never penalises a hypothesised vehicle that no measurement supports (a vehicle far
 // from every measurement only lowers its own mixing weights), so the transitory period could not end
@@ -25,11 +25,17 @@
 // persistent measurements win. Both populations are propagated and weighted together; the period
 // ends when either falls below end_share of the particles: the N+1-particles take over (the vehicle
 // is confirmed, with the id it was given at the start) or vanish. A measurement seen in one frame
-// only therefore never becomes a confirmed vehicle.
+// only therefore never becomes a confirmed vehicle. A hypothesis that wins is confirmed only if its
+// image motion is that of something moving on the road like a vehicle: with the flat-road model, a
+// bottom point at (x, y) is at Z = fy h / (y - y_h), X = (x - x_vp) Z / fx, and its image velocity gives
+//     dZ/dt = -vy Z^2 / (fy h),   dX/dt = (vx + fx X dZ/dt / Z^2) Z / fx;
+// |dX/dt| above max_lateral_mps (a lane change is ~2 m/s) or |dZ/dt| above max_closing_mps means a
+// chain of artifacts, not a vehicle.
 // Exits: a vehicle whose estimate leaves the image (by roi_margin_px) or rises to the horizon is
-// removed; so is one that no measurement has come near for max_missed_frames (the paper removes
-// vehicles at the border only, but a vehicle whose motion stops showing parallax would otherwise
-// drift on its last velocity forever).
+// removed; so is one that no measurement has come near for max_missed_frames, or whose running
+// share of measured frames falls below min_support (the paper removes vehicles at the border only,
+// but a vehicle whose motion stops showing parallax would drift on its last velocity forever, and
+// an artifact now and then near it would keep a ghost alive).
 // Cost per step: O(n_s * N * (M + 1)) for weighting and O(n_s * N) for propagation and resampling,
 // i.e. linear in N for a fixed particle count and quadratic when M grows with N; bounded by
 // max_vehicles and max_measurements.
@@ -37,6 +43,7 @@
 
 #include "core/params.hpp"
 #include "core/types.hpp"
+#include "geometry/camera.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -53,8 +60,8 @@ struct ParticleParams {
     double a_u = 0.1;                  // clutter mixing coefficient, stationary state
     double a_u_transitory = 0.97;      // raised during a transitory period
     double p_detect = 0.8;             // detection probability in the per-vehicle detection term
-    double meas_sigma_x_frac = 0.15;   // measurement sigma across, in region widths
-    double meas_sigma_y_frac = 0.08;   // measurement sigma of the bottom row, in region widths
+    double meas_sigma_x_frac = 0.15;   // measurement sigma across, in vehicle widths
+    double meas_sigma_y_frac = 0.08;   // measurement sigma of the bottom row, in vehicle widths
     double meas_sigma_min_px = 2.0;    // px; floor of both
     double accel_widths_s2 = 2.0;      // vehicle widths / s^2; random image acceleration of a vehicle
     double ego_accel_px_s2 = 300.0;    // px / s^2; image acceleration from the ego's shake
@@ -64,8 +71,13 @@ struct ParticleParams {
     int max_vehicles = 16;             // N at most (cost bound)
     int max_measurements = 16;         // measurements used per frame at most, strongest first (cost bound)
     int max_missed_frames = 12;        // frames without a measurement near it before a vehicle is removed
+    double support_alpha = 0.1;        // gain of the running share of frames a vehicle was measured in
+    double min_support = 0.3;          // below it (after min_support_age frames) a vehicle is removed
+    int min_support_age = 10;          // frames
     double roi_margin_px = 0.0;        // px; an estimate this far outside the image has left
     double duplicate_frac = 0.3;       // two vehicles closer than this many widths: the younger goes
+    double max_lateral_mps = 3.5;      // m/s; a hypothesis moving sideways faster on the road is no vehicle
+    double max_closing_mps = 70.0;     // m/s; nor one whose range changes faster
     int seed = 1;                      // random seed (runs are reproducible)
 
     void bind(ParamMap &m);
@@ -80,11 +92,11 @@ struct PointMeasurement {
 
 class JointParticleFilter {
 public:
-    explicit JointParticleFilter(const ParticleParams &p);
+    JointParticleFilter(const ParticleParams &p, const CameraParams &cam);
 
     // One step: propagate over dt, weight with the measurements, resample, estimate, manage entries
-    // and exits. image: frame size; horizon_row: estimates above it have left.
-    void step(double dt_s, const std::vector<PointMeasurement> &z, cv::Size image, float horizon_row);
+    // and exits. image: frame size; vp: the road's vanishing point (estimates up at its row have left).
+    void step(double dt_s, const std::vector<PointMeasurement> &z, cv::Size image, cv::Point2f vp);
     // Every vehicle (confirmed) and the hypothesised one (not confirmed), as tracks.
     void report(std::vector<TrackState> &out) const;
     int vehicles() const { return int(vehicles_.size()); }
@@ -96,6 +108,7 @@ private:
         int id = -1;
         float w = 0.f, h = 0.f;    // box size, px
         int age = 0, missed = 0, hits = 0;
+        float support = 1.f;       // running share of frames with a measurement near it
         cv::Vec4f mean;            // particle mean (x, y, vx, vy)
         float sigma_y = 0.f;       // particle spread of y
     };
@@ -105,12 +118,14 @@ private:
     void weigh(const std::vector<PointMeasurement> &z, cv::Size image);
     void resample();
     void estimate();
-    void end_transitory();
+    void end_transitory(cv::Point2f vp);
+    bool plausible(const Vehicle &v, cv::Point2f vp) const;
     void bookkeeping(const std::vector<PointMeasurement> &z, cv::Size image, float horizon_row);
     void remove_vehicle(int i);
     void start_transitory(const std::vector<PointMeasurement> &z);
 
     ParticleParams p_;
+    CameraParams cam_;
     std::vector<Vehicle> vehicles_;
     Vehicle candidate_;                 // id > 0 during a transitory period
     int transitory_frames_ = 0;
