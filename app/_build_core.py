@@ -123,7 +123,11 @@ def build_inplace(jobs: int = 2) -> Path:
         return target
     tmp = BUILD / "cffi"
     built = Path(make_ffibuilder(objects).compile(tmpdir=str(tmp), verbose=False))
-    shutil.copy2(built, target)
+    # copy then rename: a process that has the old module loaded keeps its (unlinked) file intact;
+    # copying over it in place crashes such processes
+    tmp_target = target.with_name(target.name + ".tmp")
+    shutil.copy2(built, tmp_target)
+    os.replace(tmp_target, target)
     return target
 
 

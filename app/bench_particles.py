@@ -21,7 +21,7 @@ PATCHES = [(232, 272, 288, 290), (62, 336, 122, 360), (514, 336, 574, 360), (334
            (176, 336, 236, 360), (400, 336, 460, 360), (130, 272, 186, 290), (436, 272, 492, 290)]
 
 
-def particle_cost(max_n: int = 8, frames: int = 100, warmup: int = 60, config: Optional[dict] = None) -> dict:
+def particle_cost(max_n: int = 8, frames: int = 140, warmup: int = 80, config: Optional[dict] = None) -> dict:
     """{N: {"n": frames, "median_ms", "p99_ms"}}: the particles stage time of the frames in which the filter
     held N confirmed vehicles, over runs with 1..max_n patches."""
     from app.sim import load_scenario, render

@@ -4,15 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 import yaml
 
 from app.core import ConfigError, InvalidArgument, Pipeline, core_schema
+from app.eval.road_motion import road_residuals
 from app.sim import load_scenario, render
-from app.sim.frames import scenario_camera
-from app.sim.world import World
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "app" / "sim" / "scenarios"
 
@@ -25,25 +23,6 @@ def shaken_scenario(tmp_path: Path, name: str, pitch_deg: float, duration_s: flo
     path = tmp_path / f"{name}_shake.yaml"
     path.write_text(yaml.safe_dump(doc))
     return load_scenario(path)
-
-
-def road_residuals(scenario, prev, cur):
-    """Mean |difference| on the road 4-40 m ahead (no vehicles) after warping prev with the true
-    road homography, and without warping."""
-    world = World(scenario)
-    cam0 = scenario_camera(scenario)
-    cp = cam0.shaken(prev.pitch_deg - cam0.pitch_deg, prev.yaw_deg - cam0.yaw_deg)
-    cc = cam0.shaken(cur.pitch_deg - cam0.pitch_deg, cur.yaw_deg - cam0.yaw_deg)
-    s = world.frame_state(cur.index).ego_odometer_m - world.frame_state(prev.index).ego_odometer_m
-    h = cc.ground_to_image() @ np.array([[1, 0, 0], [0, 1, -s], [0, 0, 1.0]]) @ np.linalg.inv(cp.ground_to_image())
-    v, u = np.mgrid[0:cur.image.shape[0], 0:cur.image.shape[1]]
-    x, z = cc.ground_from_pixel(u, v)
-    road = np.isfinite(z) & (z > 4) & (z < 40) & (np.abs(x) < 5)
-    for veh in cur.truth + prev.truth:
-        l, t, r, b = veh["box"]
-        road &= ~((u >= l - 3) & (u <= r + 3) & (v >= t - 3) & (v <= b + 3))
-    warped = cv2.warpPerspective(prev.image, h, (cur.image.shape[1], cur.image.shape[0])).astype(float)
-    return np.abs(warped - cur.image)[road].mean(), np.abs(prev.image.astype(float) - cur.image)[road].mean()
 
 
 def test_every_parallax_key_is_documented_and_the_preset_exists():

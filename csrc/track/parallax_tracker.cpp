@@ -42,7 +42,7 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
           "share of the image height at the bottom taken by the car's own bonnet: it moves with the camera, not "
           "with the road, so it gives no features and no differences; 0 for none");
     m.add("exclude_vehicle_corners", exclude_vehicle_corners,
-          "corners inside the boxes of tracked vehicles are not used for the homography: they are not on the road");
+          "corners inside the boxes of confirmed vehicles are not used for the homography: they are not on the road");
     m.add("search_max_speed_mps", search_max_speed_mps, 1.0, 100.0,
           "m/s; without a prediction the travel since the previous frame is searched up to this speed");
     m.add("search_steps", search_steps, 2, 1000, "travels tried in that search (0 .. max speed * dt)");
@@ -123,9 +123,11 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
                                        [&](const Correspondence &c) { return c.cur.y >= float(hood_row()); }),
                         f.matches.end());
         if (pp_.exclude_vehicle_corners) {
-            // Where the tracked vehicles are now (last estimate moved by its velocity), widened a little.
+            // Where the confirmed vehicles are now (last estimate moved by its velocity), widened a little
+            // (a hypothesis is not yet a reason to give up road features).
             std::vector<cv::Rect2f> boxes;
             for (const auto &t : last_tracks_) {
+                if (!t.confirmed) continue;
                 cv::Rect2f b = t.box;
                 if (std::isfinite(t.vel_px_s.x)) b += cv::Point2f(float(t.vel_px_s.x * dt), float(t.vel_px_s.y * dt));
                 boxes.push_back(cv::Rect2f(b.x - 0.1f * b.width, b.y - 0.1f * b.height, 1.2f * b.width, 1.2f * b.height));

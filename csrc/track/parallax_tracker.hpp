@@ -52,7 +52,7 @@ struct ParallaxTrackerParams {
     ParallaxParams detect;
     double band_above_horizon = 0.08;  // share of the image height above the horizon kept in the road band
     double hood_frac = 0.0;            // share of the image height at the bottom that is the car's bonnet
-    bool exclude_vehicle_corners = true;  // road features inside tracked vehicles' boxes are not used
+    bool exclude_vehicle_corners = true;  // road features inside confirmed vehicles' boxes are not used
     double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
     int long_gap = 3;                  // frames back of the second, long-gap difference (0, 1: none)
     double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction

@@ -58,7 +58,7 @@ struct ParticleParams {
     double end_share = 0.1;            // a population below this share ends the transitory period
     int max_transitory_frames = 15;    // the period is decided by majority after this many frames
     double a_u = 0.1;                  // clutter mixing coefficient, stationary state
-    double a_u_transitory = 0.97;      // raised during a transitory period
+    double a_u_transitory = 0.99;      // raised during a transitory period
     double p_detect = 0.8;             // detection probability in the per-vehicle detection term
     double meas_sigma_x_frac = 0.15;   // measurement sigma across, in vehicle widths
     double meas_sigma_y_frac = 0.08;   // measurement sigma of the bottom row, in vehicle widths
