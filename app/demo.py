@@ -8,17 +8,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from app.eval.matching import iou_matrix
 from app.replay import replay_scenario
 
 DEMO_SCENARIO = "cut_in"
-
-
-def iou(a, b) -> float:
-    l, t = max(a[0], b[0]), max(a[1], b[1])
-    r, btm = min(a[2], b[2]), min(a[3], b[3])
-    inter = max(0.0, r - l) * max(0.0, btm - t)
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
-    return inter / union if union > 0 else 0.0
 
 
 def main(args) -> int:
@@ -33,7 +26,7 @@ def main(args) -> int:
         for v in truth:
             if v["visible_fraction"] >= 0.9 and v["longitudinal_m"] <= 60:
                 counts["truth"] += 1
-                if any(t.confirmed and iou(t.box, v["box"]) >= 0.5 for t in r.tracks):
+                if any(t.confirmed and iou_matrix([t.box], [v["box"]])[0, 0] >= 0.5 for t in r.tracks):
                     counts["found"] += 1
 
     with truth_f:
