@@ -165,8 +165,10 @@ def test_tusimple_detection_by_height_band(tusimple_scores):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "not reached by shadow + vertical edges: recall 0.32 at precision 0.74 for boxes >= 40 px; the "
-    "annotations box whole vehicles (flank included, oncoming lanes, shoulders) while the method finds "
-    "rear faces standing on a shadow in the road area"))
+    "not reached by shadow + vertical edges: recall 0.32 at precision 0.72 for boxes >= 40 px (no score "
+    "threshold gives recall above 0.09 at precision 0.8); the annotations box whole vehicles (flank "
+    "included, oncoming lanes, shoulders) while the method finds rear faces standing on a shadow in the "
+    "road area. A COCO CNN (NanoDet-m, app/eval/cnn_reference.py) clears the bar on the same images: "
+    "0.77 at 0.91"))
 def test_tusimple_meets_the_issue_bar(tusimple_scores):
     assert tusimple_scores["recall_40"] >= 0.70 and tusimple_scores["precision_40"] >= 0.80

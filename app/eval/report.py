@@ -44,7 +44,10 @@ def markdown(report: dict) -> str:
         for band, b in tu["bands"].items():
             label = "all" if band == "overall" else f"{band} px"
             out.append(f"| {label} | {b['gt']} | {b['tp']} | {b['fp']} | {_f(b['recall'])} | {_f(b['precision'])} |")
-        out.append("")
+        best = tu.get("best_at_precision_0.8")
+        out += ["", "Best recall at precision >= 0.8 for boxes >= 40 px, keeping only detections above a score: " +
+                ("none reaches that precision" if not best else
+                 f"{best['recall']:.3f} at score >= {best['threshold']:.2f} (precision {best['precision']:.3f})") + ".", ""]
     ln = report.get("lanes")
     if ln:
         out += [f"### TuSimple lane sample ({ln['images']} images)", "",

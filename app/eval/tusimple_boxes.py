@@ -43,46 +43,83 @@ def _band(h: float) -> str:
     return "?"
 
 
-def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "thesis", limit: Optional[int] = None,
-             on_image: Optional[Callable] = None) -> dict:
-    root = Path(supp_dir)
-    entries = json.loads((root / "annotation.json").read_text())[:limit]
-    cfg = tusimple_config(configuration.load(config_path))
-    cfg["pipeline"]["preset"] = preset
+def band_counts(entries: list[dict], detections: list[list[tuple]]) -> dict:
+    """Per band and pooled: ground truth, matched, false positives, recall and precision.
+
+    `detections[k]`: boxes (left, top, right, bottom) found in `entries[k]`'s image."""
     counts: dict[str, dict[str, int]] = {}
 
     def add(band: str, key: str) -> None:
         counts.setdefault(band, {"tp": 0, "fp": 0, "fn": 0, "gt": 0})[key] += 1
 
-    with Pipeline(configuration.core_sections(cfg)) as pipe:
-        for e in entries:
-            gray = cv2.imread(str(root / e["file_name"]), cv2.IMREAD_GRAYSCALE)
-            if gray is None:
-                raise FileNotFoundError(f"{root / e['file_name']}: cannot be read")
-            r = pipe.run_stage("detect", gray)
-            gt = [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
-            det = [t.box for t in r.tracks]
-            pairs = match(gt, det)
-            matched_gt = {i for i, _, _ in pairs}
-            matched_det = {j for _, j, _ in pairs}
-            for i, g in enumerate(gt):
-                band = _band(g[3] - g[1])
-                add(band, "gt")
-                add(band, "tp" if i in matched_gt else "fn")
-            for j, d in enumerate(det):
-                if j not in matched_det:
-                    add(_band(d[3] - d[1]), "fp")
-            if on_image:
-                on_image(e, gray, r)
+    for e, det in zip(entries, detections):
+        gt = [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
+        pairs = match(gt, det)
+        matched_gt = {i for i, _, _ in pairs}
+        matched_det = {j for _, j, _ in pairs}
+        for i, g in enumerate(gt):
+            band = _band(g[3] - g[1])
+            add(band, "gt")
+            add(band, "tp" if i in matched_gt else "fn")
+        for j, d in enumerate(det):
+            if j not in matched_det:
+                add(_band(d[3] - d[1]), "fp")
     out = {}
     for band in [_band(lo) for lo, _ in BANDS] + [">=40"]:
         if band == ">=40":
             c = {k: counts.get("40-80", {}).get(k, 0) + counts.get(">=80", {}).get(k, 0) for k in ("tp", "fp", "fn", "gt")}
         else:
             c = counts.get(band, {"tp": 0, "fp": 0, "fn": 0, "gt": 0})
-        out[band] = c | {"recall": c["tp"] / c["gt"] if c["gt"] else None,
-                         "precision": c["tp"] / (c["tp"] + c["fp"]) if c["tp"] + c["fp"] else None}
+        out[band] = c | _rates(c)
     tot = {k: sum(c[k] for c in counts.values()) for k in ("tp", "fp", "fn", "gt")}
-    out["overall"] = tot | {"recall": tot["tp"] / tot["gt"] if tot["gt"] else None,
-                            "precision": tot["tp"] / (tot["tp"] + tot["fp"]) if tot["tp"] + tot["fp"] else None}
-    return {"images": len(entries), "bands": out}
+    out["overall"] = tot | _rates(tot)
+    return out
+
+
+def _rates(c: dict) -> dict:
+    return {"recall": c["tp"] / c["gt"] if c["gt"] else None,
+            "precision": c["tp"] / (c["tp"] + c["fp"]) if c["tp"] + c["fp"] else None}
+
+
+def operating_curve(entries: list[dict], scored: list[list[tuple]], thresholds) -> list[dict]:
+    """Recall and precision for boxes >= 40 px when only detections scoring at least each threshold
+    are kept. `scored[k]`: (left, top, right, bottom, score) per detection in image k."""
+    curve = []
+    for th in thresholds:
+        kept = [[d[:4] for d in det if d[4] >= th] for det in scored]
+        b = band_counts(entries, kept)[">=40"]
+        curve.append({"threshold": float(th), "recall": b["recall"], "precision": b["precision"]})
+    return curve
+
+
+def recall_at_precision(curve: list[dict], min_precision: float) -> Optional[dict]:
+    """The curve point with the highest recall whose precision reaches `min_precision` (None if none)."""
+    ok = [c for c in curve if c["precision"] is not None and c["precision"] >= min_precision]
+    return max(ok, key=lambda c: c["recall"]) if ok else None
+
+
+def load_entries(supp_dir: str, limit: Optional[int] = None) -> list[dict]:
+    return json.loads((Path(supp_dir) / "annotation.json").read_text())[:limit]
+
+
+def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "thesis", limit: Optional[int] = None,
+             on_image: Optional[Callable] = None) -> dict:
+    root = Path(supp_dir)
+    entries = load_entries(supp_dir, limit)
+    cfg = tusimple_config(configuration.load(config_path))
+    cfg["pipeline"]["preset"] = preset
+    scored = []
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        for e in entries:
+            gray = cv2.imread(str(root / e["file_name"]), cv2.IMREAD_GRAYSCALE)
+            if gray is None:
+                raise FileNotFoundError(f"{root / e['file_name']}: cannot be read")
+            r = pipe.run_stage("detect", gray)
+            scored.append([(*t.box, t.confidence) for t in r.tracks])
+            if on_image:
+                on_image(e, gray, r)
+    # The bar is stated at one operating point; the detection scores also give the whole curve, so
+    # that the best recall reachable at precision >= 0.8 by a stricter threshold is known too.
+    curve = operating_curve(entries, scored, [i / 20 for i in range(20)])
+    return {"images": len(entries), "bands": band_counts(entries, [[d[:4] for d in det] for det in scored]),
+            "curve_ge40": curve, "best_at_precision_0.8": recall_at_precision(curve, 0.8)}

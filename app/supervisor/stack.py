@@ -10,6 +10,20 @@ from app.core import FrameResult
 from app.fcw import EgoState, FcwOutput, FcwParams, FcwStateMachine, Lead
 
 
+def ego_from(can_state: Any, mcu_signals: Any) -> EgoState:
+    """The car's own state, input by input: the CAN bus's value when it has a fresh one, else the cabin
+    MCU's (a car whose speed reaches Headway only through the MCU, or a CAN input gone stale while the
+    MCU still reads it). Neither fresh: None, never a guess."""
+    mcu = mcu_signals if mcu_signals is not None and not mcu_signals.stale else None
+
+    def pick(name: str):
+        v = getattr(can_state, name, None) if can_state is not None else None
+        return v if v is not None or mcu is None else getattr(mcu, name)
+
+    return EgoState(speed_mps=pick("speed_mps"), brake=pick("brake"), turn_left=pick("turn_left"),
+                    turn_right=pick("turn_right"))
+
+
 def lead_of(r: FrameResult) -> Optional[Lead]:
     if r.lead_id is None:
         return None
@@ -35,11 +49,9 @@ class Stack:
         """`now_s`: the clock of the vehicle inputs (the frame time in replay, the bus clock live)."""
         if state is None:
             state = self.vehicle_state(now_s)
-        speed = state.speed_mps if state is not None else None
+        ego = ego_from(state, self.bridge.vehicle_signals() if self.bridge is not None else None)
         if pipe is not None:  # for the ego path when the lanes are missing (next frame on)
-            pipe.set_ego_motion(speed, state.yaw_rate_rps if state is not None else None)
-        ego = EgoState(speed_mps=speed, brake=getattr(state, "brake", None),
-                       turn_left=getattr(state, "turn_left", None), turn_right=getattr(state, "turn_right", None))
+            pipe.set_ego_motion(ego.speed_mps, getattr(state, "yaw_rate_rps", None) if state is not None else None)
         decision = self.fcw.step(r.t, lead_of(r), ego)
         if decision.changed:
             self.decisions.append((r.t, decision))
