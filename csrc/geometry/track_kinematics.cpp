@@ -96,7 +96,14 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
                 double se = NAN;
                 const double rate = slope(s.log_w, se);  // d(ln w)/dt = 1 / TTC to the camera plane
                 // only a clear scale change: the slope at least 3 standard errors from zero
-                if (std::isfinite(rate) && rate * z_now > p_.min_closing_mps && rate > 3.0 * se) {
+                // ...and, while the range filter does not yet trust its rate, a closing speed that the
+                // range history does not contradict: the scale says z * rate, the filter -x(1) with its
+                // variance P(1,1) (15 m/s sigma at birth, so a new track always passes). A far box whose
+                // width wobbles by a pixel claims tens of m/s that its range over the last second denies.
+                const double closing_scale = z_now * rate, closing_sigma = z_now * se;
+                const bool agrees = rate_known || std::fabs(closing_scale - closing) <=
+                                                      3.0 * std::sqrt(s.P(1, 1) + closing_sigma * closing_sigma);
+                if (std::isfinite(rate) && closing_scale > p_.min_closing_mps && rate > 3.0 * se && agrees) {
                     // to the bumper: the camera-plane TTC scaled by the share of range left to the bumper
                     tr.ttc_scale_s = float(std::max(0.0, z_now - p_.ego_front_m) / z_now / rate);
                 }

@@ -6,7 +6,9 @@
 // for its required deceleration); its measurement noise follows the row uncertainty through
 // dZ/dv = -Z^2/(fy h), so far vehicles are trusted less.
 // The scale-based TTC needs no calibration: for a rear face of fixed width, w ~ 1/Z, so
-// d(ln w)/dt = -(dZ/dt)/Z = 1/TTC; we fit the slope of ln w over a short window.
+// d(ln w)/dt = -(dZ/dt)/Z = 1/TTC; we fit the slope of ln w over a short window. While the range
+// filter does not trust its rate yet, the closing speed the scale implies (Z d(ln w)/dt) must agree
+// with the filter's within 3 sigma of both, or no scale TTC is given (a far box's pixel of jitter).
 #pragma once
 
 #include "core/params.hpp"
