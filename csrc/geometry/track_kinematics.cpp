@@ -10,7 +10,8 @@ namespace hw {
 namespace {
 
 // Least-squares slope of y over t, and its standard error (from the residuals).
-double slope(const std::deque<std::pair<double, double>> &pts, double &std_error) {
+// Least-squares slope of y over t; std_error from the residuals, spread_t = sum (t - mean t)^2.
+double slope(const std::deque<std::pair<double, double>> &pts, double &std_error, double &spread_t) {
     double st = 0, sy = 0;
     for (const auto &p : pts) { st += p.first; sy += p.second; }
     const double n = double(pts.size()), mt = st / n, my = sy / n;
@@ -19,6 +20,7 @@ double slope(const std::deque<std::pair<double, double>> &pts, double &std_error
         num += (p.first - mt) * (p.second - my);
         den += (p.first - mt) * (p.first - mt);
     }
+    spread_t = den;
     if (den <= 0) return NAN;
     const double b = num / den;
     double ss = 0;
@@ -75,6 +77,47 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
             s.t = t_s;
         }
         State &s = it->second;
+
+        // The scale change of the box: d(ln w)/dt over the last scale_window frames (a full window
+        // only: while a track is young its box is still settling).
+        double scale_rate = NAN, scale_se = NAN;
+        if (tr.box.width > 1.f) {
+            s.log_w.emplace_back(t_s, std::log(double(tr.box.width)));
+            while (int(s.log_w.size()) > p_.scale_window) s.log_w.pop_front();
+            if (int(s.log_w.size()) >= p_.scale_window &&
+                s.log_w.back().first - s.log_w.front().first >= p_.scale_min_span_s) {
+                double spread = 0.0;
+                scale_rate = slope(s.log_w, scale_se, spread);
+                // a dozen widths that move in whole pixels can fit a line by chance: the error is at
+                // least what half a pixel of width noise gives
+                if (spread > 0.0) scale_se = std::max(scale_se, 0.5 / double(tr.box.width) / std::sqrt(spread));
+            }
+        }
+        // The scale change measures the range rate too, independently of the horizon: dZ/dt = -Z d(ln w)/dt.
+        // The range alone swings with every error of the horizon row (on a real clip the lane vanishing
+        // point moves by +-7 px while the car's box stays put); the width does not. Consecutive windows
+        // overlap, so each fit counts as scale_window times less certain. A fit the filter finds
+        // implausible (beyond 3 sigma of both) is a box that jumped, not a vehicle that did, and is left out.
+        bool scale_agrees = false;
+        if (std::isfinite(scale_rate) && std::isfinite(scale_se)) {
+            const double z = s.x(0);
+            const double innov = -z * scale_rate - s.x(1);
+            const double z_se2 = (z * scale_se) * (z * scale_se);
+            // the stand-in check below: the fit against the filter before the fit has touched it
+            scale_agrees = innov * innov <= 9.0 * (s.P(1, 1) + z_se2);
+            // The fit is the mean rate over the window, read as the rate now (H = [0 1 0]): modelling
+            // its lag through the acceleration was tried and let the range swings' acceleration noise
+            // in (a false warning in cut_in); under 0.3 g braking this reads the rate ~0.2 s late.
+            if (p_.scale_rate_fusion) {
+                const double sk = s.P(1, 1) + p_.scale_window * z_se2;
+                if (innov * innov <= 9.0 * sk) {
+                    const Eigen::Vector3d K = s.P.col(1) / sk;
+                    s.x += K * innov;
+                    s.P -= K * s.P.row(1);
+                }
+            }
+        }
+
         // Range rate and acceleration only once the filter has converged: variance down to (2 m/s)^2,
         // and for the acceleration to (1.5 m/s^2)^2 with the estimate clear of zero by two sigma
         // (a noisy acceleration would turn every wobble of the box into a braking lead).
@@ -85,29 +128,15 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
         const double closing = -s.x(1);
         if (rate_known && closing > p_.min_closing_mps)
             tr.ttc_s = float(std::max(0.0, s.x(0) - p_.ego_front_m) / closing);
+        // The scale TTC on its own (the FCW's stand-in while the rate is unknown, and a check on the
+        // range TTC): only a clear scale change, the slope at least 3 standard errors from zero, that
+        // the range filter does not contradict (its rate sigma is 15 m/s at birth, so a new track passes;
+        // a far box whose width wobbles by a pixel claims tens of m/s that its range history denies).
         const double z_now = s.x(0);
-
-        if (tr.box.width > 1.f) {
-            s.log_w.emplace_back(t_s, std::log(double(tr.box.width)));
-            while (int(s.log_w.size()) > p_.scale_window) s.log_w.pop_front();
-            // a full window only: while a track is young its box is still settling
-            if (int(s.log_w.size()) >= p_.scale_window &&
-                s.log_w.back().first - s.log_w.front().first >= p_.scale_min_span_s) {
-                double se = NAN;
-                const double rate = slope(s.log_w, se);  // d(ln w)/dt = 1 / TTC to the camera plane
-                // only a clear scale change: the slope at least 3 standard errors from zero
-                // ...and, while the range filter does not yet trust its rate, a closing speed that the
-                // range history does not contradict: the scale says z * rate, the filter -x(1) with its
-                // variance P(1,1) (15 m/s sigma at birth, so a new track always passes). A far box whose
-                // width wobbles by a pixel claims tens of m/s that its range over the last second denies.
-                const double closing_scale = z_now * rate, closing_sigma = z_now * se;
-                const bool agrees = rate_known || std::fabs(closing_scale - closing) <=
-                                                      3.0 * std::sqrt(s.P(1, 1) + closing_sigma * closing_sigma);
-                if (std::isfinite(rate) && closing_scale > p_.min_closing_mps && rate > 3.0 * se && agrees) {
-                    // to the bumper: the camera-plane TTC scaled by the share of range left to the bumper
-                    tr.ttc_scale_s = float(std::max(0.0, z_now - p_.ego_front_m) / z_now / rate);
-                }
-            }
+        if (std::isfinite(scale_rate) && z_now * scale_rate > p_.min_closing_mps && scale_rate > 3.0 * scale_se &&
+            (rate_known || scale_agrees)) {
+            // to the bumper: the camera-plane TTC scaled by the share of range left to the bumper
+            tr.ttc_scale_s = float(std::max(0.0, z_now - p_.ego_front_m) / z_now / scale_rate);
         }
     }
     for (auto it = state_.begin(); it != state_.end();)

@@ -30,6 +30,7 @@ struct KinematicsParams {
     double min_closing_mps = 0.3;    // slower closing is "not closing": TTC not available
     int scale_window = 12;           // frames in the ln(w) slope fit
     double scale_min_span_s = 0.3;   // the fit needs at least this much time
+    bool scale_rate_fusion = true;   // the scale change also updates the range filter's rate
 
     void bind(ParamMap &m) {
         m.add("jerk_sigma_mps3", jerk_sigma_mps3, 0.01, 100.0,
@@ -45,6 +46,10 @@ struct KinematicsParams {
               "frames; window of the scale-change fit, and the track age before a scale TTC is given; 12 frames = 0.4 s at 30 fps smooths 1 px width noise");
         m.add("scale_min_span_s", scale_min_span_s, 0.0, 10.0,
               "s; the scale fit needs at least this time span before it reports a TTC");
+        m.add("scale_rate_fusion", scale_rate_fusion,
+              "the box's scale change also measures the range rate (dZ/dt = -Z d(ln w)/dt) in the range filter; "
+              "unlike the range it does not move with the horizon row, whose errors otherwise swing the range "
+              "rate by metres per second on real video");
     }
 };
 
