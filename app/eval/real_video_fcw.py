@@ -1,9 +1,9 @@
-"""False warnings on real freeway video: the whole stack (pipeline, supervisor, FCW, CAN) over the Udacity
-clips, in which nothing dangerous happens, so every warning is a false one.
+"""False warnings on real motorway video: the whole stack (pipeline, supervisor, FCW, CAN) over the Udacity
+clips and the TME tme08 frames, in which nothing dangerous happens, so every warning is a false one.
 
-The clips come without CAN: the ego speed is a constant 27 m/s (97 km/h, freeway traffic) played in as a
-CAN log, and the camera is the one app/eval/road_motion.py assumes for these clips (fx 1150 px at 1280 px,
-1.5 m high, level). The speed only opens the FCW's gates; TTCs come from the images.
+They come without CAN: the ego speed is a constant 27 m/s (97 km/h, motorway traffic) played in as a CAN
+log. The cameras are those of app/eval/road_motion.py (Udacity: fx 1150 px at 1280 px assumed, 1.5 m high,
+level; TME: from its calibration.ini). The speed only opens the FCW's gates; TTCs come from the images.
 
     python -m app.eval.real_video_fcw [--pipeline thesis] [--data ../shared/data]
 """
@@ -18,7 +18,7 @@ from typing import Optional
 import cv2
 import yaml
 
-from app.eval.road_motion import udacity_camera
+from app.eval.road_motion import tme_camera, udacity_camera
 from app.replay import replay_recording
 from app.sim.can_log import DBC_PATH, write_ego_speed_log
 from app.sim.world import Motion1D
@@ -26,28 +26,37 @@ from app.sim.world import Motion1D
 EGO_SPEED_MPS = 27.0
 
 
-def clips(data: Path) -> list[Path]:
+TME_FPS = 20.0
+
+
+def recordings(data: Path) -> list[tuple[Path, dict, Optional[float]]]:
+    """(source, camera, fps of an image folder) for every recording."""
+    out = []
     folder = data / "udacity"
-    return sorted((folder / "clips").glob("*.mp4")) + [folder / "test_video.mp4"]
+    for clip in sorted((folder / "clips").glob("*.mp4")) + [folder / "test_video.mp4"]:
+        cap = cv2.VideoCapture(str(clip))
+        size = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        cap.release()
+        out.append((clip, udacity_camera(*size), None))
+    tme = data / "tme"
+    if (tme / "tme08").exists():
+        out.append((tme / "tme08", tme_camera(tme / "calibration.ini"), TME_FPS))
+    return out
 
 
 def evaluate(data: str, preset: str = "thesis") -> list[dict]:
     out = []
     with tempfile.TemporaryDirectory() as tmp:
-        for clip in clips(Path(data)):
-            cap = cv2.VideoCapture(str(clip))
-            size = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
-            fps = cap.get(cv2.CAP_PROP_FPS) or 25.0
-            seconds = cap.get(cv2.CAP_PROP_FRAME_COUNT) / fps
-            cap.release()
-            log = Path(tmp) / f"{clip.stem}.log"
-            write_ego_speed_log(log, Motion1D(0.0, EGO_SPEED_MPS, []), seconds + 1.0)
-            cfg = {"camera": udacity_camera(*size), "pipeline": {"preset": preset},
+        for source, camera, fps in recordings(Path(data)):
+            log = Path(tmp) / f"{source.stem}.log"
+            write_ego_speed_log(log, Motion1D(0.0, EGO_SPEED_MPS, []), 60.0)
+            cfg = {"camera": camera, "pipeline": {"preset": preset},
                    "vehicle": {"speed_dbc": str(DBC_PATH), "speed_message": "EGO_SPEED", "speed_signals": "SPEED_MPS"}}
             cfg_path = Path(tmp) / "config.yaml"
             cfg_path.write_text(yaml.safe_dump(cfg))
-            s = replay_recording(str(clip), str(cfg_path), can_in=str(log), progress=False)
-            out.append({"clip": clip.name, "frames": s.frames, "seconds": round(s.frames / fps, 2),
+            rate = fps or cv2.VideoCapture(str(source)).get(cv2.CAP_PROP_FPS) or 25.0
+            s = replay_recording(str(source), str(cfg_path), fps=fps, can_in=str(log), progress=False)
+            out.append({"clip": source.name, "frames": s.frames, "seconds": round(s.frames / rate, 2),
                         "vehicles_confirmed": len(s.confirmed_ids),
                         "warnings": sum(1 for _, level, _ in s.warnings if level == "warning"),
                         "prewarnings": sum(1 for _, level, _ in s.warnings if level == "prewarning"),

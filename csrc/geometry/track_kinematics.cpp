@@ -10,8 +10,7 @@ namespace hw {
 namespace {
 
 // Least-squares slope of y over t, and its standard error (from the residuals).
-// Least-squares slope of y over t; std_error from the residuals, spread_t = sum (t - mean t)^2.
-double slope(const std::deque<std::pair<double, double>> &pts, double &std_error, double &spread_t) {
+double slope(const std::deque<std::pair<double, double>> &pts, double &std_error) {
     double st = 0, sy = 0;
     for (const auto &p : pts) { st += p.first; sy += p.second; }
     const double n = double(pts.size()), mt = st / n, my = sy / n;
@@ -20,7 +19,6 @@ double slope(const std::deque<std::pair<double, double>> &pts, double &std_error
         num += (p.first - mt) * (p.second - my);
         den += (p.first - mt) * (p.first - mt);
     }
-    spread_t = den;
     if (den <= 0) return NAN;
     const double b = num / den;
     double ss = 0;
@@ -86,11 +84,7 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
             while (int(s.log_w.size()) > p_.scale_window) s.log_w.pop_front();
             if (int(s.log_w.size()) >= p_.scale_window &&
                 s.log_w.back().first - s.log_w.front().first >= p_.scale_min_span_s) {
-                double spread = 0.0;
-                scale_rate = slope(s.log_w, scale_se, spread);
-                // a dozen widths that move in whole pixels can fit a line by chance: the error is at
-                // least what half a pixel of width noise gives
-                if (spread > 0.0) scale_se = std::max(scale_se, 0.5 / double(tr.box.width) / std::sqrt(spread));
+                scale_rate = slope(s.log_w, scale_se);
             }
         }
         // The scale change measures the range rate too, independently of the horizon: dZ/dt = -Z d(ln w)/dt.
