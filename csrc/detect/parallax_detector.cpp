@@ -1,5 +1,7 @@
 #include "detect/parallax_detector.hpp"
 
+#include "detect/photometric.hpp"
+
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -24,6 +26,18 @@ void ParallaxParams::bind(ParamMap &m) {
           "px at the difference's level; a cell is hot only if its mean |difference| exceeds this times its mean "
           "gradient, i.e. it shows more displacement than interpolation blur and the last alignment error leave at "
           "edges (markings, dash ends); a vehicle's parallax near the camera is several pixels; 0 disables");
+    m.add("photometric", photometric,
+          "take the smooth brightness change between the aligned frames out of the difference (a quadratic surface "
+          "fitted to the road's signed difference, see photometric.hpp): vignetting and the road's sheen toward a low "
+          "sun make a road point look 8-10 gray levels brighter far ahead than near (TME tme08), which raised the "
+          "hot-cell threshold above most vehicles' parallax");
+    m.add("photometric_trim", photometric_trim, 1.0, 100.0,
+          "robust sigmas (1.4826 MAD) beyond which a road cell is left out of the brightness fit (vehicles, moving "
+          "shadows)");
+    m.add("row_min_cells", row_min_cells, 0, 10000,
+          "cells; a row of cells with at least this many road cells is hot only above sad_factor times its own median "
+          "road cell: a structure across the road (a brightness edge on the far road a pixel off, a shadow edge) makes "
+          "the whole row differ, a vehicle only its part of it; 0 disables");
     m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
@@ -166,12 +180,41 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     const cv::Matx33d Hs = S * H * S.inv();
     cv::Mat warped, diff;
     cv::warpPerspective(prev_band, warped, Hs, cur_band.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
-    cv::absdiff(cur_band, warped, diff);
+
+    const int cw = std::max(1, p.cell_w_px / sc), ch = std::max(1, p.cell_h_px / sc);
+    const int ncx = cur_band.cols / cw, ncy = cur_band.rows / ch;
+    if (ncx < 1 || ncy < 1) return out;
+    // Road cells: inside the lane model's road area (below the horizon when there is none).
+    const float cell_px_w = float(cw * sc), cell_px_h = float(ch * sc);  // cell size in full-resolution px
+    auto cell_x = [&](float c) { return c * cell_px_w; };                   // full-res x of a cell edge
+    auto cell_y = [&](float r) { return float(band_top) + r * cell_px_h; }; // full-res y of a cell edge
+    cv::Mat road = cv::Mat::zeros(ncy, ncx, CV_8UC1);
+    float road_bottom = float(cur_full.rows - 1);
+    if (lanes.road_polygon.size() >= 3) {
+        road_bottom = 0.f;
+        for (const auto &q : lanes.road_polygon) road_bottom = std::max(road_bottom, float(q.y));
+        std::vector<cv::Point> poly;
+        for (const auto &q : lanes.road_polygon)
+            poly.emplace_back(cvRound(q.x / cell_px_w - 0.5f), cvRound((q.y - band_top) / cell_px_h - 0.5f));
+        cv::fillPoly(road, std::vector<std::vector<cv::Point>>{poly}, cv::Scalar(255));
+    } else {
+        const int r0 = std::clamp(int(std::ceil((horizon_row - band_top) / cell_px_h)), 0, ncy);
+        road.rowRange(r0, ncy).setTo(255);
+    }
+
+    // The absolute difference, after the smooth brightness change between the aligned frames is taken
+    // out (photometric.hpp: a road point seen elsewhere in the image is seen brighter or darker).
+    if (p.photometric) {
+        cv::Mat d, road_px = cv::Mat::zeros(cur_band.size(), CV_8UC1);
+        cv::subtract(cur_band, warped, d, cv::noArray(), CV_16S);
+        cv::resize(road, road_px(cv::Rect(0, 0, ncx * cw, ncy * ch)), cv::Size(ncx * cw, ncy * ch), 0, 0, cv::INTER_NEAREST);
+        out.brightness = fit_brightness_surface(d, road_px, 2 * cw, 2 * ch, p.photometric_trim);
+        compensated_absdiff(d, out.brightness, diff);
+    } else {
+        cv::absdiff(cur_band, warped, diff);
+    }
 
     // SAD per cell.
-    const int cw = std::max(1, p.cell_w_px / sc), ch = std::max(1, p.cell_h_px / sc);
-    const int ncx = diff.cols / cw, ncy = diff.rows / ch;
-    if (ncx < 1 || ncy < 1) return out;
     // Per cell: the mean |difference| (SAD / pixels) and the mean gradient magnitude of the current
     // band, (|I(x+1) - I(x-1)| + |I(y+1) - I(y-1)|) / 4 (central differences, L1, halved).
     // Row sums first (plain loops over whole rows, which vectorise), then per cell.
@@ -201,24 +244,6 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     sad *= 1.0 / double(cw * ch);
     grad *= 0.25 / double(cw * ch);
 
-    // Road cells: inside the lane model's road area (below the horizon when there is none).
-    const float cell_px_w = float(cw * sc), cell_px_h = float(ch * sc);  // cell size in full-resolution px
-    auto cell_x = [&](float c) { return c * cell_px_w; };                   // full-res x of a cell edge
-    auto cell_y = [&](float r) { return float(band_top) + r * cell_px_h; }; // full-res y of a cell edge
-    cv::Mat road = cv::Mat::zeros(ncy, ncx, CV_8UC1);
-    float road_bottom = float(cur_full.rows - 1);
-    if (lanes.road_polygon.size() >= 3) {
-        road_bottom = 0.f;
-        for (const auto &q : lanes.road_polygon) road_bottom = std::max(road_bottom, float(q.y));
-        std::vector<cv::Point> poly;
-        for (const auto &q : lanes.road_polygon)
-            poly.emplace_back(cvRound(q.x / cell_px_w - 0.5f), cvRound((q.y - band_top) / cell_px_h - 0.5f));
-        cv::fillPoly(road, std::vector<std::vector<cv::Point>>{poly}, cv::Scalar(255));
-    } else {
-        const int r0 = std::clamp(int(std::ceil((horizon_row - band_top) / cell_px_h)), 0, ncy);
-        road.rowRange(r0, ncy).setTo(255);
-    }
-
     // Threshold from the road cells' own residual.
     std::vector<float> road_sad;
     for (int r = 0; r < ncy; ++r)
@@ -233,6 +258,26 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     // and the last tenths of a pixel of alignment error), and inside what the warp could fill from
     // the previous band (its border rows are replicated, not seen).
     cv::Mat hot = (sad > thr) & (sad > float(p.edge_slack_px) * grad);
+    // A row of cells whose road part differs as a whole is a structure of the road that the alignment
+    // does not fit (a joint or a brightness edge across the far road a pixel off, an overpass shadow
+    // edge), not vehicles, which cover part of a row: the row's own median road cell raises its threshold.
+    if (p.row_min_cells > 0) {
+        std::vector<float> row;
+        for (int r = 0; r < ncy; ++r) {
+            row.clear();
+            const uint8_t *rd = road.ptr<uint8_t>(r);
+            const float *sr = sad.ptr<float>(r);
+            for (int c = 0; c < ncx; ++c)
+                if (rd[c]) row.push_back(sr[c]);
+            if (int(row.size()) < p.row_min_cells) continue;
+            std::nth_element(row.begin(), row.begin() + long(row.size() / 2), row.end());
+            const float row_thr = float(p.sad_factor) * row[row.size() / 2];
+            if (row_thr <= thr) continue;
+            uint8_t *h = hot.ptr<uint8_t>(r);
+            for (int c = 0; c < ncx; ++c)
+                if (sr[c] <= row_thr) h[c] = 0;
+        }
+    }
     {
         const cv::Matx33d Hi = Hs.inv();
         for (int r = 0; r < ncy; ++r)
