@@ -34,10 +34,11 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("photometric_trim", photometric_trim, 1.0, 100.0,
           "robust sigmas (1.4826 MAD) beyond which a road cell is left out of the brightness fit (vehicles, moving "
           "shadows)");
-    m.add("row_min_cells", row_min_cells, 0, 10000,
-          "cells; a row of cells with at least this many road cells is hot only above sad_factor times its own median "
-          "road cell: a structure across the road (a brightness edge on the far road a pixel off, a shadow edge) makes "
-          "the whole row differ, a vehicle only its part of it; 0 disables");
+    m.add("row_min_widths", row_min_widths, 0.0, 100.0,
+          "expected vehicle widths; a row of cells whose road part is at least this wide is hot only above sad_factor "
+          "times its own median road cell: a structure across the road (a brightness edge on the far road a pixel "
+          "off, a shadow edge) makes the whole row differ, vehicles (fewer than half of it side by side) only their "
+          "part; 0 disables");
     m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
@@ -205,10 +206,17 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     // The absolute difference, after the smooth brightness change between the aligned frames is taken
     // out (photometric.hpp: a road point seen elsewhere in the image is seen brighter or darker).
     if (p.photometric) {
-        cv::Mat d, road_px = cv::Mat::zeros(cur_band.size(), CV_8UC1);
+        // Fitted on the mean signed difference of blocks of 4 x 4 cells (box means of the int16 difference):
+        // a quadratic surface needs a few hundred of them, not thousands.
+        cv::Mat d, df, means, use;
         cv::subtract(cur_band, warped, d, cv::noArray(), CV_16S);
-        cv::resize(road, road_px(cv::Rect(0, 0, ncx * cw, ncy * ch)), cv::Size(ncx * cw, ncy * ch), 0, 0, cv::INTER_NEAREST);
-        out.brightness = fit_brightness_surface(d, road_px, 2 * cw, 2 * ch, p.photometric_trim);
+        const int B = 4, bx = ncx / B, by = ncy / B;
+        if (bx >= 4 && by >= 3) {
+            d(cv::Rect(0, 0, bx * B * cw, by * B * ch)).convertTo(df, CV_32F);
+            cv::resize(df, means, cv::Size(bx, by), 0, 0, cv::INTER_AREA);
+            cv::resize(road(cv::Rect(0, 0, B * bx, B * by)), use, cv::Size(bx, by), 0, 0, cv::INTER_NEAREST);
+            out.brightness = fit_brightness_cells(means, use, double(B * cw), double(B * ch), cur_band.size(), p.photometric_trim);
+        }
         compensated_absdiff(d, out.brightness, diff);
     } else {
         cv::absdiff(cur_band, warped, diff);
@@ -261,7 +269,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     // A row of cells whose road part differs as a whole is a structure of the road that the alignment
     // does not fit (a joint or a brightness edge across the far road a pixel off, an overpass shadow
     // edge), not vehicles, which cover part of a row: the row's own median road cell raises its threshold.
-    if (p.row_min_cells > 0) {
+    if (p.row_min_widths > 0.0) {
         std::vector<float> row;
         for (int r = 0; r < ncy; ++r) {
             row.clear();
@@ -269,7 +277,9 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
             const float *sr = sad.ptr<float>(r);
             for (int c = 0; c < ncx; ++c)
                 if (rd[c]) row.push_back(sr[c]);
-            if (int(row.size()) < p.row_min_cells) continue;
+            // Only where the road is wide enough that vehicles side by side cannot fill half of it.
+            const float w_row = float(p.vehicle_width_m * cam.fx * (cell_y(r + 0.5f) - horizon_row) / (cam.fy * cam.height_m));
+            if (row.empty() || !(w_row > 0.f) || float(row.size()) * cell_px_w < float(p.row_min_widths) * w_row) continue;
             std::nth_element(row.begin(), row.begin() + long(row.size() / 2), row.end());
             const float row_thr = float(p.sad_factor) * row[row.size() / 2];
             if (row_thr <= thr) continue;

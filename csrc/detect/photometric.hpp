@@ -37,6 +37,12 @@ struct BrightnessSurface {
 // and the fit repeated (3 passes). Fewer than 12 cells: ok = false.
 BrightnessSurface fit_brightness_surface(const cv::Mat &d, const cv::Mat &mask, int cell_w, int cell_h, double trim);
 
+// The same fit from cell means already computed: `means` (CV_32FC1) holds the mean signed difference
+// of cells cell_w x cell_h px (cell (r, c) centred at ((c + 0.5) cell_w, (r + 0.5) cell_h)), `use`
+// (CV_8UC1, same size) the cells to fit on; `image` the size the surface's coordinates refer to.
+BrightnessSurface fit_brightness_cells(const cv::Mat &means, const cv::Mat &use, double cell_w, double cell_h,
+                                       cv::Size image, double trim);
+
 // |d - o(x, y)| saturated to CV_8UC1 (d as above); o = 0 when !s.ok.
 void compensated_absdiff(const cv::Mat &d, const BrightnessSurface &s, cv::Mat &out);
 

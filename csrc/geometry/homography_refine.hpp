@@ -27,7 +27,7 @@
 namespace hw {
 
 struct HomographyRefineParams {
-    int iterations = 1;           // Gauss-Newton steps (0: no refinement)
+    int iterations = 0;           // Gauss-Newton steps (0: no refinement, the default: see bind())
     double outlier_gray = 12.0;   // gray levels; pixels with a larger |residual| are left out
     double max_shift_px = 4.0;    // px; largest vertical shift accepted per step
     double max_travel_m = 0.5;    // m; largest extra travel accepted per step

@@ -82,6 +82,10 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
           "(homographies chained) and its regions are added where the short difference has none: a vehicle "
           "keeping its distance 50 m ahead shows ~0.3 px of parallax per frame at 30 fps, long_gap times more "
           "here (the paper ran at 5-10 fps); 0 or 1 disables (saves one warp per frame)");
+    m.add("long_gap_min_range_m", long_gap_min_range_m, 0.0, 1000.0,
+          "m; the long-gap difference covers only the road beyond this range (the band's upper rows): near vehicles "
+          "show parallax enough against the previous frame and the near rows are most of the band's pixels; 0 = the "
+          "whole band");
     m.add("max_dt_s", max_dt_s, 0.001, 100.0,
           "s; a longer gap between frames (or time going back) starts the homography and the tracks again");
 }
@@ -235,7 +239,17 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
                     H = H * e.second;
                     old_level = e.first;
                 }
-                const ParallaxFrame far = detect_parallax(level, old_level, cur_, band_top_, H, road, vp, cam_, pp_.detect);
+                // Only the far road (beyond long_gap_min_range_m, the upper rows of the band): near vehicles
+                // show parallax enough against the previous frame, and the rows below cost most of the work.
+                int rows = level.rows;
+                if (pp_.long_gap_min_range_m > 0.0) {
+                    const int cell_h = std::max(1, pp_.detect.cell_h_px >> pp_.detect.level);
+                    const double y_cut = vp.y + cam_.fy * cam_.height_m / pp_.long_gap_min_range_m;
+                    const int r = int((y_cut - band_top_) / double(1 << pp_.detect.level)) / cell_h * cell_h;
+                    rows = std::clamp(r, std::min(level.rows, 4 * cell_h), level.rows);
+                }
+                const ParallaxFrame far = detect_parallax(level.rowRange(0, rows), old_level.rowRange(0, rows), cur_, band_top_,
+                                                          H, road, vp, cam_, pp_.detect);
                 // A long-gap region is used where the short gap saw nothing (the near, fast vehicles are
                 // measured sharper against the previous frame).
                 for (const auto &m : far.measurements) {
