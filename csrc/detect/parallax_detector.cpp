@@ -38,7 +38,7 @@ void ParallaxParams::bind(ParamMap &m) {
           "expected vehicle widths; a row of cells whose road part is at least this wide is hot only above sad_factor "
           "times its own median road cell: a structure across the road (a brightness edge on the far road a pixel "
           "off, a shadow edge) makes the whole row differ, vehicles (fewer than half of it side by side) only their "
-          "part; 0 disables");
+          "part; 0 disables, the default: 5 cut the synthetic MOTA on three scenarios from 0.59 to 0.37");
     m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
@@ -169,7 +169,7 @@ bool bottom_step(const cv::Mat &gray, int c0, int c1, int y0, int y1, float min_
 
 ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
                               const cv::Matx33d &H, const LaneModel &lanes, cv::Point2f vp, const CameraParams &cam,
-                              const ParallaxParams &p) {
+                              const ParallaxParams &p, cv::Mat *grad_cells) {
     const float horizon_row = vp.y, vp_x = vp.x;
     CV_Assert(cur_band.type() == CV_8UC1 && prev_band.type() == CV_8UC1 && cur_band.size() == prev_band.size());
     CV_Assert(cur_full.type() == CV_8UC1 && band_top >= 0 && band_top < cur_full.rows);
@@ -225,12 +225,24 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     // SAD per cell.
     // Per cell: the mean |difference| (SAD / pixels) and the mean gradient magnitude of the current
     // band, (|I(x+1) - I(x-1)| + |I(y+1) - I(y-1)|) / 4 (central differences, L1, halved).
-    // Row sums first (plain loops over whole rows, which vectorise), then per cell.
-    cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F), grad = cv::Mat::zeros(ncy, ncx, CV_32F);
+    // Row sums first (plain loops over whole rows, which vectorise), then per cell. The gradient cells
+    // depend on the current band only: a second call on the same band takes them from `grad_cells`.
+    const bool have_grad = grad_cells && grad_cells->type() == CV_32F && grad_cells->size() == cv::Size(ncx, ncy);
+    cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F), grad = have_grad ? *grad_cells : cv::Mat::zeros(ncy, ncx, CV_32F);
     const int W = ncx * cw;
     std::vector<int> g_row(size_t(W) + 1);
     for (int y = 0; y < ncy * ch; ++y) {
-        const uint8_t *d = diff.ptr<uint8_t>(y), *c = cur_band.ptr<uint8_t>(y);
+        const uint8_t *d = diff.ptr<uint8_t>(y);
+        float *s = sad.ptr<float>(y / ch);
+        if (have_grad) {
+            for (int cc = 0; cc < ncx; ++cc) {
+                int sd = 0;
+                for (int x = cc * cw; x < (cc + 1) * cw; ++x) sd += d[x];
+                s[cc] += float(sd);
+            }
+            continue;
+        }
+        const uint8_t *c = cur_band.ptr<uint8_t>(y);
         const uint8_t *up = cur_band.ptr<uint8_t>(std::max(y - 1, 0)), *dn = cur_band.ptr<uint8_t>(std::min(y + 1, diff.rows - 1));
         int *g = g_row.data();
         g[0] = std::abs(int(c[1]) - int(c[0])) + std::abs(int(dn[0]) - int(up[0]));
@@ -238,7 +250,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
             const int xr = x + 1 < diff.cols ? x + 1 : x;
             g[x] = std::abs(int(c[xr]) - int(c[x - 1])) + std::abs(int(dn[x]) - int(up[x]));
         }
-        float *s = sad.ptr<float>(y / ch), *gr = grad.ptr<float>(y / ch);
+        float *gr = grad.ptr<float>(y / ch);
         for (int cc = 0; cc < ncx; ++cc) {
             int sd = 0, sg = 0;
             for (int x = cc * cw; x < (cc + 1) * cw; ++x) {
@@ -250,7 +262,10 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         }
     }
     sad *= 1.0 / double(cw * ch);
-    grad *= 0.25 / double(cw * ch);
+    if (!have_grad) {
+        grad *= 0.25 / double(cw * ch);
+        if (grad_cells) *grad_cells = grad;
+    }
 
     // Threshold from the road cells' own residual.
     std::vector<float> road_sad;

@@ -93,8 +93,10 @@ struct ParallaxFrame {
 // pyramid level p.level; cur_full: the whole current frame (bottom refinement); H: road homography
 // previous -> current in full-resolution pixels; lanes: this frame's lane model (road area,
 // vanishing point); vp: the road's vanishing point in the current frame (its row is the horizon).
+// grad_cells: optional cache of the current band's mean gradient per cell (CV_32F, cells x cells): filled
+// when empty or of another size, used as it is otherwise (a second difference on the same band).
 ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
                               const cv::Matx33d &H, const LaneModel &lanes, cv::Point2f vp, const CameraParams &cam,
-                              const ParallaxParams &p);
+                              const ParallaxParams &p, cv::Mat *grad_cells = nullptr);
 
 } // namespace hw

@@ -83,9 +83,9 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
           "keeping its distance 50 m ahead shows ~0.3 px of parallax per frame at 30 fps, long_gap times more "
           "here (the paper ran at 5-10 fps); 0 or 1 disables (saves one warp per frame)");
     m.add("long_gap_min_range_m", long_gap_min_range_m, 0.0, 1000.0,
-          "m; the long-gap difference covers only the road beyond this range (the band's upper rows): near vehicles "
-          "show parallax enough against the previous frame and the near rows are most of the band's pixels; 0 = the "
-          "whole band");
+          "m; the long-gap difference covers only the road beyond this range (the band's upper rows), 0 = the whole "
+          "band; 20 saves ~0.8 ms per 640x480 frame but cost 0.06 MOTA on the synthetic suite (0.27 against 0.34), "
+          "10 cost 0.02, so 0 by default");
     m.add("max_dt_s", max_dt_s, 0.001, 100.0,
           "s; a longer gap between frames (or time going back) starts the homography and the tracks again");
 }
@@ -228,7 +228,8 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
                 }
                 times.add("homography", sr.ms());
             }
-            detection_ = detect_parallax(level, prev_level_, cur_, band_top_, H_now, road, vp, cam_, pp_.detect);
+            cv::Mat grad_cells;  // the current band's gradient cells, shared by both differences
+            detection_ = detect_parallax(level, prev_level_, cur_, band_top_, H_now, road, vp, cam_, pp_.detect, &grad_cells);
             full_detection = true;
             for (const auto &m : detection_.measurements) z.push_back({m.point, m.box, m.sad});
             if (pp_.long_gap > 1 && int(history_.size()) >= pp_.long_gap - 1) {
@@ -249,7 +250,8 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
                     rows = std::clamp(r, std::min(level.rows, 4 * cell_h), level.rows);
                 }
                 const ParallaxFrame far = detect_parallax(level.rowRange(0, rows), old_level.rowRange(0, rows), cur_, band_top_,
-                                                          H, road, vp, cam_, pp_.detect);
+                                                          H, road, vp, cam_, pp_.detect,
+                                                          rows == level.rows ? &grad_cells : nullptr);
                 // A long-gap region is used where the short gap saw nothing (the near, fast vehicles are
                 // measured sharper against the previous frame).
                 for (const auto &m : far.measurements) {

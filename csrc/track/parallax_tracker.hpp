@@ -59,7 +59,7 @@ struct ParallaxTrackerParams {
     bool exclude_vehicle_corners = true;  // road features inside confirmed vehicles' boxes are not used
     double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
     int long_gap = 3;                  // frames back of the second, long-gap difference (0, 1: none)
-    double long_gap_min_range_m = 20.0;  // m; the long-gap difference covers the road beyond this range only
+    double long_gap_min_range_m = 0.0;   // m; the long-gap difference covers the road beyond this range only (0: all)
     double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction
     int search_steps = 24;             // travels tried between 0 and that
 
