@@ -12,6 +12,7 @@ have none); the focal length from the TME field of view, and an assumed 1150 px 
 from __future__ import annotations
 
 import configparser
+import json
 import math
 from pathlib import Path
 from typing import Optional
@@ -83,19 +84,20 @@ def fit_horizon(camera: dict, frames: list[np.ndarray], n: int = 15) -> dict:
 
 def homography_windows(frames: list[np.ndarray], config: dict, window: int = 6, step: int = 1) -> dict:
     """Acceptance and alignment residual of the last pair of every window of `window` frames."""
-    accepted, residuals, unwarped = [], [], []
+    accepted, residuals, unwarped, raw = [], [], [], []
     with Pipeline(config) as p:
         for end in range(window, len(frames) + 1, step):
             r = p.run_stage("homography", np.vstack(frames[end - window:end]))
             accepted.append(bool(r.full_detection))
             if r.image_change is not None:
-                residuals.append(r.image_change)   # |I_k - warp(I_k-1, H)| on the road area
-                unwarped.append(r.image_mean)      # |I_k - I_k-1| on the same pixels
+                residuals.append(r.image_change)   # |I_k - warp(I_k-1, H) - o| on the road area
+                unwarped.append(r.image_mean)      # |I_k - I_k-1 - o'| on the same pixels
+                raw.append(r.image_stddev)         # |I_k - warp(I_k-1, H)|: brightness change left in
     med = lambda v: float(np.median(v)) if v else None  # noqa: E731
     return {"pairs": len(accepted), "accepted_rate": float(np.mean(accepted)) if accepted else None,
             "residual_median": med(residuals),
             "residual_p90": float(np.percentile(residuals, 90)) if residuals else None,
-            "aligned_pairs": len(residuals), "unwarped_median": med(unwarped)}
+            "aligned_pairs": len(residuals), "unwarped_median": med(unwarped), "raw_residual_median": med(raw)}
 
 
 def track_continuity(frames: list[np.ndarray], config: dict, fps: float) -> dict:
@@ -117,47 +119,48 @@ def track_continuity(frames: list[np.ndarray], config: dict, fps: float) -> dict
             "tracks": {str(i): {"first": a, "last": b, "frames": c} for i, (a, b, c) in sorted(spans.items())}}
 
 
-# Vehicles visible through all of tme08, marked by hand at frames 0, 25 and 49 (l, t, r, b in px of the
-# 1024x768 frames) and interpolated linearly in between; a track is on one when IoU >= 0.3.
-TME08_VISIBLE_THROUGHOUT = {
-    "silver car, right of the ego lane": {0: (470, 368, 520, 407), 25: (500, 368, 570, 420), 49: (548, 372, 645, 442)},
-    "dark car ahead left": {0: (365, 370, 420, 410), 25: (335, 370, 390, 420), 49: (285, 370, 348, 425)},
-}
+# Vehicles visible in every frame of tme08 and three Udacity clips, boxes per frame (read off the frames at
+# key frames and interpolated; how, in the file).
+VISIBLE_THROUGHOUT = Path(__file__).resolve().parent / "data" / "visible_throughout.json"
 
 
-def _interpolate(keys: dict, k: int) -> tuple:
-    ks = sorted(keys)
-    lo = max(x for x in ks if x <= k)
-    hi = min(x for x in ks if x >= k)
-    if lo == hi:
-        return keys[lo]
-    a = (k - lo) / (hi - lo)
-    return tuple((1 - a) * u + a * v for u, v in zip(keys[lo], keys[hi]))
+def visible_throughout(sequence: str) -> list[dict]:
+    """The annotated vehicles of one sequence ("tme08", "test_video.mp4", ...): [{"name", "boxes"}], boxes
+    per frame (l, t, r, b); [] when the sequence has none."""
+    doc = json.loads(VISIBLE_THROUGHOUT.read_text())
+    return doc["sequences"].get(sequence, {}).get("vehicles", [])
 
 
-def tme_identity(frames: list[np.ndarray], config: dict, fps: float = 20.0) -> dict:
-    """For each hand-marked vehicle: frames it was tracked (confirmed, IoU >= 0.3), ids that followed it
-    (more than one = id switches), and fragments (runs of consecutive tracked frames)."""
+def identity(frames: list[np.ndarray], config: dict, fps: float, vehicles: list[dict],
+             min_ious: tuple = (0.3, 0.5)) -> dict:
+    """For each annotated vehicle and IoU level: the frames a confirmed track was on it, the id switches
+    (the track on it changed id from one tracked frame to the next) and the fragments (runs of consecutive
+    tracked frames; 1 = tracked without a break once it started)."""
     from app.eval.matching import iou_matrix
 
-    out = {name: {"tracked": [], "ids": []} for name in TME08_VISIBLE_THROUGHOUT}
+    hits = {(v["name"], m): [] for v in vehicles for m in min_ious}
     with Pipeline(config) as p:
         for k, img in enumerate(frames):
             r = p.process(img, k / fps)
             tracks = [t for t in r.tracks if t.confirmed]
-            for name, keys in TME08_VISIBLE_THROUGHOUT.items():
-                box = _interpolate(keys, k)
-                m = iou_matrix([t.box for t in tracks], [box])[:, 0] if tracks else np.zeros(0)
-                if m.size and m.max() >= 0.3:
-                    out[name]["tracked"].append(k)
-                    out[name]["ids"].append(tracks[int(m.argmax())].id)
-    res = {}
-    for name, v in out.items():
-        ks = v["tracked"]
-        runs = sum(1 for i, k in enumerate(ks) if i == 0 or k != ks[i - 1] + 1)
-        switches = sum(1 for i in range(1, len(v["ids"])) if v["ids"][i] != v["ids"][i - 1])
-        res[name] = {"frames": len(frames), "tracked_frames": len(ks), "fragments": runs,
-                     "id_switches": switches, "ids": sorted(set(v["ids"]))}
+            for v in vehicles:
+                if k >= len(v["boxes"]) or not tracks:
+                    continue
+                m = iou_matrix([t.box for t in tracks], [v["boxes"][k]])[:, 0]
+                for lim in min_ious:
+                    if m.max() >= lim:
+                        hits[(v["name"], lim)].append((k, tracks[int(m.argmax())].id))
+    res: dict = {}
+    for (name, lim), h in hits.items():
+        ks = [k for k, _ in h]
+        ids = [i for _, i in h]
+        res.setdefault(name, {"frames": min(len(frames), len(next(v for v in vehicles if v["name"] == name)["boxes"]))})
+        res[name][f"iou{lim}"] = {
+            "tracked_frames": len(ks),
+            "first_tracked": ks[0] if ks else None,
+            "fragments": sum(1 for i, k in enumerate(ks) if i == 0 or k != ks[i - 1] + 1),
+            "id_switches": sum(1 for i in range(1, len(ids)) if ids[i] != ids[i - 1]),
+            "ids": sorted(set(ids))}
     return res
 
 
@@ -238,7 +241,7 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
         cfg = {"camera": cam, "pipeline": {"preset": preset}, "parallax": {"hood_frac": HOOD["tme08"]}}
         report["tme08"] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                            "continuity": track_continuity(frames, cfg, fps),
-                           "visible_throughout": tme_identity(frames, cfg, fps)}
+                           "visible_throughout": identity(frames, cfg, fps, visible_throughout("tme08"))}
     else:
         report["skipped"]["tme08"] = f"{tme} not found"
     clips = sorted((data / "udacity" / "clips").glob("*.mp4")) + [data / "udacity" / "test_video.mp4"]
@@ -251,28 +254,35 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
         cfg = {"camera": cam, "pipeline": {"preset": preset}, "parallax": {"hood_frac": HOOD.get(clip.name, 0.0)}}
         report[clip.name] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                              "continuity": track_continuity(frames, cfg, fps)}
+        if visible_throughout(clip.name) and udacity_max_frames is None:
+            report[clip.name]["visible_throughout"] = identity(frames, cfg, fps, visible_throughout(clip.name))
     return report
 
 
 def markdown(report: dict) -> str:
     out = ["### Parallax pipeline on real drives: road homography and track continuity", "",
-           "| sequence | pairs | accepted | residual median | residual p90 | without alignment | ids | "
-           "ids living 80 % | ids started after 1 s |",
-           "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+           "| sequence | pairs | accepted | residual median | residual p90 | without alignment | "
+           "brightness change left in | ids | ids living 80 % | ids started after 1 s |",
+           "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for name, r in report.items():
         if name == "skipped":
             continue
         h, c = r["homography"], r["continuity"]
         f = lambda x: "n/a" if x is None else f"{x:.2f}"  # noqa: E731
         out.append(f"| {name} | {h['pairs']} | {f(h['accepted_rate'])} | {f(h['residual_median'])} | "
-                   f"{f(h['residual_p90'])} | {f(h['unwarped_median'])} | {c['ids']} | "
+                   f"{f(h['residual_p90'])} | {f(h['unwarped_median'])} | {f(h.get('raw_residual_median'))} | {c['ids']} | "
                    f"{c['ids_living_80pct']} | {c['ids_started_after_1s']} |")
-    vt = report.get("tme08", {}).get("visible_throughout")
-    if vt:
-        out += ["", "tme08, vehicles visible throughout (hand-marked, IoU >= 0.3):", "",
-                "| vehicle | frames | tracked | fragments | id switches |", "| --- | ---: | ---: | ---: | ---: |"]
-        for name, v in vt.items():
-            out.append(f"| {name} | {v['frames']} | {v['tracked_frames']} | {v['fragments']} | {v['id_switches']} |")
+    rows = [(seq, name, v) for seq, r in report.items() if seq != "skipped"
+            for name, v in r.get("visible_throughout", {}).items()]
+    if rows:
+        out += ["", "Vehicles visible throughout (app/eval/data/visible_throughout.json), confirmed tracks on them at "
+                "IoU >= 0.3 (and 0.5):", "",
+                "| sequence | vehicle | frames | tracked | first tracked | fragments | id switches | tracked at IoU 0.5 |",
+                "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+        for seq, name, v in rows:
+            a, b = v["iou0.3"], v["iou0.5"]
+            out.append(f"| {seq} | {name} | {v['frames']} | {a['tracked_frames']} | {a['first_tracked']} | "
+                       f"{a['fragments']} | {a['id_switches']} | {b['tracked_frames']} |")
     for name, why in report.get("skipped", {}).items():
         out.append(f"\n(skipped {name}: {why})")
     return "\n".join(out)

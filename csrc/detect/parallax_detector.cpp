@@ -1,5 +1,7 @@
 #include "detect/parallax_detector.hpp"
 
+#include "detect/photometric.hpp"
+
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -24,6 +26,19 @@ void ParallaxParams::bind(ParamMap &m) {
           "px at the difference's level; a cell is hot only if its mean |difference| exceeds this times its mean "
           "gradient, i.e. it shows more displacement than interpolation blur and the last alignment error leave at "
           "edges (markings, dash ends); a vehicle's parallax near the camera is several pixels; 0 disables");
+    m.add("photometric", photometric,
+          "take the smooth brightness change between the aligned frames out of the difference (a quadratic surface "
+          "fitted to the road's signed difference, see photometric.hpp): vignetting and the road's sheen toward a low "
+          "sun make a road point look 8-10 gray levels brighter far ahead than near (TME tme08), which raised the "
+          "hot-cell threshold above most vehicles' parallax");
+    m.add("photometric_trim", photometric_trim, 1.0, 100.0,
+          "robust sigmas (1.4826 MAD) beyond which a road cell is left out of the brightness fit (vehicles, moving "
+          "shadows)");
+    m.add("row_min_widths", row_min_widths, 0.0, 100.0,
+          "expected vehicle widths; a row of cells whose road part is at least this wide is hot only above sad_factor "
+          "times its own median road cell: a structure across the road (a brightness edge on the far road a pixel "
+          "off, a shadow edge) makes the whole row differ, vehicles (fewer than half of it side by side) only their "
+          "part; 0 disables, the default: 5 cut the synthetic MOTA on three scenarios from 0.59 to 0.37");
     m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
@@ -154,7 +169,7 @@ bool bottom_step(const cv::Mat &gray, int c0, int c1, int y0, int y1, float min_
 
 ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
                               const cv::Matx33d &H, const LaneModel &lanes, cv::Point2f vp, const CameraParams &cam,
-                              const ParallaxParams &p) {
+                              const ParallaxParams &p, cv::Mat *grad_cells) {
     const float horizon_row = vp.y, vp_x = vp.x;
     CV_Assert(cur_band.type() == CV_8UC1 && prev_band.type() == CV_8UC1 && cur_band.size() == prev_band.size());
     CV_Assert(cur_full.type() == CV_8UC1 && band_top >= 0 && band_top < cur_full.rows);
@@ -166,41 +181,10 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     const cv::Matx33d Hs = S * H * S.inv();
     cv::Mat warped, diff;
     cv::warpPerspective(prev_band, warped, Hs, cur_band.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
-    cv::absdiff(cur_band, warped, diff);
 
-    // SAD per cell.
     const int cw = std::max(1, p.cell_w_px / sc), ch = std::max(1, p.cell_h_px / sc);
-    const int ncx = diff.cols / cw, ncy = diff.rows / ch;
+    const int ncx = cur_band.cols / cw, ncy = cur_band.rows / ch;
     if (ncx < 1 || ncy < 1) return out;
-    // Per cell: the mean |difference| (SAD / pixels) and the mean gradient magnitude of the current
-    // band, (|I(x+1) - I(x-1)| + |I(y+1) - I(y-1)|) / 4 (central differences, L1, halved).
-    // Row sums first (plain loops over whole rows, which vectorise), then per cell.
-    cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F), grad = cv::Mat::zeros(ncy, ncx, CV_32F);
-    const int W = ncx * cw;
-    std::vector<int> g_row(size_t(W) + 1);
-    for (int y = 0; y < ncy * ch; ++y) {
-        const uint8_t *d = diff.ptr<uint8_t>(y), *c = cur_band.ptr<uint8_t>(y);
-        const uint8_t *up = cur_band.ptr<uint8_t>(std::max(y - 1, 0)), *dn = cur_band.ptr<uint8_t>(std::min(y + 1, diff.rows - 1));
-        int *g = g_row.data();
-        g[0] = std::abs(int(c[1]) - int(c[0])) + std::abs(int(dn[0]) - int(up[0]));
-        for (int x = 1; x < W; ++x) {
-            const int xr = x + 1 < diff.cols ? x + 1 : x;
-            g[x] = std::abs(int(c[xr]) - int(c[x - 1])) + std::abs(int(dn[x]) - int(up[x]));
-        }
-        float *s = sad.ptr<float>(y / ch), *gr = grad.ptr<float>(y / ch);
-        for (int cc = 0; cc < ncx; ++cc) {
-            int sd = 0, sg = 0;
-            for (int x = cc * cw; x < (cc + 1) * cw; ++x) {
-                sd += d[x];
-                sg += g[x];
-            }
-            s[cc] += float(sd);
-            gr[cc] += float(sg);
-        }
-    }
-    sad *= 1.0 / double(cw * ch);
-    grad *= 0.25 / double(cw * ch);
-
     // Road cells: inside the lane model's road area (below the horizon when there is none).
     const float cell_px_w = float(cw * sc), cell_px_h = float(ch * sc);  // cell size in full-resolution px
     auto cell_x = [&](float c) { return c * cell_px_w; };                   // full-res x of a cell edge
@@ -219,6 +203,70 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         road.rowRange(r0, ncy).setTo(255);
     }
 
+    // The absolute difference, after the smooth brightness change between the aligned frames is taken
+    // out (photometric.hpp: a road point seen elsewhere in the image is seen brighter or darker).
+    if (p.photometric) {
+        // Fitted on the mean signed difference of blocks of 4 x 4 cells (box means of the int16 difference):
+        // a quadratic surface needs a few hundred of them, not thousands.
+        cv::Mat d, df, means, use;
+        cv::subtract(cur_band, warped, d, cv::noArray(), CV_16S);
+        const int B = 4, bx = ncx / B, by = ncy / B;
+        if (bx >= 4 && by >= 3) {
+            d(cv::Rect(0, 0, bx * B * cw, by * B * ch)).convertTo(df, CV_32F);
+            cv::resize(df, means, cv::Size(bx, by), 0, 0, cv::INTER_AREA);
+            cv::resize(road(cv::Rect(0, 0, B * bx, B * by)), use, cv::Size(bx, by), 0, 0, cv::INTER_NEAREST);
+            out.brightness = fit_brightness_cells(means, use, double(B * cw), double(B * ch), cur_band.size(), p.photometric_trim);
+        }
+        compensated_absdiff(d, out.brightness, diff);
+    } else {
+        cv::absdiff(cur_band, warped, diff);
+    }
+
+    // SAD per cell.
+    // Per cell: the mean |difference| (SAD / pixels) and the mean gradient magnitude of the current
+    // band, (|I(x+1) - I(x-1)| + |I(y+1) - I(y-1)|) / 4 (central differences, L1, halved).
+    // Row sums first (plain loops over whole rows, which vectorise), then per cell. The gradient cells
+    // depend on the current band only: a second call on the same band takes them from `grad_cells`.
+    const bool have_grad = grad_cells && grad_cells->type() == CV_32F && grad_cells->size() == cv::Size(ncx, ncy);
+    cv::Mat sad = cv::Mat::zeros(ncy, ncx, CV_32F), grad = have_grad ? *grad_cells : cv::Mat::zeros(ncy, ncx, CV_32F);
+    const int W = ncx * cw;
+    std::vector<int> g_row(size_t(W) + 1);
+    for (int y = 0; y < ncy * ch; ++y) {
+        const uint8_t *d = diff.ptr<uint8_t>(y);
+        float *s = sad.ptr<float>(y / ch);
+        if (have_grad) {
+            for (int cc = 0; cc < ncx; ++cc) {
+                int sd = 0;
+                for (int x = cc * cw; x < (cc + 1) * cw; ++x) sd += d[x];
+                s[cc] += float(sd);
+            }
+            continue;
+        }
+        const uint8_t *c = cur_band.ptr<uint8_t>(y);
+        const uint8_t *up = cur_band.ptr<uint8_t>(std::max(y - 1, 0)), *dn = cur_band.ptr<uint8_t>(std::min(y + 1, diff.rows - 1));
+        int *g = g_row.data();
+        g[0] = std::abs(int(c[1]) - int(c[0])) + std::abs(int(dn[0]) - int(up[0]));
+        for (int x = 1; x < W; ++x) {
+            const int xr = x + 1 < diff.cols ? x + 1 : x;
+            g[x] = std::abs(int(c[xr]) - int(c[x - 1])) + std::abs(int(dn[x]) - int(up[x]));
+        }
+        float *gr = grad.ptr<float>(y / ch);
+        for (int cc = 0; cc < ncx; ++cc) {
+            int sd = 0, sg = 0;
+            for (int x = cc * cw; x < (cc + 1) * cw; ++x) {
+                sd += d[x];
+                sg += g[x];
+            }
+            s[cc] += float(sd);
+            gr[cc] += float(sg);
+        }
+    }
+    sad *= 1.0 / double(cw * ch);
+    if (!have_grad) {
+        grad *= 0.25 / double(cw * ch);
+        if (grad_cells) *grad_cells = grad;
+    }
+
     // Threshold from the road cells' own residual.
     std::vector<float> road_sad;
     for (int r = 0; r < ncy; ++r)
@@ -233,6 +281,28 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     // and the last tenths of a pixel of alignment error), and inside what the warp could fill from
     // the previous band (its border rows are replicated, not seen).
     cv::Mat hot = (sad > thr) & (sad > float(p.edge_slack_px) * grad);
+    // A row of cells whose road part differs as a whole is a structure of the road that the alignment
+    // does not fit (a joint or a brightness edge across the far road a pixel off, an overpass shadow
+    // edge), not vehicles, which cover part of a row: the row's own median road cell raises its threshold.
+    if (p.row_min_widths > 0.0) {
+        std::vector<float> row;
+        for (int r = 0; r < ncy; ++r) {
+            row.clear();
+            const uint8_t *rd = road.ptr<uint8_t>(r);
+            const float *sr = sad.ptr<float>(r);
+            for (int c = 0; c < ncx; ++c)
+                if (rd[c]) row.push_back(sr[c]);
+            // Only where the road is wide enough that vehicles side by side cannot fill half of it.
+            const float w_row = float(p.vehicle_width_m * cam.fx * (cell_y(r + 0.5f) - horizon_row) / (cam.fy * cam.height_m));
+            if (row.empty() || !(w_row > 0.f) || float(row.size()) * cell_px_w < float(p.row_min_widths) * w_row) continue;
+            std::nth_element(row.begin(), row.begin() + long(row.size() / 2), row.end());
+            const float row_thr = float(p.sad_factor) * row[row.size() / 2];
+            if (row_thr <= thr) continue;
+            uint8_t *h = hot.ptr<uint8_t>(r);
+            for (int c = 0; c < ncx; ++c)
+                if (sr[c] <= row_thr) h[c] = 0;
+        }
+    }
     {
         const cv::Matx33d Hi = Hs.inv();
         for (int r = 0; r < ncy; ++r)

@@ -28,6 +28,7 @@
 
 #include "core/params.hpp"
 #include "core/types.hpp"
+#include "detect/photometric.hpp"
 #include "geometry/camera.hpp"
 
 #include <opencv2/core.hpp>
@@ -43,6 +44,9 @@ struct ParallaxParams {
     double sad_min = 5.0;            // gray levels; mean |difference| of a hot cell, floor
     double sad_factor = 3.0;         // hot above this many times the median road cell
     double edge_slack_px = 0.5;      // px at the level; hot only beyond this displacement of the local gradient
+    bool photometric = true;         // take the smooth brightness change out of the difference
+    double photometric_trim = 3.0;   // robust sigmas; road cells farther from the brightness surface are left out
+    double row_min_widths = 0.0;     // vehicle widths; rows with this much road get their own threshold (0: off)
     double vehicle_width_m = 1.8;    // m; width the scan expects at a row
     double min_width_frac = 0.3;     // region narrower than this share of the expected width: no vehicle
     double max_width_frac = 2.2;     // wider: no single vehicle
@@ -80,6 +84,7 @@ struct ParallaxFrame {
     float road_residual = kNaN;   // gray levels; mean |difference| over road cells that are not hot
     float threshold = kNaN;       // gray levels; the hot-cell threshold used
     int hot_cells = 0;
+    BrightnessSurface brightness; // the brightness change taken out (level coordinates of the band)
     cv::Mat hot;                  // CV_8UC1 cell map (255 hot); cell (r, c) covers full-resolution pixels
     cv::Size2f cell;              //   x in [c, c+1) * cell.width, y in band_top + [r, r+1) * cell.height
 };
@@ -88,8 +93,10 @@ struct ParallaxFrame {
 // pyramid level p.level; cur_full: the whole current frame (bottom refinement); H: road homography
 // previous -> current in full-resolution pixels; lanes: this frame's lane model (road area,
 // vanishing point); vp: the road's vanishing point in the current frame (its row is the horizon).
+// grad_cells: optional cache of the current band's mean gradient per cell (CV_32F, cells x cells): filled
+// when empty or of another size, used as it is otherwise (a second difference on the same band).
 ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band, const cv::Mat &cur_full, int band_top,
                               const cv::Matx33d &H, const LaneModel &lanes, cv::Point2f vp, const CameraParams &cam,
-                              const ParallaxParams &p);
+                              const ParallaxParams &p, cv::Mat *grad_cells = nullptr);
 
 } // namespace hw

@@ -41,8 +41,9 @@ FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked,
     out.horizon_row = vp_y;
     out.full_detection = tracker.homography().status == HomographyKalman::Status::kAccepted;
     const auto res = tracker.road_residual(out.lanes);
-    out.image_change = res.first;
-    out.image_mean = res.second;
+    out.image_change = res.aligned;
+    out.image_mean = res.unaligned;
+    out.image_stddev = res.aligned_raw;
     if (stage == "parallax")
         for (const auto &m : tracker.detection().measurements) {
             TrackState t;

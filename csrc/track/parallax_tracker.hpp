@@ -29,6 +29,7 @@
 #include "detect/parallax_detector.hpp"
 #include "geometry/homography_dlt.hpp"
 #include "geometry/homography_kalman.hpp"
+#include "geometry/homography_refine.hpp"
 #include "track/particle_filter.hpp"
 #include "track/tracker.hpp"
 
@@ -41,9 +42,11 @@ namespace hw {
 struct HomographyParams {
     DltParams dlt;
     HomographyKalmanParams kalman;
+    HomographyRefineParams refine;
     void bind(ParamMap &m) {
         dlt.bind(m);
         kalman.bind(m);
+        refine.bind(m);
     }
 };
 
@@ -51,10 +54,12 @@ struct HomographyParams {
 struct ParallaxTrackerParams {
     ParallaxParams detect;
     double band_above_horizon = 0.08;  // share of the image height above the horizon kept in the road band
+    double road_range_m = 120.0;       // m; the road area is continued toward the vanishing point up to here
     double hood_frac = 0.0;            // share of the image height at the bottom that is the car's bonnet
     bool exclude_vehicle_corners = true;  // road features inside confirmed vehicles' boxes are not used
     double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
     int long_gap = 3;                  // frames back of the second, long-gap difference (0, 1: none)
+    double long_gap_min_range_m = 0.0;   // m; the long-gap difference covers the road beyond this range only (0: all)
     double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction
     int search_steps = 24;             // travels tried between 0 and that
 
@@ -68,7 +73,9 @@ struct HomographyStep {
     int correspondences = 0;     // after the vehicle-box exclusion
     int used = 0;                // in the DLT fit
     double distance = NAN;       // ||H_meas - H_pred||_2 (road-band coordinates)
-    cv::Matx33d H = cv::Matx33d::eye();  // estimate, previous -> current pixels
+    cv::Matx33d H = cv::Matx33d::eye();  // estimate (refined on the road pixels when that ran), previous -> current
+    bool refined = false;        // the road-pixel refinement (homography_refine.hpp) moved it
+    double refine_shift_px = 0.0, refine_travel_m = 0.0;
 };
 
 class ParallaxTracker final : public VehicleTracker {
@@ -81,10 +88,15 @@ public:
 
     const HomographyStep &homography() const { return h_step_; }
     const ParallaxFrame &detection() const { return detection_; }
-    // Mean |I_k - warp(I_{k-1}, H)| (first) and |I_k - I_{k-1}| (second) over the same road pixels (full
-    // resolution: the ego lane up to 40 m, or the road area without a lane model, outside the detections
-    // and the bonnet) for the last frame; NaN without an alignment.
-    std::pair<float, float> road_residual(const LaneModel &lanes) const;
+    // The last frame's alignment residual over the road pixels (full resolution: the ego lane up to 40 m,
+    // or the road area without a lane model, outside the detections and the bonnet), gray levels; NaN
+    // without an alignment.
+    struct RoadResidual {
+        float aligned = kNaN;      // mean |I_k - warp(I_{k-1}, H) - o|, o the fitted brightness change
+        float unaligned = kNaN;    // mean |I_k - I_{k-1} - o'|, o' fitted alike
+        float aligned_raw = kNaN;  // mean |I_k - warp(I_{k-1}, H)| (brightness change left in)
+    };
+    RoadResidual road_residual(const LaneModel &lanes) const;
 
 private:
     LaneFeatureParams fp_;

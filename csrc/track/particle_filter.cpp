@@ -61,6 +61,11 @@ void ParticleParams::bind(ParamMap &m) {
           "px; a vehicle whose estimate is this far outside the image (or at the horizon) has left");
     m.add("duplicate_frac", duplicate_frac, 0.0, 2.0,
           "vehicle widths; two vehicles whose estimates are this close follow one vehicle: the younger goes");
+    m.add("border_frac", border_frac, 0.0, 10.0,
+          "vehicle widths; a hypothesis whose box reaches this near the image's left or right side is cut by it (the "
+          "difference region of an entering car stops a few pixels short of the side): its lateral speed "
+          "(max_lateral_mps) is only judged once it is in full view, because its visible part widens as it enters "
+          "and the mid-lower point slides with it");
     m.add("max_lateral_mps", max_lateral_mps, 0.1, 100.0,
           "m/s; a hypothesis whose image motion means moving sideways on the road faster than this is a chain of "
           "artifacts, not a vehicle (a lane change is ~2 m/s)");
@@ -206,7 +211,7 @@ void JointParticleFilter::estimate() {
     if (transitory()) mean_of(N, true, candidate_);
 }
 
-void JointParticleFilter::end_transitory(cv::Point2f vp) {
+void JointParticleFilter::end_transitory(cv::Point2f vp, cv::Size image) {
     if (!transitory()) return;
     ++transitory_frames_;
     const int ns = p_.particles;
@@ -214,6 +219,12 @@ void JointParticleFilter::end_transitory(cv::Point2f vp) {
     const double share = double(n_ext) / ns;
     const bool decide = transitory_frames_ >= p_.max_transitory_frames;
     const bool wins = share > 1.0 - p_.end_share || (decide && share >= 0.5);
+    // The sideways motion of a hypothesis cut by the image's side is not that of a vehicle: its visible
+    // part widens as it enters and the mid-lower point slides with it. It is judged once in full view
+    // (until then a winning hypothesis waits, up to max_transitory_frames more).
+    const float half = 0.5f * candidate_.w, margin = float(p_.border_frac) * candidate_.w;
+    const bool cut = candidate_.mean[0] - half <= margin || candidate_.mean[0] + half >= float(image.width - 1) - margin;
+    if (wins && cut && !plausible(candidate_, vp) && transitory_frames_ < 2 * p_.max_transitory_frames) return;
     if (share < p_.end_share || (decide && share < 0.5) || (wins && !plausible(candidate_, vp))) {
         std::fill(extended_.begin(), extended_.end(), uint8_t(0));  // the hypothesis fades
         candidate_ = Vehicle{};
@@ -368,7 +379,7 @@ void JointParticleFilter::step(double dt_s, const std::vector<PointMeasurement> 
         estimate();
         for (size_t i = 0; i < vehicles_.size(); ++i) rescale(vehicles_[i], y_before[i]);
         if (transitory()) rescale(candidate_, cand_y);
-        end_transitory(vp);
+        end_transitory(vp, image);
         bookkeeping(z, image, horizon_row);
     }
     start_transitory(z);

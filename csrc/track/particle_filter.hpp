@@ -77,6 +77,7 @@ struct ParticleParams {
     double roi_margin_px = 0.0;        // px; an estimate this far outside the image has left
     double duplicate_frac = 0.3;       // two vehicles closer than this many widths: the younger goes
     double max_lateral_mps = 3.5;      // m/s; a hypothesis moving sideways faster on the road is no vehicle
+    double border_frac = 0.25;         // vehicle widths; a hypothesis reaching this near the image's side is cut by it
     double max_closing_mps = 70.0;     // m/s; nor one whose range changes faster
     int seed = 1;                      // random seed (runs are reproducible)
 
@@ -118,7 +119,7 @@ private:
     void weigh(const std::vector<PointMeasurement> &z, cv::Size image);
     void resample();
     void estimate();
-    void end_transitory(cv::Point2f vp);
+    void end_transitory(cv::Point2f vp, cv::Size image);
     bool plausible(const Vehicle &v, cv::Point2f vp) const;
     void bookkeeping(const std::vector<PointMeasurement> &z, cv::Size image, float horizon_row);
     void remove_vehicle(int i);
