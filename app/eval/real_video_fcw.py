@@ -2,8 +2,10 @@
 clips and the TME tme08 frames, in which nothing dangerous happens, so every warning is a false one.
 
 They come without CAN: the ego speed is a constant 27 m/s (97 km/h, motorway traffic) played in as a CAN
-log. The cameras are those of app/eval/road_motion.py (Udacity: fx 1150 px at 1280 px assumed, 1.5 m high,
-level; TME: from its calibration.ini). The speed only opens the FCW's gates; TTCs come from the images.
+log. The cameras are those of app/eval/road_motion.py (Udacity: fx 1150 px at 1280 px assumed, 1.5 m high;
+TME: from its calibration.ini; pitch and yaw from the lanes' vanishing point). For the thesis preset the
+speed only opens the FCW's gates (TTCs come from the images); the parallax preset also predicts its road
+homography from it, so for that preset a wrong assumed speed also degrades detection.
 
     python -m app.eval.real_video_fcw [--pipeline thesis] [--data ../shared/data]
 """
@@ -18,7 +20,7 @@ from typing import Optional
 import cv2
 import yaml
 
-from app.eval.road_motion import tme_camera, udacity_camera
+from app.eval.road_motion import fit_horizon, read_tme, read_video, tme_camera, udacity_camera
 from app.replay import replay_recording
 from app.sim.can_log import DBC_PATH, write_ego_speed_log
 from app.sim.world import Motion1D
@@ -30,17 +32,17 @@ TME_FPS = 20.0
 
 
 def recordings(data: Path) -> list[tuple[Path, dict, Optional[float]]]:
-    """(source, camera, fps of an image folder) for every recording."""
+    """(source, camera, fps of an image folder) for every recording; pitch and yaw fitted to the lanes
+    as in app/eval/road_motion.py."""
     out = []
     folder = data / "udacity"
     for clip in sorted((folder / "clips").glob("*.mp4")) + [folder / "test_video.mp4"]:
-        cap = cv2.VideoCapture(str(clip))
-        size = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
-        cap.release()
-        out.append((clip, udacity_camera(*size), None))
+        frames, _ = read_video(clip, 15)
+        out.append((clip, fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames), None))
     tme = data / "tme"
     if (tme / "tme08").exists():
-        out.append((tme / "tme08", tme_camera(tme / "calibration.ini"), TME_FPS))
+        frames, _ = read_tme(tme / "tme08")
+        out.append((tme / "tme08", fit_horizon(tme_camera(tme / "calibration.ini"), frames), TME_FPS))
     return out
 
 
