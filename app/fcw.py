@@ -53,8 +53,9 @@ FCW_SCHEMA = {
     "max_closing_margin_mps": _key(3.0, "m/s; a TTC is believed only if the closing speed it implies (gap / TTC) "
                                         "is at most the ego speed plus this: traffic ahead does not drive "
                                         "backwards, so anything faster is a measurement error", 0.0, 50.0),
-    "min_threat_s": _key(0.1, "s; a threat must last this long (3 frames at 30 fps) before it warns: one noisy "
-                              "frame never sounds the buzzer", 0.0, 2.0),
+    "min_threat_s": _key(0.1, "s; a threat must last this long (3 frames at 30 fps) before it warns or "
+                              "pre-warns: one noisy frame never sounds the buzzer nor lights the display",
+                         0.0, 2.0),
 }
 
 
@@ -129,6 +130,7 @@ class FcwStateMachine:
         self._warning_ttc = math.inf          # TTC when the last warning started
         self._last_warning_end = -math.inf
         self._threat_since: Optional[float] = None
+        self._pre_since: Optional[float] = None
 
     def _accel(self, lead: Lead) -> float:
         """Relative acceleration that makes things worse (< 0: closing speeds up), else 0."""
@@ -188,13 +190,20 @@ class FcwStateMachine:
         if a_req is not None and a_req >= p.decel_warning_mps2:
             threat = WARNING
 
-        # A warning-level threat must persist for min_threat_s before it counts.
+        # A warning-level threat must persist for min_threat_s before it counts, and so must any threat
+        # before the display shows a pre-warning (a far car's noisy TTC flickers below 4 s for a frame).
         if threat == WARNING:
             self._threat_since = t_s if self._threat_since is None else self._threat_since
             if self.level < WARNING and t_s - self._threat_since < p.min_threat_s - 1e-9:
                 threat = PREWARNING
         else:
             self._threat_since = None
+        if threat > NONE:
+            self._pre_since = t_s if self._pre_since is None else self._pre_since
+            if self.level == NONE and t_s - self._pre_since < p.min_threat_s - 1e-9:
+                threat = NONE
+        else:
+            self._pre_since = None
 
         suppressed = None
         if threat > NONE:
