@@ -21,13 +21,7 @@ from tests.conftest import data_path
 from tests.thesis_scenes import best_match, detected, edge_errors, false_boxes, iou, lead
 
 EDGE_TOL_PX = 3.0
-BANDS = ((0, 20), (20, 40), (40, 80), (80, math.inf))
 
-# TuSimple's camera: K and height from train_clip1/calibration.txt (same rig); the pitch puts the
-# horizon at row 344, where the annotated vehicles' bottom rows extrapolate to zero width (least
-# squares over all supp boxes), i.e. atan((376.26 - 344) / 710.37) = 2.6 deg down.
-TUSIMPLE_CAMERA = {"width": 1280, "height": 720, "fx": 714.1526, "fy": 710.3725, "cx": 675.5754,
-                   "cy": 376.2563, "height_m": 1.80, "pitch_deg": 2.6}
 # What shadow + vertical edges measured on the 600 supp images (see tusimple_scores): floors that
 # catch a regression; the issue's bar (recall 0.70 at precision 0.80) is tested separately.
 TUSIMPLE_FLOOR_40 = {"recall": 0.29, "precision": 0.68}
@@ -106,55 +100,16 @@ def test_detection_on_a_larger_image_with_the_camera_scaled():
 
 # --- TuSimple -------------------------------------------------------------------------------------
 
-def _match(dets, gts):
-    """Greedy one-to-one matching at IoU >= 0.5: {detection index: annotation index}."""
-    pairs = sorted(((iou(d, g), i, j) for i, d in enumerate(dets) for j, g in enumerate(gts)), reverse=True)
-    by_det, used = {}, set()
-    for v, i, j in pairs:
-        if v < 0.5:
-            break
-        if i not in by_det and j not in used:
-            by_det[i] = j
-            used.add(j)
-    return by_det
-
-
-def _band(h):
-    return next(b for b in BANDS if b[0] <= h < b[1])
-
-
 @pytest.fixture(scope="module")
 def tusimple_scores():
-    from app.core import Pipeline
-    root = data_path("tusimple", "supp")
-    annotations = json.loads((root / "annotation.json").read_text())
-    gt_n = {b: 0 for b in BANDS}; gt_hit = {b: 0 for b in BANDS}
-    det_n = {b: 0 for b in BANDS}; det_hit = {b: 0 for b in BANDS}
-    rel_n = rel_hit = big_n = big_hit = 0
-    with Pipeline({"pipeline": {"preset": "thesis"}, "camera": TUSIMPLE_CAMERA}) as p:
-        for e in annotations:
-            gray = cv2.imread(str(root / e["file_name"]), cv2.IMREAD_GRAYSCALE)
-            dets = _boxes(p.run_stage("detect", gray))
-            gts = [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
-            m = _match(dets, gts)
-            matched_gt = set(m.values())
-            for j, g in enumerate(gts):
-                b = _band(g[3] - g[1])
-                gt_n[b] += 1; gt_hit[b] += j in matched_gt
-                if g[3] - g[1] >= 40:
-                    big_n += 1; big_hit += j in matched_gt
-            for i, d in enumerate(dets):
-                h = gts[m[i]][3] - gts[m[i]][1] if i in m else d[3] - d[1]
-                b = _band(h)
-                det_n[b] += 1; det_hit[b] += i in m
-                if d[3] - d[1] >= 40 or h >= 40:
-                    rel_n += 1; rel_hit += i in m
-    scores = {"bands": {f"{b[0]}-{b[1]}": {"recall": gt_hit[b] / max(1, gt_n[b]), "n_gt": gt_n[b],
-                                            "precision": det_hit[b] / max(1, det_n[b]), "n_det": det_n[b]}
-                        for b in BANDS},
-              "recall_40": big_hit / max(1, big_n), "precision_40": rel_hit / max(1, rel_n)}
-    print("TuSimple supp detection:", json.dumps(scores, indent=1))
-    return scores
+    """The evaluation's own scoring (app/eval/tusimple_boxes.py), as `headway eval` reports it."""
+    from app.eval.tusimple_boxes import evaluate
+
+    bands = evaluate(str(data_path("tusimple", "supp")))["bands"]
+    print("TuSimple supp detection:", json.dumps(bands, indent=1))
+    return {"bands": {name: {"recall": b["recall"], "n_gt": b["gt"], "precision": b["precision"]}
+                      for name, b in bands.items() if name not in (">=40", "overall")},
+            "recall_40": bands[">=40"]["recall"], "precision_40": bands[">=40"]["precision"]}
 
 
 def test_tusimple_detection_by_height_band(tusimple_scores):

@@ -17,7 +17,6 @@ import tempfile
 from pathlib import Path
 from typing import Optional
 
-import cv2
 import yaml
 
 from app.eval.road_motion import fit_horizon, read_tme, read_video, tme_camera, udacity_camera
@@ -28,37 +27,34 @@ from app.sim.world import Motion1D
 EGO_SPEED_MPS = 27.0
 
 
-TME_FPS = 20.0
-
-
-def recordings(data: Path) -> list[tuple[Path, dict, Optional[float]]]:
-    """(source, camera, fps of an image folder) for every recording; pitch and yaw fitted to the lanes
-    as in app/eval/road_motion.py."""
+def recordings(data: Path) -> list[tuple[Path, dict, float, bool]]:
+    """(source, camera, frame rate, is an image folder) for every recording; pitch and yaw fitted to the
+    lanes as in app/eval/road_motion.py."""
     out = []
     folder = data / "udacity"
     for clip in sorted((folder / "clips").glob("*.mp4")) + [folder / "test_video.mp4"]:
-        frames, _ = read_video(clip, 15)
-        out.append((clip, fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames), None))
+        frames, fps = read_video(clip, 15)
+        out.append((clip, fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames), fps, False))
     tme = data / "tme"
     if (tme / "tme08").exists():
-        frames, _ = read_tme(tme / "tme08")
-        out.append((tme / "tme08", fit_horizon(tme_camera(tme / "calibration.ini"), frames), TME_FPS))
+        frames, fps = read_tme(tme / "tme08")
+        out.append((tme / "tme08", fit_horizon(tme_camera(tme / "calibration.ini"), frames), fps, True))
     return out
 
 
 def evaluate(data: str, preset: str = "thesis") -> list[dict]:
     out = []
     with tempfile.TemporaryDirectory() as tmp:
-        for source, camera, fps in recordings(Path(data)):
+        for source, camera, fps, is_folder in recordings(Path(data)):
             log = Path(tmp) / f"{source.stem}.log"
             write_ego_speed_log(log, Motion1D(0.0, EGO_SPEED_MPS, []), 60.0)
             cfg = {"camera": camera, "pipeline": {"preset": preset},
                    "vehicle": {"speed_dbc": str(DBC_PATH), "speed_message": "EGO_SPEED", "speed_signals": "SPEED_MPS"}}
             cfg_path = Path(tmp) / "config.yaml"
             cfg_path.write_text(yaml.safe_dump(cfg))
-            rate = fps or cv2.VideoCapture(str(source)).get(cv2.CAP_PROP_FPS) or 25.0
-            s = replay_recording(str(source), str(cfg_path), fps=fps, can_in=str(log), progress=False)
-            out.append({"clip": source.name, "frames": s.frames, "seconds": round(s.frames / rate, 2),
+            s = replay_recording(str(source), str(cfg_path), fps=fps if is_folder else None, can_in=str(log),
+                                 progress=False)
+            out.append({"clip": source.name, "frames": s.frames, "seconds": round(s.frames / fps, 2),
                         "vehicles_confirmed": len(s.confirmed_ids),
                         "warnings": sum(1 for _, level, _ in s.warnings if level == "warning"),
                         "prewarnings": sum(1 for _, level, _ in s.warnings if level == "prewarning"),

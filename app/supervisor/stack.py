@@ -51,7 +51,7 @@ class Stack:
             state = self.vehicle_state(now_s)
         ego = ego_from(state, self.bridge.vehicle_signals() if self.bridge is not None else None)
         if pipe is not None:  # for the ego path when the lanes are missing (next frame on)
-            pipe.set_ego_motion(ego.speed_mps, getattr(state, "yaw_rate_rps", None) if state is not None else None)
+            pipe.set_ego_motion(ego.speed_mps, getattr(state, "yaw_rate_rps", None))
         decision = self.fcw.step(r.t, lead_of(r), ego)
         if decision.changed:
             self.decisions.append((r.t, decision))

@@ -34,11 +34,6 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("photometric_trim", photometric_trim, 1.0, 100.0,
           "robust sigmas (1.4826 MAD) beyond which a road cell is left out of the brightness fit (vehicles, moving "
           "shadows)");
-    m.add("row_min_widths", row_min_widths, 0.0, 100.0,
-          "expected vehicle widths; a row of cells whose road part is at least this wide is hot only above sad_factor "
-          "times its own median road cell: a structure across the road (a brightness edge on the far road a pixel "
-          "off, a shadow edge) makes the whole row differ, vehicles (fewer than half of it side by side) only their "
-          "part; 0 disables, the default: 5 cut the synthetic MOTA on three scenarios from 0.59 to 0.37");
     m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
@@ -281,28 +276,6 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     // and the last tenths of a pixel of alignment error), and inside what the warp could fill from
     // the previous band (its border rows are replicated, not seen).
     cv::Mat hot = (sad > thr) & (sad > float(p.edge_slack_px) * grad);
-    // A row of cells whose road part differs as a whole is a structure of the road that the alignment
-    // does not fit (a joint or a brightness edge across the far road a pixel off, an overpass shadow
-    // edge), not vehicles, which cover part of a row: the row's own median road cell raises its threshold.
-    if (p.row_min_widths > 0.0) {
-        std::vector<float> row;
-        for (int r = 0; r < ncy; ++r) {
-            row.clear();
-            const uint8_t *rd = road.ptr<uint8_t>(r);
-            const float *sr = sad.ptr<float>(r);
-            for (int c = 0; c < ncx; ++c)
-                if (rd[c]) row.push_back(sr[c]);
-            // Only where the road is wide enough that vehicles side by side cannot fill half of it.
-            const float w_row = float(p.vehicle_width_m * cam.fx * (cell_y(r + 0.5f) - horizon_row) / (cam.fy * cam.height_m));
-            if (row.empty() || !(w_row > 0.f) || float(row.size()) * cell_px_w < float(p.row_min_widths) * w_row) continue;
-            std::nth_element(row.begin(), row.begin() + long(row.size() / 2), row.end());
-            const float row_thr = float(p.sad_factor) * row[row.size() / 2];
-            if (row_thr <= thr) continue;
-            uint8_t *h = hot.ptr<uint8_t>(r);
-            for (int c = 0; c < ncx; ++c)
-                if (sr[c] <= row_thr) h[c] = 0;
-        }
-    }
     {
         const cv::Matx33d Hi = Hs.inv();
         for (int r = 0; r < ncy; ++r)

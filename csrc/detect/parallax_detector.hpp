@@ -46,7 +46,6 @@ struct ParallaxParams {
     double edge_slack_px = 0.5;      // px at the level; hot only beyond this displacement of the local gradient
     bool photometric = true;         // take the smooth brightness change out of the difference
     double photometric_trim = 3.0;   // robust sigmas; road cells farther from the brightness surface are left out
-    double row_min_widths = 0.0;     // vehicle widths; rows with this much road get their own threshold (0: off)
     double vehicle_width_m = 1.8;    // m; width the scan expects at a row
     double min_width_frac = 0.3;     // region narrower than this share of the expected width: no vehicle
     double max_width_frac = 2.2;     // wider: no single vehicle

@@ -87,7 +87,8 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
                 scale_rate = slope(s.log_w, scale_se);
             }
         }
-        // The scale change measures the range rate too, independently of the horizon: dZ/dt = -Z d(ln w)/dt.
+        // The scale change measures the range rate too, independently of the horizon: dZ/dt = -Z d(ln w)/dt
+        // (used by the filter only with scale_rate_fusion; the agreement check below always).
         // The range alone swings with every error of the horizon row (on a real clip the lane vanishing
         // point moves by +-7 px while the car's box stays put); the width does not. Consecutive windows
         // overlap, so each fit counts as scale_window times less certain. A fit the filter finds

@@ -213,21 +213,7 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
             if (pp_.road_range_m > 0.0)
                 road.road_polygon = extend_road(road.road_polygon, vp,
                                                 float(vp.y + cam_.fy * cam_.height_m / pp_.road_range_m));
-            // The filtered homography polished on the road pixels (its far part above all).
-            cv::Matx33d H_now = kf_.H_px();
-            {
-                Stopwatch sr;
-                const HomographyRefinement ref = refine_road_homography(level, prev_level_, band_top_, pp_.detect.level, H_now,
-                                                                        road.road_polygon, vp, cam_, hp_.refine);
-                if (ref.ok) {
-                    H_now = ref.H;
-                    h_step_.H = H_now;
-                    h_step_.refined = true;
-                    h_step_.refine_shift_px = ref.shift_px;
-                    h_step_.refine_travel_m = ref.travel_m;
-                }
-                times.add("homography", sr.ms());
-            }
+            const cv::Matx33d H_now = kf_.H_px();
             cv::Mat grad_cells;  // the current band's gradient cells, shared by both differences
             detection_ = detect_parallax(level, prev_level_, cur_, band_top_, H_now, road, vp, cam_, pp_.detect, &grad_cells);
             full_detection = true;

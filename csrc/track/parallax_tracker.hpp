@@ -29,7 +29,6 @@
 #include "detect/parallax_detector.hpp"
 #include "geometry/homography_dlt.hpp"
 #include "geometry/homography_kalman.hpp"
-#include "geometry/homography_refine.hpp"
 #include "track/particle_filter.hpp"
 #include "track/tracker.hpp"
 
@@ -42,11 +41,9 @@ namespace hw {
 struct HomographyParams {
     DltParams dlt;
     HomographyKalmanParams kalman;
-    HomographyRefineParams refine;
     void bind(ParamMap &m) {
         dlt.bind(m);
         kalman.bind(m);
-        refine.bind(m);
     }
 };
 
@@ -73,9 +70,7 @@ struct HomographyStep {
     int correspondences = 0;     // after the vehicle-box exclusion
     int used = 0;                // in the DLT fit
     double distance = NAN;       // ||H_meas - H_pred||_2 (road-band coordinates)
-    cv::Matx33d H = cv::Matx33d::eye();  // estimate (refined on the road pixels when that ran), previous -> current
-    bool refined = false;        // the road-pixel refinement (homography_refine.hpp) moved it
-    double refine_shift_px = 0.0, refine_travel_m = 0.0;
+    cv::Matx33d H = cv::Matx33d::eye();  // estimate, previous -> current
 };
 
 class ParallaxTracker final : public VehicleTracker {
