@@ -66,6 +66,7 @@ EVENTS = {
     lib.HW_EVENT_RECONNECTED: "reconnected",
     lib.HW_EVENT_SIZE_CHANGED: "size_changed",
 }
+ROAD_MOTION = {lib.HW_ROAD_ACCEPTED: "accepted", lib.HW_ROAD_PREDICTED: "predicted"}
 
 
 def _check(status: int) -> None:
@@ -130,6 +131,12 @@ class FrameResult:
     image_mean: Optional[float] = None     # gray level
     image_stddev: Optional[float] = None   # near 0: blinded
     image_change: Optional[float] = None   # mean |change| since the previous frame; 0: frozen
+    # the road plane's motion since the previous frame (parallax preset): "accepted" (a measurement passed
+    # the gate), "predicted" (the filter coasts), None (no estimate); the filtered homography (3x3, pixels,
+    # previous -> current) and the frames coasted
+    road_motion: Optional[str] = None
+    road_coast_frames: int = 0
+    road_homography: Optional[np.ndarray] = None
 
 
 def _result(r: Any) -> FrameResult:
@@ -181,6 +188,10 @@ def _result(r: Any) -> FrameResult:
         image_mean=_opt(r.image_mean),
         image_stddev=_opt(r.image_stddev),
         image_change=_opt(r.image_change),
+        road_motion=ROAD_MOTION.get(int(r.road_motion)),
+        road_coast_frames=int(r.road_coast_frames),
+        road_homography=(None if r.road_motion == lib.HW_ROAD_NONE
+                         else np.array([r.road_homography[i] for i in range(9)], dtype=float).reshape(3, 3)),
     )
 
 

@@ -122,6 +122,12 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->image_mean = o.image_mean;
     r->image_stddev = o.image_stddev;
     r->image_change = o.image_change;
+    r->road_motion = o.road.state == hw::RoadMotion::State::kAccepted    ? HW_ROAD_ACCEPTED
+                     : o.road.state == hw::RoadMotion::State::kPredicted ? HW_ROAD_PREDICTED
+                                                                          : HW_ROAD_NONE;
+    r->road_coast_frames = o.road.coast_frames;
+    for (int i = 0; i < 9; ++i)
+        r->road_homography[i] = r->road_motion == HW_ROAD_NONE ? NAN : float(o.road.H.val[i]);
 }
 
 cv::Mat wrap_gray(const uint8_t *gray, int32_t width, int32_t height, int32_t stride) {

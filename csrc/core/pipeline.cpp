@@ -63,6 +63,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
         FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera,
                          EgoMotion{ego_speed_mps_, ego_yaw_rate_rps_}};
         tracker_->step(ctx, out.tracks, out.times, out.full_detection);
+        out.road = tracker_->road_motion();
     }
     {
         Stopwatch sw;

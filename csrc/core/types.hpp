@@ -75,6 +75,14 @@ struct StageTimes {
     }
 };
 
+// The road plane's motion from the previous frame to this one, as a tracker that estimates it reports it.
+struct RoadMotion {
+    enum class State { kNone, kAccepted, kPredicted };
+    State state = State::kNone;
+    int coast_frames = 0;
+    cv::Matx33d H = cv::Matx33d::eye();  // pixels, previous -> current
+};
+
 // Everything one frame produced.
 struct FrameOutput {
     int64_t frame_number = 0;
@@ -90,6 +98,7 @@ struct FrameOutput {
     StageTimes times;
     float total_ms = 0.f;
     float image_mean = kNaN, image_stddev = kNaN, image_change = kNaN;  // see capture/image_stats.hpp
+    RoadMotion road;
 };
 
 } // namespace hw

@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 1
+#define HW_ABI_VERSION 2
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -41,6 +41,13 @@ typedef enum {
     HW_ERR_END_OF_STREAM = 6,    /* pop: the source has ended and every result was popped */
     HW_ERR_INTERNAL = 7          /* an unexpected exception inside the core (message says which) */
 } hw_status;
+
+/* What the road-plane motion estimate (parallax preset) did in a frame. */
+typedef enum {
+    HW_ROAD_NONE = 0,      /* no estimate: another preset, the first frames, or lost after a long gap */
+    HW_ROAD_ACCEPTED = 1,  /* a measured homography passed the gate and updated the filter */
+    HW_ROAD_PREDICTED = 2  /* no acceptable measurement: the filter's prediction carries on (coasting) */
+} hw_road_motion;
 
 /* FCW levels. */
 typedef enum { HW_FCW_NONE = 0, HW_FCW_PREWARNING = 1, HW_FCW_WARNING = 2 } hw_fcw_level;
@@ -113,6 +120,12 @@ typedef struct {
     /* image health on a sparse grid: mean gray, its standard deviation (near 0 = blinded), mean absolute
      * change since the previous frame (0 = frozen; NaN on the first frame) */
     float image_mean, image_stddev, image_change;
+    /* the road plane's motion from the previous frame to this one (parallax preset): hw_road_motion, the
+     * frames the prediction has carried on without an accepted measurement, and the filtered homography
+     * (pixels, previous -> current, row-major; NaN when road_motion is HW_ROAD_NONE) */
+    int32_t road_motion;
+    int32_t road_coast_frames;
+    float road_homography[9];
 } hw_frame_result;
 
 typedef struct {

@@ -90,6 +90,16 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
           "s; a longer gap between frames (or time going back) starts the homography and the tracks again");
 }
 
+RoadMotion ParallaxTracker::road_motion() const {
+    RoadMotion r;
+    if (!h_step_.valid) return r;
+    r.state = h_step_.status == HomographyKalman::Status::kAccepted ? RoadMotion::State::kAccepted
+                                                                     : RoadMotion::State::kPredicted;
+    r.coast_frames = h_step_.coast_frames;
+    r.H = h_step_.H;
+    return r;
+}
+
 ParallaxTracker::ParallaxTracker(const LaneFeatureParams &features, const HomographyParams &homography,
                                  const ParallaxTrackerParams &parallax, const ParticleParams &particles,
                                  const CameraParams &cam)

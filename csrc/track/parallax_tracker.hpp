@@ -82,6 +82,7 @@ public:
     void reset() override;
 
     const HomographyStep &homography() const { return h_step_; }
+    RoadMotion road_motion() const override;
     const ParallaxFrame &detection() const { return detection_; }
     // The last frame's alignment residual over the road pixels (full resolution: the ego lane up to 40 m,
     // or the road area without a lane model, outside the detections and the bonnet), gray levels; NaN

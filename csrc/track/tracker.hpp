@@ -30,6 +30,8 @@ public:
     virtual void step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
                       bool &full_detection) = 0;
     virtual void reset() = 0;
+    // The road plane's motion of the last step, for trackers that estimate it (none by default).
+    virtual RoadMotion road_motion() const { return {}; }
 };
 
 } // namespace hw
