@@ -1,6 +1,7 @@
 #include "detect/parallax_detector.hpp"
 
 #include "detect/photometric.hpp"
+#include "detect/vehicle_top.hpp"
 
 #include <opencv2/imgproc.hpp>
 
@@ -63,6 +64,26 @@ void ParallaxParams::bind(ParamMap &m) {
           "widths; rows without difference bridged while measuring the height (the flat back of a truck)");
     m.add("min_aspect", min_aspect, 0.1, 5.0,
           "box height / width reported at least (a region whose upper edges showed no parallax)");
+    m.add("find_top", find_top,
+          "take a region's top from the current frame, where its side edges stop going up under a roof line "
+          "(vehicle_top.hpp), when that is higher than top_min_aspect widths: the difference misses the flat back of "
+          "a truck, and the road band ends band_above_horizon above the horizon, below the roof of a near truck "
+          "(overtaking_from_side truck 2 was confirmed with its box half as tall as the truck, IoU 0.35, for 20 "
+          "frames); false: the height from the region alone");
+    m.add("top_min_aspect", top_min_aspect, 0.1, 5.0,
+          "height / width (between the sides found); a top found lower than this is not trusted and the region's "
+          "height is kept (cars' upper sides fade into the rear window; as the thesis preset's top_min_aspect)");
+    m.add("top_max_height_m", top_max_height_m, 0.5, 10.0,
+          "m above the road at the region's bottom row (flat road); the top search stops there: trucks are up to "
+          "4 m tall; in metres because a vehicle cut by the image's side shows only part of its width");
+    m.add("top_keep_frac", top_keep_frac, 0.05, 1.0,
+          "share of the side edges' strength on the lower body that still counts as a side going up (as the thesis "
+          "preset's top_keep_frac)");
+    m.add("top_max_gap", top_max_gap, 0, 50, "px; gaps in the side edges bridged going up (seams, a window frame)");
+    m.add("top_snap_frac", top_snap_frac, 0.0, 1.0,
+          "region widths; each side is first moved to the strongest vertical edge within this distance on the lower "
+          "body (the difference's sides are blurred by half a cell and widened by the cast shadow); a side within a "
+          "cell of the image's side is cut by it and not followed, the other side alone gives the top");
     m.add("join_gap_cells", join_gap_cells, 0, 100,
           "cells; hot clusters this far beside a region's columns still join it (the difference of one vehicle is "
           "broken at its wheels and plate)");
@@ -442,7 +463,28 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
                 w = x1 - x0;
             }
         }
-        const float h = std::clamp(yb - cell_y(float(top)), float(p.min_aspect) * w, float(p.max_aspect) * w);
+        float h = std::clamp(yb - cell_y(float(top)), float(p.min_aspect) * w, float(p.max_aspect) * w);
+        // The top from the current frame where the difference cannot give it: the flat back of a truck shows
+        // no parallax, and the road band ends band_above_horizon above the horizon, below the roof of any
+        // near van or truck. The vehicle's sides are vertical edges up to its roof (vehicle_top.hpp); a side
+        // within a cell of the image's side is cut by it (an overtaking vehicle) and only the inner one is
+        // followed, the search bounded by a height in metres (the visible width of a cut vehicle says
+        // nothing about its height).
+        if (p.find_top) {
+            const bool cut_l = x0 <= cell_px_w, cut_r = x1 >= float(cur_full.cols - 1) - cell_px_w;
+            if (!(cut_l && cut_r)) {
+                const int r0 = int(yb - 0.45f * w), r1 = int(yb - 0.15f * w);
+                const float rad = float(p.top_snap_frac) * w;
+                const float l = cut_l ? x0 : snap_side(cur_full, x0, r0, r1, rad);
+                const float r = cut_r ? x1 : snap_side(cur_full, x1, r0, r1, rad);
+                const float px_per_m = (yb - horizon_row) / float(cam.height_m);  // flat road, at the bottom row
+                const float t = vehicle_top_between(cur_full, l, r, yb, r - l,
+                                                    int(std::floor(yb - float(p.top_max_height_m) * px_per_m)),
+                                                    yb - float(p.top_min_aspect) * (r - l), !cut_l, !cut_r,
+                                                    p.top_keep_frac, p.top_max_gap);
+                if (std::isfinite(t)) h = yb - t;
+            }
+        }
         m.point = {0.5f * (x0 + x1), yb};
         m.box = cv::Rect2f(x0, yb - h, w, h);
         m.sad = g.cells ? g.sad_sum / float(g.cells) : 0.f;

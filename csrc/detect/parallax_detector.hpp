@@ -13,7 +13,9 @@
 // Each region gives one measurement at its mid-lower point, whose row is refined on the current
 // frame to the strongest dark-above / bright-below step near the region's bottom (the shadow under
 // the vehicle; for a vehicle standing still relative to the road the contact zone itself shows no
-// parallax and the lowest difference lies higher up).
+// parallax and the lowest difference lies higher up). The box's top comes from the region's hot rows,
+// or, when the vehicle's sides reach higher as vertical edges in the current frame, from those
+// (vehicle_top.hpp): a truck's flat back shows no difference and its roof stands above the road band.
 //
 // Structures above the road plane are rejected by measurement, not by masks: clusters are formed on
 // the road area of the lane model only, most of a region's lowest cells must lie inside it by
@@ -57,6 +59,12 @@ struct ParallaxParams {
     double min_aspect = 0.6;         // box height / width reported at least
     double height_hot_frac = 0.25;   // share of the columns hot for a row to count towards the height
     double height_gap_frac = 0.15;   // widths of rows without difference bridged for the height
+    bool find_top = true;            // top from the current frame's side edges (vehicle_top.hpp) when higher
+    double top_min_aspect = 0.9;     // ... than this many widths (cars keep the region's height)
+    double top_max_height_m = 4.5;   // m; the top search stops this high above the road at the bottom row
+    double top_keep_frac = 0.35;     // side edge strength, relative to the lower body, that still counts
+    int top_max_gap = 2;             // px; gaps in the side edges bridged going up
+    double top_snap_frac = 0.1;      // widths; sides moved to the strongest vertical edge within this first
     int join_gap_cells = 2;          // cells; hot clusters this far beside a region's span still join it
     double streak_elongation = 5.0;  // elongation of a region's cells beyond which ...
     double streak_angle_deg = 12.0;  // ... a long axis this close to the vanishing point's direction is no vehicle
@@ -72,7 +80,8 @@ struct ParallaxParams {
 // One region of differences.
 struct ParallaxMeasurement {
     cv::Point2f point;   // mid-lower point: bottom-centre of the region, px
-    cv::Rect2f box;      // vehicle box: the region's columns, its bottom, a height from the region (clamped)
+    cv::Rect2f box;      // vehicle box: the region's columns, its bottom, a height from the region (clamped) or,
+                         // higher, from its side edges in the current frame (find_top)
     float sad = 0.f;     // mean |difference| of its hot cells, gray levels
     bool refined = false;  // bottom row moved to a shadow step on the current frame
 };

@@ -22,17 +22,29 @@ float side_edge(const cv::Mat &gray, int y, int c) {
 } // namespace
 
 float vehicle_top(const cv::Mat &gray, float left, float right, float bottom, const TopSearch &p) {
-    CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
     const float w = right - left;
     if (!(w >= 6.f) || !std::isfinite(bottom)) return kNaN;
+    return vehicle_top_between(gray, left, right, bottom, w, int(std::floor(bottom - float(p.max_aspect) * w)),
+                               bottom - float(p.min_aspect) * w, true, true, p.keep_frac, p.max_gap);
+}
+
+float vehicle_top_between(const cv::Mat &gray, float left, float right, float bottom, float ref_w, int y_min,
+                          float y_max, bool use_left, bool use_right, double keep_frac, int max_gap) {
+    CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
+    const float w = right - left;
+    if (!(w >= 6.f) || !std::isfinite(bottom) || !(ref_w > 0.f) || !(use_left || use_right)) return kNaN;
     const int cl = int(std::lround(left)), cr = int(std::lround(right));
-    if (cl < 1 || cr > gray.cols - 2) return kNaN;
-    // Both sides at once: the weaker of the two edges per row.
-    auto edge = [&](int y) { return std::min(side_edge(gray, y, cl), side_edge(gray, y, cr)); };
+    if ((use_left && (cl < 1 || cl > gray.cols - 2)) || (use_right && (cr < 1 || cr > gray.cols - 2))) return kNaN;
+    // The sides followed at once: the weaker of the two edges per row (or the one side).
+    auto edge = [&](int y) {
+        if (!use_left) return side_edge(gray, y, cr);
+        if (!use_right) return side_edge(gray, y, cl);
+        return std::min(side_edge(gray, y, cl), side_edge(gray, y, cr));
+    };
 
     // Typical strength on the lower body, above wheels and underbody shadow.
-    const int ref_lo = int(std::lround(bottom - 0.45f * w)), ref_hi = int(std::lround(bottom - 0.15f * w));
-    const int y_min = std::max(0, int(std::floor(bottom - float(p.max_aspect) * w)));
+    const int ref_lo = int(std::lround(bottom - 0.45f * ref_w)), ref_hi = int(std::lround(bottom - 0.15f * ref_w));
+    y_min = std::max(0, y_min);
     if (ref_lo < y_min || ref_hi > gray.rows - 1 || ref_hi <= ref_lo) return kNaN;
     std::vector<float> ref;
     for (int y = ref_lo; y <= ref_hi; ++y) ref.push_back(edge(y));
@@ -40,26 +52,43 @@ float vehicle_top(const cv::Mat &gray, float left, float right, float bottom, co
     const float typical = ref[ref.size() / 2];
     if (typical < 2.f) return kNaN;  // no sides to follow (gray levels)
 
-    // Up from the lower body while both sides carry an edge, bridging short gaps.
-    const float keep = float(p.keep_frac) * typical;
+    // Up from the lower body while the sides carry an edge, bridging short gaps.
+    const float keep = float(keep_frac) * typical;
     int last = ref_lo, gap = 0;
-    for (int y = ref_lo - 1; y >= y_min && gap <= p.max_gap; --y) {
+    for (int y = ref_lo - 1; y >= y_min && gap <= max_gap; --y) {
         if (edge(y) >= keep) { last = y; gap = 0; }
         else ++gap;
     }
     if (last <= y_min) return kNaN;  // still going at the search limit: background edges, not a roof
     const float top = float(last) - 0.5f;
-    if (bottom - top < float(p.min_aspect) * w) return kNaN;
-    // A roof closes the two sides: a horizontal edge across the inner columns at the top (within a
-    // row). Without it the "sides" were lines running on (lane markings, poles), not a vehicle.
+    if (top > y_max) return kNaN;
+    // A roof closes the sides: a horizontal edge across the inner columns at the top (within a row).
+    // Without it the "sides" were lines running on (lane markings, poles), not a vehicle.
+    const int xa = std::max(0, cl + 1), xb = std::min(gray.cols - 1, cr - 1);
     float roof = 0.f;
     for (int y = std::max(1, last - 1); y <= std::min(gray.rows - 2, last + 1); ++y) {
         const uint8_t *up = gray.ptr<uint8_t>(y - 1), *down = gray.ptr<uint8_t>(y + 1);
         float s = 0.f;
-        for (int x = cl + 1; x < cr; ++x) s += 0.5f * std::abs(float(down[x]) - float(up[x]));
-        roof = std::max(roof, s / float(std::max(1, cr - cl - 1)));
+        for (int x = xa; x <= xb; ++x) s += 0.5f * std::abs(float(down[x]) - float(up[x]));
+        roof = std::max(roof, s / float(std::max(1, xb - xa + 1)));
     }
     return roof >= keep ? top : kNaN;
+}
+
+float snap_side(const cv::Mat &gray, float x, int y0, int y1, float radius) {
+    CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
+    y0 = std::max(y0, 0);
+    y1 = std::min(y1, gray.rows - 1);
+    const int a = std::max(1, int(std::floor(x - radius))), b = std::min(gray.cols - 2, int(std::ceil(x + radius)));
+    if (y1 < y0 || b < a) return x;
+    // |I(c+1) - I(c-1)| / 2 summed over the rows, per column c.
+    std::vector<float> prof(size_t(b - a + 1), 0.f);
+    for (int y = y0; y <= y1; ++y) {
+        const uint8_t *row = gray.ptr<uint8_t>(y);
+        for (int c = a; c <= b; ++c) prof[size_t(c - a)] += 0.5f * std::abs(float(row[c + 1]) - float(row[c - 1]));
+    }
+    const auto best = std::max_element(prof.begin(), prof.end());
+    return *best > 0.f ? float(a + int(best - prof.begin())) : x;
 }
 
 } // namespace hw

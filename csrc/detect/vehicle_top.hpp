@@ -1,4 +1,4 @@
-// vehicle_top.hpp - the top of a verified vehicle from how far up its two sides reach.
+// vehicle_top.hpp - the top of a vehicle from how far up its sides reach.
 //
 // The thesis sets the top from a fixed aspect ratio ("no consistent cue marks the top"), which is
 // right for cars and far off for vans and trucks. Both sides of a vehicle are vertical edges from
@@ -9,6 +9,12 @@
 // roof line) closes the sides there. The result is kept within
 // [min_aspect, max_aspect] times the width; when the sides are too weak to say, the caller's
 // fallback aspect applies.
+//
+// vehicle_top_between() is the same search with the bounds given as rows and a choice of sides: a
+// vehicle cut by the image's side (entering, overtaking) shows only its inner side, and its visible
+// width says nothing about its height, so the caller bounds the search by a height in metres on the
+// flat road instead (parallax_detector.cpp). snap_side() moves a side given to a few pixels (a region
+// of the aligned difference, widened by the vehicle's cast shadow) onto the vertical edge it belongs to.
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -25,5 +31,15 @@ struct TopSearch {
 // Returns the top row (px) of the vehicle between sub-pixel sides `left`, `right` standing on
 // `bottom`, or NaN when the side edges do not tell.
 float vehicle_top(const cv::Mat &gray, float left, float right, float bottom, const TopSearch &p);
+
+// The same search, the top looked for in rows [y_min, y_max] (y_max: the lowest top accepted) and
+// followed along the left side, the right side or both (the weaker of the two per row); at least one.
+// The lower body (reference strength) is taken 0.15 .. 0.45 of `ref_w` above the bottom.
+float vehicle_top_between(const cv::Mat &gray, float left, float right, float bottom, float ref_w, int y_min,
+                          float y_max, bool use_left, bool use_right, double keep_frac, int max_gap);
+
+// The column (px, the centre between the two pixels of the step) of the strongest vertical edge within
+// `radius` px of `x`, averaged over rows [y0, y1]; x itself when there is no such column or no edge.
+float snap_side(const cv::Mat &gray, float x, int y0, int y1, float radius);
 
 } // namespace hw
