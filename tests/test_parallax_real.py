@@ -9,6 +9,14 @@ from app.eval import road_motion
 from tests.conftest import data_path
 
 
+def udacity_parallax(*path: str, max_frames=None):
+    """Frames, frame rate and the parallax configuration (camera fitted to the lanes, bonnet) of a Udacity clip."""
+    frames, fps = road_motion.read_video(data_path("udacity", *path), max_frames=max_frames)
+    cam = road_motion.fit_horizon(road_motion.udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
+    return frames, fps, {"camera": cam, "pipeline": {"preset": "parallax"},
+                         "parallax": {"hood_frac": road_motion.HOOD[path[-1]]}}
+
+
 def test_tme_motorway_homography_is_accepted_on_most_frames():
     """tme08 (dashed markings, 20 fps, no CAN speed). Measured: 87 % of 45 windows accepted."""
     frames, _ = road_motion.read_tme(data_path("tme", "tme08"))
@@ -38,10 +46,7 @@ def test_udacity_black_car_ahead_is_tracked_continuously():
     carries one confirmed track from frame 5 on without a break or an id switch. Measured: 33 of 38 frames at
     IoU >= 0.3 (27-31 at 0.5 across the last changes), 1 fragment, 0 id switches. (The white car beside it and
     the vehicles of tme08 and the other clips are not tracked: docs/parallax.md, "Real drives".)"""
-    frames, fps = road_motion.read_video(data_path("udacity", "test_video.mp4"))
-    cam = road_motion.fit_horizon(road_motion.udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
-    cfg = {"camera": cam, "pipeline": {"preset": "parallax"},
-           "parallax": {"hood_frac": road_motion.HOOD["test_video.mp4"]}}
+    frames, fps, cfg = udacity_parallax("test_video.mp4")
     vehicles = [v for v in road_motion.visible_throughout("test_video.mp4") if v["name"] == "black car ahead"]
     res = road_motion.identity(frames, cfg, fps, vehicles)["black car ahead"]["iou0.3"]
     assert res["tracked_frames"] >= 30, res
@@ -54,10 +59,7 @@ def test_udacity_car_in_the_adjacent_lane_is_tracked():
     covered it only partly (its right boundary found near the car) and no region on it was inside by the
     margin: 0 frames tracked. With the road area at least two lanes each side of the ego lane
     (parallax.road_lanes_each_side): measured 79 frames at IoU >= 0.3, from frame 21, 1 fragment, 0 id switches."""
-    frames, fps = road_motion.read_video(data_path("udacity", "clips", "test_small2.mp4"))
-    cam = road_motion.fit_horizon(road_motion.udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
-    cfg = {"camera": cam, "pipeline": {"preset": "parallax"},
-           "parallax": {"hood_frac": road_motion.HOOD["test_small2.mp4"]}}
+    frames, fps, cfg = udacity_parallax("clips", "test_small2.mp4")
     vehicles = [v for v in road_motion.visible_throughout("test_small2.mp4") if v["name"] == "black car ahead"]
     res = road_motion.identity(frames, cfg, fps, vehicles)["black car ahead"]["iou0.3"]
     assert res["tracked_frames"] >= 60, res
@@ -77,10 +79,7 @@ def test_tme_running_homography_is_accepted_on_most_frames():
 def test_udacity_clip_runs_through_the_parallax_preset():
     """project_video_cut: the first 40 frames through process(); the homography is accepted on at least
     a third of the windows (measured: 76 % over the whole clip) and every result is well formed."""
-    frames, fps = road_motion.read_video(data_path("udacity", "clips", "project_video_cut.mp4"), max_frames=40)
-    cam = road_motion.fit_horizon(road_motion.udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
-    cfg = {"camera": cam, "pipeline": {"preset": "parallax"},
-           "parallax": {"hood_frac": road_motion.HOOD["project_video_cut.mp4"]}}
+    frames, fps, cfg = udacity_parallax("clips", "project_video_cut.mp4", max_frames=40)
     h = road_motion.homography_windows(frames, cfg, window=6, step=2)
     assert h["accepted_rate"] >= 1 / 3, h
     with Pipeline(cfg) as p:
