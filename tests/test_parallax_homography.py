@@ -55,20 +55,25 @@ def test_estimated_homography_aligns_the_shaken_road(tmp_path, pitch_deg):
     assert np.median(residuals) < 3.0, residuals
 
 
-def test_process_reports_the_running_road_homography(tmp_path):
-    """process() reports the running filter's homography and what it did: under 0.4 deg shake and without CAN
-    speed, measured: accepted on 82 of 89 pairs (6 coasting), the worst road point 5-40 m ahead (ego lane +-5 m)
-    mapped 1.1 px (median over frames) / 2.7 px (p90) from the exact homography."""
-    scenario = shaken_scenario(tmp_path, "empty_road", 0.4)
+@pytest.mark.parametrize("name, pitch_deg", [("empty_road", 0.4), ("dense_traffic", 0.15)])
+def test_process_reports_the_running_road_homography(tmp_path, name, pitch_deg):
+    """process() reports the running filter's homography and what it did, and it maps the whole road, not only
+    the marked lanes: the worst road point 5-40 m ahead (within 5 m of the ego lane's centre) against the exact
+    homography, median over frames, without CAN speed. Measured with the road-motion model: 0.74 px (p90 1.48)
+    under 0.4 deg shake, 0.23 px (p90 0.40) on dense_traffic; with the plain DLT (homography.road_model false)
+    1.13 and 14.2 px: vehicles hide the markings on the image's right side, where it extrapolated 15-20 px off.
+    Accepted on 98 % of the pairs (DLT 95 %)."""
+    scenario = shaken_scenario(tmp_path, name, pitch_deg, duration_s=4.0)
     frames = list(render(scenario))
     worst, states = [], []
     with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
         for k, f in enumerate(frames):
             r = p.process(f.image, f.t_s)
             states.append(r.road_motion)
-            if k < 2:
+            if r.road_homography is None:
+                assert k < 5 and not worst, (k, states)  # only before the filter has started
                 continue
-            assert r.road_homography is not None and r.road_homography.shape == (3, 3), k
+            assert r.road_homography.shape == (3, 3), k
             true, cam = true_road_homography(scenario, frames[k - 1], f)
             v, u = np.mgrid[0:f.image.shape[0]:10, 0:f.image.shape[1]:10]
             x, z = cam.ground_from_pixel(u, v)
@@ -77,9 +82,9 @@ def test_process_reports_the_running_road_homography(tmp_path):
             a, b = true @ prev_pts, r.road_homography @ prev_pts
             worst.append(float(np.max(np.hypot(*(a[:2] / a[2] - b[:2] / b[2])))))
     assert states[0] is None  # no previous frame
-    assert states.count("accepted") >= 0.85 * (len(frames) - 1), states
-    assert set(states[2:]) <= {"accepted", "predicted"}, states
-    assert np.median(worst) < 1.5 and np.percentile(worst, 90) < 3.5, np.round(worst, 2)
+    assert states.count("accepted") >= 0.9 * (len(frames) - 1), states
+    assert set(states[5:]) <= {"accepted", "predicted"}, states
+    assert np.median(worst) < 1.0 and np.percentile(worst, 90) < 2.0, np.round(worst, 2)
     with Pipeline({"pipeline": {"preset": "thesis"}}) as p:  # no road-motion estimate there
         r = p.process(frames[1].image, frames[1].t_s)
         assert r.road_motion is None and r.road_homography is None

@@ -2,6 +2,7 @@
 
 #include "core/stopwatch.hpp"
 #include "detect/photometric.hpp"
+#include "geometry/road_motion_fit.hpp"
 
 #include <opencv2/imgproc.hpp>
 
@@ -108,6 +109,16 @@ std::vector<cv::Point> widen_road(const LaneModel &m, double lanes, cv::Size siz
 }
 
 } // namespace
+
+void HomographyParams::bind(ParamMap &m) {
+    dlt.bind(m);
+    kalman.bind(m);
+    m.add("road_model", road_model,
+          "the measured homography is the one of a camera rotating a little (pitch, yaw, roll) and moving along and "
+          "across the flat road of the camera model (five parameters, road_motion_fit.hpp), fitted to the "
+          "correspondences the DLT kept; false: the DLT itself (eight parameters, as the paper), which extrapolates "
+          "freely where the markings give no features");
+}
 
 void ParallaxTrackerParams::bind(ParamMap &m) {
     detect.bind(m);
@@ -251,7 +262,15 @@ void ParallaxTracker::step(const FrameContext &ctx, std::vector<TrackState> &tra
             to.push_back(c.cur);
         }
         const cv::Matx33d pred = kf_.predicted_px();
-        const HomographyFit fit = fit_homography(from, to, hp_.dlt, predicted ? &pred : nullptr);
+        HomographyFit fit = fit_homography(from, to, hp_.dlt, predicted ? &pred : nullptr);
+        if (fit.ok && hp_.road_model) {
+            const RoadMotionFit rm = fit_road_motion(from, to, fit.H, cam_, hp_.dlt);
+            if (rm.ok) {
+                fit.H = rm.H;
+                fit.used = rm.used;
+                fit.rms_px = rm.rms_px;
+            }
+        }
         h_step_.status = prev_.empty() ? HomographyKalman::Status::kNone : kf_.update(fit.ok ? &fit.H : nullptr);
         h_step_.valid = kf_.valid();
         h_step_.coast_frames = kf_.coast_frames();

@@ -41,10 +41,8 @@ namespace hw {
 struct HomographyParams {
     DltParams dlt;
     HomographyKalmanParams kalman;
-    void bind(ParamMap &m) {
-        dlt.bind(m);
-        kalman.bind(m);
-    }
+    bool road_model = true;   // the measurement restricted to the road plane's motion (road_motion_fit.hpp)
+    void bind(ParamMap &m);
 };
 
 // Section "parallax": the detector and how the tracker feeds it.

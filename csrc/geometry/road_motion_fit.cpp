@@ -1,0 +1,97 @@
+#include "geometry/road_motion_fit.hpp"
+
+#include <opencv2/calib3d.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace hw {
+
+cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta) {
+    const double p = cam.pitch_deg * M_PI / 180.0, b = cam.yaw_deg * M_PI / 180.0;
+    // The mounting as in travel_homography(): yaw about y, then pitch about x.
+    const cv::Matx33d Ryaw(std::cos(b), 0, -std::sin(b), 0, 1, 0, std::sin(b), 0, std::cos(b));
+    const cv::Matx33d Rpitch(1, 0, 0, 0, std::cos(p), -std::sin(p), 0, std::sin(p), std::cos(p));
+    const cv::Matx33d Rc = Rpitch * Ryaw;
+    cv::Matx33d Rd;
+    cv::Rodrigues(cv::Vec3d(theta[0], theta[1], theta[2]), Rd);
+    const double h = cam.height_m;
+    // I - t n^T / h with n = (0, 1, 0): only the middle column changes.
+    const cv::Matx33d T(1, -theta[3] / h, 0, 0, 1, 0, 0, -theta[4] / h, 1);
+    const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
+    cv::Matx33d G = K * Rd * Rc * T * Rc.t() * K.inv();
+    return G * (1.0 / G(2, 2));
+}
+
+namespace {
+
+// Transfer residuals (dx, dy per point) of the model at theta.
+void residuals(const CameraParams &cam, const cv::Vec<double, 5> &theta, const std::vector<cv::Point2f> &from,
+               const std::vector<cv::Point2f> &to, std::vector<double> &r) {
+    const cv::Matx33d H = road_motion_homography(cam, theta);
+    r.resize(2 * from.size());
+    for (size_t i = 0; i < from.size(); ++i) {
+        const cv::Vec3d q = H * cv::Vec3d(from[i].x, from[i].y, 1.0);
+        r[2 * i] = q[0] / q[2] - to[i].x;
+        r[2 * i + 1] = q[1] / q[2] - to[i].y;
+    }
+}
+
+} // namespace
+
+RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
+                              const cv::Matx33d &dlt, const CameraParams &cam, const DltParams &p) {
+    RoadMotionFit out;
+    // The correspondences the DLT explains (its trimming rule): a wrong one has the same leverage here.
+    std::vector<double> e(from.size());
+    for (size_t i = 0; i < from.size(); ++i) e[i] = transfer_error(dlt, from[i], to[i]);
+    std::vector<double> sorted = e;
+    if (sorted.size() < 5) return out;
+    std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
+    const double lim = std::max(p.trim_floor_px, (p.trim_factor > 0 ? p.trim_factor : 1e9) * sorted[sorted.size() / 2]);
+    std::vector<cv::Point2f> f, t;
+    for (size_t i = 0; i < from.size(); ++i)
+        if (e[i] <= lim) { f.push_back(from[i]); t.push_back(to[i]); }
+    if (int(f.size()) < std::max(5, p.min_points)) return out;
+
+    // Gauss-Newton from rest (the model is nearly linear in all five: small angles, and the translation
+    // enters linearly before the projection), Jacobian by central differences.
+    cv::Vec<double, 5> th(0, 0, 0, 0, 0);
+    const double step[5] = {1e-5, 1e-5, 1e-5, 1e-3, 1e-3};
+    std::vector<double> r, rp, rm;
+    for (int it = 0; it < 10; ++it) {
+        residuals(cam, th, f, t, r);
+        cv::Matx<double, 5, 5> JtJ = cv::Matx<double, 5, 5>::zeros();
+        cv::Vec<double, 5> Jtr(0, 0, 0, 0, 0);
+        std::vector<cv::Vec<double, 5>> J(r.size());
+        for (int k = 0; k < 5; ++k) {
+            cv::Vec<double, 5> a = th, b = th;
+            a[k] += step[k];
+            b[k] -= step[k];
+            residuals(cam, a, f, t, rp);
+            residuals(cam, b, f, t, rm);
+            for (size_t i = 0; i < r.size(); ++i) J[i][k] = (rp[i] - rm[i]) / (2 * step[k]);
+        }
+        for (size_t i = 0; i < r.size(); ++i) {
+            for (int a = 0; a < 5; ++a) {
+                Jtr[a] += J[i][a] * r[i];
+                for (int b = 0; b < 5; ++b) JtJ(a, b) += J[i][a] * J[i][b];
+            }
+        }
+        cv::Vec<double, 5> d;
+        if (!cv::solve(JtJ, -Jtr, d, cv::DECOMP_CHOLESKY)) return out;
+        th += d;
+        if (std::abs(d[0]) + std::abs(d[1]) + std::abs(d[2]) < 1e-7 && std::abs(d[3]) + std::abs(d[4]) < 1e-5) break;
+    }
+    residuals(cam, th, f, t, r);
+    double ss = 0;
+    for (double v : r) ss += v * v;
+    out.rms_px = std::sqrt(ss / double(f.size()));
+    out.theta = th;
+    out.H = road_motion_homography(cam, th);
+    out.used = int(f.size());
+    out.ok = std::isfinite(out.rms_px) && out.rms_px <= p.max_rms_px;
+    return out;
+}
+
+} // namespace hw

@@ -1,0 +1,43 @@
+// road_motion_fit.hpp - the road plane's homography between two frames, restricted to how a car's
+// camera moves over a flat road: a small rotation (pitch, yaw, roll: shake, turning) and a translation
+// (travel along the road, a lateral shift), through the camera model's intrinsics and mounting.
+//
+// The DLT's eight degrees of freedom are fixed by the correspondences on the lane markings only: where
+// there are none (the far side of the image when vehicles hide the markings there) it extrapolates
+// freely, and on the shaken synthetic dense_traffic road put road points on the image's right side
+// 15-20 px off while the ego lane aligned to a pixel or two. With five physical parameters every road
+// point moves as the plane does, including where no marking is seen.
+//
+// Model (camera axes x right, y down, z forward; level-camera road plane n^T X = h, n = (0, 1, 0)):
+//     x' ~ K R_d R_c (I - t n^T / h) R_c^T K^-1 x,   t = (lateral, 0, travel),
+// R_c the mounting (pitch, yaw of CameraParams), R_d = Rodrigues(pitch_d, yaw_d, roll_d) the rotation
+// between the frames. Fitted by Gauss-Newton on the transfer error of the correspondences the DLT kept
+// (those within trim_factor medians of its transfer error), started at rest.
+#pragma once
+
+#include "geometry/camera.hpp"
+#include "geometry/homography_dlt.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <vector>
+
+namespace hw {
+
+// theta = (pitch_d, yaw_d, roll_d [rad], lateral_m, travel_m) -> homography, H(2,2) = 1.
+cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta);
+
+struct RoadMotionFit {
+    bool ok = false;
+    cv::Matx33d H = cv::Matx33d::eye();
+    cv::Vec<double, 5> theta;
+    int used = 0;
+    double rms_px = 0.0;
+};
+
+// The road-motion homography closest to the correspondences that `dlt` (a DLT of them) explains
+// within DltParams' trimming; ok when it explains them within max_rms_px.
+RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
+                              const cv::Matx33d &dlt, const CameraParams &cam, const DltParams &p);
+
+} // namespace hw
