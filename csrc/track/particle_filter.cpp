@@ -72,10 +72,16 @@ void ParticleParams::bind(ParamMap &m) {
     m.add("max_closing_mps", max_closing_mps, 1.0, 1000.0,
           "m/s; nor one whose range would change faster than this (two cars at 250 km/h head-on: 140)");
     m.add("seed", seed, 0, 2147483647, "random seed of the filter; runs are reproducible");
+    m.add("resampling", resampling, "joint|per_vehicle",
+          "joint: the paper's, each particle resampled whole by its joint weight; per_vehicle: each vehicle's part "
+          "resampled by its own factor of the likelihood (and the hypothesised vehicle with its particles' mark), so "
+          "that how well the other vehicles fit does not decide which of a vehicle's particles survive; on "
+          "overtaking_from_side it confirms the entering truck and cars sooner and more evenly over seeds "
+          "(docs/parallax.md, Entries)");
 }
 
 JointParticleFilter::JointParticleFilter(const ParticleParams &p, const CameraParams &cam)
-    : p_(p), cam_(cam), rng_(uint32_t(p.seed)) {
+    : p_(p), cam_(cam), per_vehicle_(p.resampling == "per_vehicle"), rng_(uint32_t(p.seed)) {
     reset();
 }
 
@@ -140,14 +146,20 @@ void JointParticleFilter::weigh(const std::vector<PointMeasurement> &z, cv::Size
         const float sy = std::max(float(p_.meas_sigma_min_px), float(p_.meas_sigma_y_frac) * w);
         sig.push_back({1.f / sx, 1.f / sy, 1.0 / (2.0 * M_PI * double(sx) * double(sy))});
     }
+    const int ns = p_.particles;
+    const double log_clutter = std::log(a_u * U);
     std::vector<double> g(size_t(N) + 1);
-    for (int s = 0; s < p_.particles; ++s) {
+    if (per_vehicle_) logf_.assign(size_t(ns) * size_t(N + 1), 0.0);
+    struct Near { int i; double p; };
+    std::vector<Near> near;  // the vehicles of this particle near one measurement (usually one or none)
+    for (int s = 0; s < ns; ++s) {
         const float *x = particle(s);
         const int nv = N + (extended_[size_t(s)] ? 1 : 0);
         std::fill(g.begin(), g.end(), 0.0);
         double lw = 0.0;
         for (size_t j = 0; j < z.size(); ++j) {
             double sum_p = 0.0, sum_p2 = 0.0;
+            near.clear();
             for (int i = 0; i < nv; ++i) {
                 const float dx = (z[j].z.x - x[4 * i]) * sig[size_t(i)].ix, dy = (z[j].z.y - x[4 * i + 1]) * sig[size_t(i)].iy;
                 const float d2 = dx * dx + dy * dy;
@@ -157,34 +169,84 @@ void JointParticleFilter::weigh(const std::vector<PointMeasurement> &z, cv::Size
                 sum_p += pij;
                 sum_p2 += pij * pij;
                 g[size_t(i)] = std::max(g[size_t(i)], e);
+                near.push_back({i, pij});
             }
             // sum_i a_ij p_ij + a_u U with a_ij = (1 - a_u) p_ij / sum_i p_ij   (eq. 2)
             const double mix = sum_p > 0.0 ? (1.0 - a_u) * sum_p2 / sum_p : 0.0;
-            lw += std::log(mix + a_u * U);
+            const double l_all = std::log(mix + a_u * U);
+            lw += l_all;
+            // per_vehicle: vehicle i's share of this term is the bracket with it over the bracket without
+            // it (the others summed afresh, not subtracted: p_ij may dwarf them).
+            if (per_vehicle_ && near.size() == 1) {  // the usual case: without it only clutter is left
+                logf_[size_t(near[0].i) * size_t(ns) + size_t(s)] += l_all - log_clutter;
+                continue;
+            }
+            for (size_t a = 0; per_vehicle_ && a < near.size(); ++a) {
+                double sp = 0.0, sp2 = 0.0;
+                for (size_t b = 0; b < near.size(); ++b)
+                    if (b != a) { sp += near[b].p; sp2 += near[b].p * near[b].p; }
+                const double mix_without = sp > 0.0 ? (1.0 - a_u) * sp2 / sp : 0.0;
+                logf_[size_t(near[a].i) * size_t(ns) + size_t(s)] += l_all - std::log(mix_without + a_u * U);
+            }
         }
-        for (int i = 0; i < nv; ++i) lw += std::log(1.0 - pd + pd * g[size_t(i)]);  // detection term
+        for (int i = 0; i < nv; ++i) {
+            const double det = std::log(1.0 - pd + pd * g[size_t(i)]);  // detection term
+            lw += det;
+            if (per_vehicle_) logf_[size_t(i) * size_t(ns) + size_t(s)] += det;
+        }
         logw_[size_t(s)] = lw;
     }
 }
 
-void JointParticleFilter::resample() {
+void JointParticleFilter::systematic(const double *logw, std::vector<int> &ancestor) {
     const int ns = p_.particles;
-    const double mx = *std::max_element(logw_.begin(), logw_.end());
-    std::vector<double> cum(static_cast<size_t>(ns));
+    ancestor.resize(size_t(ns));
+    const auto [lo, hi] = std::minmax_element(logw, logw + ns);
+    if (*lo == *hi) {  // equal weights (a vehicle no measurement came near): systematic keeps every particle
+        std::iota(ancestor.begin(), ancestor.end(), 0);
+        return;
+    }
+    const double mx = *hi;
+    cum_.resize(size_t(ns));
     double acc = 0.0;
-    for (int s = 0; s < ns; ++s) cum[size_t(s)] = (acc += std::exp(logw_[size_t(s)] - mx));
-    // Systematic: one uniform offset, then n_s evenly spaced pointers into the cumulative weights.
+    for (int s = 0; s < ns; ++s) cum_[size_t(s)] = (acc += std::exp(logw[s] - mx));
+    const std::vector<double> &cum = cum_;
+    // One uniform offset, then n_s evenly spaced pointers into the cumulative weights.
     std::uniform_real_distribution<double> u01(0.0, 1.0);
     const double step = acc / ns;
     double u = u01(rng_) * step;
-    std::vector<float> next(state_.size());
-    std::vector<uint8_t> ext(static_cast<size_t>(ns));
-    const size_t S = size_t(stride());
     int k = 0;
     for (int s = 0; s < ns; ++s, u += step) {
         while (k < ns - 1 && cum[size_t(k)] < u) ++k;
-        std::copy_n(&state_[size_t(k) * S], S, &next[size_t(s) * S]);
-        ext[size_t(s)] = extended_[size_t(k)];
+        ancestor[size_t(s)] = k;
+    }
+}
+
+void JointParticleFilter::resample() {
+    const int ns = p_.particles, N = int(vehicles_.size());
+    const size_t S = size_t(stride());
+    std::vector<float> next(state_.size());
+    std::vector<uint8_t> ext(static_cast<size_t>(ns));
+    std::vector<int> anc;
+    if (!per_vehicle_) {
+        systematic(logw_.data(), anc);  // the paper: whole particles by their joint weight
+        for (int s = 0; s < ns; ++s) {
+            const size_t k = size_t(anc[size_t(s)]);
+            std::copy_n(&state_[k * S], S, &next[size_t(s) * S]);
+            ext[size_t(s)] = extended_[k];
+        }
+    } else {
+        // Each vehicle's slot by its own factor, each with its own draw; then the candidate's slot
+        // together with the mark that the particle carries it.
+        for (int i = 0; i <= N; ++i) {
+            if (i == N && !transitory()) break;
+            systematic(&logf_[size_t(i) * size_t(ns)], anc);
+            for (int s = 0; s < ns; ++s) {
+                const size_t k = size_t(anc[size_t(s)]);
+                std::copy_n(&state_[k * S + 4 * size_t(i)], 4, &next[size_t(s) * S + 4 * size_t(i)]);
+                if (i == N) ext[size_t(s)] = extended_[k];
+            }
+        }
     }
     state_.swap(next);
     extended_.swap(ext);
