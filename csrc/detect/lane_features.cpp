@@ -351,6 +351,24 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
     return out;
 }
 
+namespace {
+
+// Columns [i S, (i + 1) S) of the S x (S n) maps: the source coordinates M_i (u, v, 1) of patch i's pixel
+// (u, v). All patches of a frame are then sampled by one cv::remap instead of one warpAffine each, whose
+// per-call set-up (~10 us) was most of the patches' cost.
+void affine_map(const cv::Matx23f &M, int S, int i, cv::Mat &mx, cv::Mat &my) {
+    for (int v = 0; v < S; ++v) {
+        float *x = mx.ptr<float>(v) + i * S, *y = my.ptr<float>(v) + i * S;
+        const float x0 = M(0, 1) * float(v) + M(0, 2), y0 = M(1, 1) * float(v) + M(1, 2);
+        for (int u = 0; u < S; ++u) {
+            x[u] = x0 + M(0, 0) * float(u);
+            y[u] = y0 + M(1, 0) * float(u);
+        }
+    }
+}
+
+} // namespace
+
 std::vector<Correspondence> patch_lk(const cv::Mat &cur, const cv::Mat &prev, const std::vector<cv::Point2f> &corners,
                                      const cv::Matx33d &H_guess, bool predicted, const LaneFeatureParams &p) {
     CV_Assert(cur.type() == CV_8UC1 && prev.type() == CV_8UC1 && cur.size() == prev.size());
@@ -360,7 +378,7 @@ std::vector<Correspondence> patch_lk(const cv::Mat &cur, const cv::Mat &prev, co
     if (n == 0) return out;
     const cv::Matx33d Hi = H_guess.inv();
     // Patches side by side: current ones in `cm`, pre-warped previous ones in `pm`.
-    cv::Mat cm(S, S * n, CV_8UC1), pm(S, S * n, CV_8UC1);
+    cv::Mat cm(S, S * n, CV_8UC1), pm, pmx(S, S * n, CV_32FC1), pmy(S, S * n, CV_32FC1);
     std::vector<cv::Point2f> g(corners.size());
     std::vector<cv::Matx22f> J(corners.size());
     const float c0 = 0.5f * float(S - 1);
@@ -374,20 +392,27 @@ std::vector<Correspondence> patch_lk(const cv::Mat &cur, const cv::Mat &prev, co
         for (int r = 0; r < 2; ++r)
             for (int k = 0; k < 2; ++k) Ji(r, k) = float((Hi(r, k) * w - q[r] * Hi(2, k)) / (w * w));
         J[size_t(i)] = Ji;
-        cv::Mat cp = cm.colRange(i * S, (i + 1) * S), pp = pm.colRange(i * S, (i + 1) * S);
-        cv::getRectSubPix(cur, cv::Size(S, S), c, cp);
-        // pp(u) = prev(g + J (u - c0)): warpAffine with the inverse map [J | g - J c0].
-        const cv::Matx23d M(Ji(0, 0), Ji(0, 1), g[size_t(i)].x - Ji(0, 0) * c0 - Ji(0, 1) * c0,
-                            Ji(1, 0), Ji(1, 1), g[size_t(i)].y - Ji(1, 0) * c0 - Ji(1, 1) * c0);
-        cv::warpAffine(prev, pp, M, cv::Size(S, S), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
+        cv::Mat cp = cm.colRange(i * S, (i + 1) * S);
+        // Harris corners sit on whole pixels: then the current patch is a plain copy.
+        const cv::Rect whole(int(c.x) - int(c0), int(c.y) - int(c0), S, S);
+        if (c.x == std::floor(c.x) && c.y == std::floor(c.y) && c0 == std::floor(c0) &&
+            (whole & cv::Rect(0, 0, cur.cols, cur.rows)) == whole)
+            cur(whole).copyTo(cp);
+        else
+            cv::getRectSubPix(cur, cv::Size(S, S), c, cp);
+        // pm(u) = prev(g + J (u - c0)), the previous frame pre-warped: the inverse map [J | g - J c0].
+        affine_map(cv::Matx23f(Ji(0, 0), Ji(0, 1), g[size_t(i)].x - Ji(0, 0) * c0 - Ji(0, 1) * c0,
+                               Ji(1, 0), Ji(1, 1), g[size_t(i)].y - Ji(1, 0) * c0 - Ji(1, 1) * c0),
+                   S, i, pmx, pmy);
     }
+    cv::remap(prev, pm, pmx, pmy, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
     std::vector<cv::Point2f> start(corners.size()), fwd, back;
     for (int i = 0; i < n; ++i) start[size_t(i)] = cv::Point2f(float(i * S) + c0, c0);
     fwd = back = start;
     std::vector<uint8_t> st_f, st_b;
     std::vector<float> err;
     const cv::Size win(p.lk_window_px, p.lk_window_px);
-    const cv::TermCriteria crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
+    const cv::TermCriteria crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03);
     cv::calcOpticalFlowPyrLK(cm, pm, start, fwd, st_f, err, win, levels, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
     cv::calcOpticalFlowPyrLK(pm, cm, fwd, back, st_b, err, win, levels, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
     const float fb2 = float(p.fb_max_px * p.fb_max_px);

@@ -2,6 +2,7 @@
 
 #include "detect/photometric.hpp"
 #include "detect/vehicle_top.hpp"
+#include "geometry/homography_warp.hpp"
 
 #include <opencv2/imgproc.hpp>
 
@@ -196,7 +197,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     const cv::Matx33d S(f, 0, 0, 0, f, -f * band_top, 0, 0, 1);
     const cv::Matx33d Hs = S * H * S.inv();
     cv::Mat warped, diff;
-    cv::warpPerspective(prev_band, warped, Hs, cur_band.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    warp_homography(prev_band, Hs, cur_band.size(), warped);
 
     const int cw = std::max(1, p.cell_w_px / sc), ch = std::max(1, p.cell_h_px / sc);
     const int ncx = cur_band.cols / cw, ncy = cur_band.rows / ch;
