@@ -134,7 +134,7 @@ void ParallaxTrackerParams::bind(ParamMap &m) {
           "ego lane's width at each row), where the lane model's area is narrower: it covers the ego and adjacent "
           "lanes only, and an adjacent boundary found on a car's side or a gore area cut it further (Udacity "
           "test_small1, test_video: the cars one and two lanes to the right were outside it and never measured); "
-          "2 scans as far as the thesis preset's detector (test_small2's car: 79 of 100 frames tracked, 0 without); "
+          "2 scans as far as the thesis preset's detector (test_small2's car: 77 of 100 frames tracked, 0 without); "
           "it also takes in what stands beside the road, and road the homography extrapolates to (synthetic suite, "
           "particle seeds 1/2/3: MOTA 0.583/0.566/0.541 against 0.586/0.575/0.597 with 0, precision 0.83-0.87 "
           "against 0.87-0.88; overpass_shadow 0.37-0.54 against 0.60-0.63); 0 keeps the lane model's area");
