@@ -56,7 +56,7 @@ RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::v
 
     // Gauss-Newton from rest (the model is nearly linear in all five: small angles, and the translation
     // enters linearly before the projection), Jacobian by forward differences (steps far below the
-    // parameters' precision, far above the rounding of the residuals). It converges in 3-4 iterations.
+    // parameters' precision, far above the rounding of the residuals); at most 8 iterations.
     cv::Vec<double, 5> th(0, 0, 0, 0, 0);
     const double step[5] = {1e-6, 1e-6, 1e-6, 1e-4, 1e-4};
     std::vector<double> r, rp;
