@@ -251,14 +251,12 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     for (int y = 0; y < ncy * ch; ++y) {
         const uint8_t *d = diff.ptr<uint8_t>(y);
         float *s = sad.ptr<float>(y / ch);
-        if (have_grad) {
-            for (int cc = 0; cc < ncx; ++cc) {
-                int sd = 0;
-                for (int x = cc * cw; x < (cc + 1) * cw; ++x) sd += d[x];
-                s[cc] += float(sd);
-            }
-            continue;
+        for (int cc = 0; cc < ncx; ++cc) {
+            int sd = 0;
+            for (int x = cc * cw; x < (cc + 1) * cw; ++x) sd += d[x];
+            s[cc] += float(sd);
         }
+        if (have_grad) continue;
         const uint8_t *c = cur_band.ptr<uint8_t>(y);
         const uint8_t *up = cur_band.ptr<uint8_t>(std::max(y - 1, 0)), *dn = cur_band.ptr<uint8_t>(std::min(y + 1, diff.rows - 1));
         int *g = g_row.data();
@@ -269,12 +267,8 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         }
         float *gr = grad.ptr<float>(y / ch);
         for (int cc = 0; cc < ncx; ++cc) {
-            int sd = 0, sg = 0;
-            for (int x = cc * cw; x < (cc + 1) * cw; ++x) {
-                sd += d[x];
-                sg += g[x];
-            }
-            s[cc] += float(sd);
+            int sg = 0;
+            for (int x = cc * cw; x < (cc + 1) * cw; ++x) sg += g[x];
             gr[cc] += float(sg);
         }
     }
@@ -474,7 +468,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         if (p.find_top) {
             const bool cut_l = x0 <= cell_px_w, cut_r = x1 >= float(cur_full.cols - 1) - cell_px_w;
             if (!(cut_l && cut_r)) {
-                const int r0 = int(yb - 0.45f * w), r1 = int(yb - 0.15f * w);
+                const auto [r0, r1] = lower_body_rows(yb, w);
                 const float rad = float(p.top_snap_frac) * w;
                 const float l = cut_l ? x0 : snap_side(cur_full, x0, r0, r1, rad);
                 const float r = cut_r ? x1 : snap_side(cur_full, x1, r0, r1, rad);

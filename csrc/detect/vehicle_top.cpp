@@ -43,7 +43,7 @@ float vehicle_top_between(const cv::Mat &gray, float left, float right, float bo
     };
 
     // Typical strength on the lower body, above wheels and underbody shadow.
-    const int ref_lo = int(std::lround(bottom - 0.45f * ref_w)), ref_hi = int(std::lround(bottom - 0.15f * ref_w));
+    const auto [ref_lo, ref_hi] = lower_body_rows(bottom, ref_w);
     y_min = std::max(0, y_min);
     if (ref_lo < y_min || ref_hi > gray.rows - 1 || ref_hi <= ref_lo) return kNaN;
     std::vector<float> ref;

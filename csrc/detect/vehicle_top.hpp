@@ -19,6 +19,9 @@
 
 #include <opencv2/core.hpp>
 
+#include <cmath>
+#include <utility>
+
 namespace hw {
 
 struct TopSearch {
@@ -27,6 +30,12 @@ struct TopSearch {
     double keep_frac = 0.35;   // side edge strength, relative to the lower body, that still counts
     int max_gap = 2;           // rows; gaps bridged going up
 };
+
+// The rows [first, last] of a vehicle's lower body, above its wheels and underbody shadow (0.15 .. 0.45
+// widths above its bottom): where its sides are measured as a reference.
+inline std::pair<int, int> lower_body_rows(float bottom, float width) {
+    return {int(std::lround(bottom - 0.45f * width)), int(std::lround(bottom - 0.15f * width))};
+}
 
 // Returns the top row (px) of the vehicle between sub-pixel sides `left`, `right` standing on
 // `bottom`, or NaN when the side edges do not tell.

@@ -36,7 +36,8 @@ bool least_squares_point(const std::vector<LaneCandidate> &c, const std::vector<
     return true;
 }
 
-// Clip the quadrilateral (convex) to the image; integer vertices.
+} // namespace
+
 std::vector<cv::Point> clip_to_image(const std::vector<cv::Point2f> &quad, cv::Size size) {
     const std::vector<cv::Point2f> img{{0.f, 0.f}, {float(size.width - 1), 0.f},
                                        {float(size.width - 1), float(size.height - 1)},
@@ -47,8 +48,6 @@ std::vector<cv::Point> clip_to_image(const std::vector<cv::Point2f> &quad, cv::S
     for (const auto &q : clipped) out.emplace_back(int(std::lround(q.x)), int(std::lround(q.y)));
     return out;
 }
-
-} // namespace
 
 bool consensus_vanishing_point(const std::vector<LaneCandidate> &c, const HorizonPrior &hp, cv::Size size,
                                const LaneAssemblyParams &p, cv::Point2f &vp, std::vector<char> &inlier) {

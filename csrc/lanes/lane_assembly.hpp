@@ -89,6 +89,9 @@ void build_lane_model(const std::vector<LaneCandidate> &c, const LaneAssignment 
                       cv::Size size, const CameraParams &cam, const HorizonPrior &hp,
                       const LaneAssemblyParams &p, LaneModel &out);
 
+// A convex quadrilateral clipped to the image; integer vertices.
+std::vector<cv::Point> clip_to_image(const std::vector<cv::Point2f> &quad, cv::Size size);
+
 // Road area between the outer boundaries of `m`: adjacent boundaries where known, else the ego lane
 // widened by one lane each side; with no boundary, the camera-model default (ego lane +- 1.5 lanes
 // up to road_range_m). Clipped to the image.

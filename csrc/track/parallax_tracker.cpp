@@ -3,6 +3,7 @@
 #include "core/stopwatch.hpp"
 #include "detect/photometric.hpp"
 #include "geometry/road_motion_fit.hpp"
+#include "lanes/lane_assembly.hpp"
 
 #include <opencv2/imgproc.hpp>
 
@@ -81,31 +82,7 @@ std::vector<cv::Point> widen_road(const LaneModel &m, double lanes, cv::Size siz
         if (q.y >= yb - 1) { ml_b = std::min(ml_b, float(q.x)); mr_b = std::max(mr_b, float(q.x)); }
         if (q.y <= yt + 1) { ml_t = std::min(ml_t, float(q.x)); mr_t = std::max(mr_t, float(q.x)); }
     }
-    const float W = float(size.width - 1);
-    std::vector<cv::Point2f> quad{{ml_b, yb}, {ml_t, yt}, {mr_t, yt}, {mr_b, yb}};
-    // Clip the sides to the image: where a side leaves it, the polygon follows the image's side.
-    std::vector<cv::Point> out;
-    auto side_cut = [&](cv::Point2f lo, cv::Point2f hi, float x) {  // row where segment lo-hi reaches column x
-        return lo.y + (hi.y - lo.y) * (x - lo.x) / (hi.x - lo.x);
-    };
-    const cv::Point2f &lb = quad[0], &lt = quad[1], &rt = quad[2], &rb = quad[3];
-    if (lb.x < 0.f) {
-        out.emplace_back(0, cvRound(yb));
-        if (lt.x < 0.f) out.emplace_back(0, cvRound(yt));
-        else { out.emplace_back(0, cvRound(side_cut(lb, lt, 0.f))); out.emplace_back(cvRound(lt.x), cvRound(yt)); }
-    } else {
-        out.emplace_back(cvRound(lb.x), cvRound(yb));
-        out.emplace_back(cvRound(std::max(0.f, lt.x)), cvRound(yt));
-    }
-    if (rb.x > W) {
-        if (rt.x > W) out.emplace_back(cvRound(W), cvRound(yt));
-        else { out.emplace_back(cvRound(rt.x), cvRound(yt)); out.emplace_back(cvRound(W), cvRound(side_cut(rb, rt, W))); }
-        out.emplace_back(cvRound(W), cvRound(yb));
-    } else {
-        out.emplace_back(cvRound(std::min(W, rt.x)), cvRound(yt));
-        out.emplace_back(cvRound(rb.x), cvRound(yb));
-    }
-    return out;
+    return clip_to_image({{ml_b, yb}, {ml_t, yt}, {mr_t, yt}, {mr_b, yb}}, size);
 }
 
 } // namespace
