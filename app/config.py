@@ -74,6 +74,15 @@ def defaults() -> dict[str, dict[str, Any]]:
 
 def _check_value(path: str, value: Any, spec: dict) -> Any:
     t = spec["type"]
+    if spec.get("list"):  # names, as a YAML list or one string separated by commas; kept as that string
+        names = value.split(",") if isinstance(value, str) else value
+        if not isinstance(names, list) or not all(isinstance(v, str) for v in names):
+            raise ConfigFileError(f"{path}: expected a list of names, got {value!r}")
+        names = [v.strip() for v in names if v.strip()]
+        for v in names:
+            if "choices" in spec and v not in spec["choices"].split("|"):
+                raise ConfigFileError(f"{path}: {v!r} is not one of {_choices(spec)}")
+        return ",".join(names)
     if t == "bool":
         if not isinstance(value, bool):
             raise ConfigFileError(f"{path}: expected true or false, got {value!r}")
@@ -183,6 +192,11 @@ def scaled_camera(camera: dict, width: int, height: int) -> dict:
     return cam
 
 
+def _choices(spec: dict) -> str:
+    """A key's allowed values for people (an empty name, "keep the preset's", is left out)."""
+    return ", ".join(c for c in spec.get("choices", "").split("|") if c)
+
+
 def default_yaml() -> str:
     """The documented default configuration, every key with its reason (for `headway config default`)."""
     lines = ["# Headway configuration. Give only the keys you change; the rest are these defaults.", ""]
@@ -190,7 +204,7 @@ def default_yaml() -> str:
         lines.append(f"{sec}:")
         for key, spec in keys.items():
             rng = f" [{spec['min']}, {spec['max']}]" if "min" in spec else ""
-            ch = f" one of {spec['choices'].replace('|', ', ')}" if "choices" in spec else ""
+            ch = f" one of {_choices(spec)}" if "choices" in spec else ""
             lines.append(f"  # {spec['doc']}{rng}{ch}")
             lines.append(f"  {key}: {yaml.safe_dump(spec['default'], default_flow_style=True).strip().removesuffix('...').strip()}")
         lines.append("")
@@ -205,7 +219,7 @@ def markdown() -> str:
     for sec, keys in schema().items():
         out += [f"## `{sec}`", "", "| key | default | range | meaning |", "| --- | --- | --- | --- |"]
         for key, spec in keys.items():
-            rng = f"{spec['min']} .. {spec['max']}" if "min" in spec else spec.get("choices", "").replace("|", ", ")
+            rng = f"{spec['min']} .. {spec['max']}" if "min" in spec else _choices(spec)
             default = spec["default"] if spec["default"] != "" else '""'
             out.append(f"| `{key}` | `{default}` | {rng} | {spec['doc'].replace('|', '/')} |")
         out.append("")

@@ -179,15 +179,14 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
         bar = stack.enter_context(_progress(n_frames, label, progress))
         for index, t_s, gray, truth in frames:
             r = pipe.process(gray, t_s)
-            decision = sup.step(r, r.t, pipe)
+            decision = sup.step(r, r.t_s, pipe)
             summary.add(r)
             if decision.changed and decision.level > 0:
-                summary.warnings.append((r.t, {1: "prewarning", 2: "warning"}[decision.level], decision.ttc_used_s))
+                summary.warnings.append((r.t_s, {1: "prewarning", 2: "warning"}[decision.level], decision.ttc_used_s))
             if writer:
                 writer.write(r, decision.level)
             if video:
-                r.fcw_level = decision.level
-                video.write(annotate(gray, r, truth))
+                video.write(annotate(gray, r, truth, decision.level))
             if on_result:
                 on_result(r, decision, truth)
             if bar is not None:

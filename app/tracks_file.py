@@ -33,8 +33,8 @@ def frame_record(r: FrameResult, fcw_level: Optional[int] = None) -> dict:
         for t in r.tracks
         if t.confirmed
     ]
-    level = r.fcw_level if fcw_level is None else fcw_level
-    return {"frame": r.frame, "t": round(r.t, 6), "tracks": tracks, "lead_id": r.lead_id,
+    level = 0 if fcw_level is None else fcw_level
+    return {"frame": r.frame, "t": round(r.t_s, 6), "tracks": tracks, "lead_id": r.lead_id,
             "fcw": FCW_NAMES.get(level, "none")}
 
 

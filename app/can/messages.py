@@ -18,7 +18,6 @@ STATES = ("starting", "ok", "degraded", "fault")
 # Faults of severity "fault" in the health registry (app/supervisor/faults.py): Headway cannot warn
 # the driver reliably; any other fault only degrades it. Tests keep the two in step.
 FATAL_FAULTS = frozenset({"camera_lost", "core_stalled", "can_error"})
-LANE_UNKNOWN = -1000  # app.core's lane_index for "unknown"
 
 
 def _num(x: Any) -> Optional[float]:
@@ -89,8 +88,8 @@ def object_signals(index: int, track: Any, camera: Optional[Mapping[str, float]]
     page0 = {**common, "OBJECT_PAGE": 0, "RANGE_M": _num(track.range_m), "LATERAL_M": _num(track.lateral_m),
              "RANGE_RATE_MPS": _num(track.range_rate_mps)}
     page1 = {**common, "OBJECT_PAGE": 1, "AZIMUTH_RAD": azimuth, "WIDTH_RAD": width,
-             "LANE": None if lane is None or lane == LANE_UNKNOWN or abs(lane) > 3 else int(lane),
-             "IN_PATH": 3 if in_path is None or in_path == -1 else int(bool(in_path)),
+             "LANE": None if lane is None or abs(lane) > 3 else int(lane),
+             "IN_PATH": 3 if in_path is None else int(bool(in_path)),
              "CONFIDENCE": _num(getattr(track, "confidence", None)),
              "CONFIRMED": int(bool(getattr(track, "confirmed", False)))}
     return page0, page1

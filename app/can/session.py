@@ -157,7 +157,7 @@ class CanSession:
         while self._frame_times and now_s - self._frame_times[0] > FRAME_RATE_WINDOW_S:
             self._frame_times.popleft()
         if not self.deterministic:
-            t_done, t = getattr(result, "t_done", None), getattr(result, "t", None)
+            t_done, t = getattr(result, "t_done_s", None), getattr(result, "t_s", None)
             if t_done is not None and t is not None and t_done >= t:
                 self._latency_ms.append((t_done - t) * 1000.0)
 
@@ -202,21 +202,21 @@ class CanSession:
 
     def on_result(self, result: Any, *_frame: Any, fcw: Optional[Any] = None,
                   status: Optional[Mapping[str, Any]] = None) -> VehicleState:
-        """One frame result on its own clock (``result.t``): inputs up to then, then publish. Fits the
+        """One frame result on its own clock (``result.t_s``): inputs up to then, then publish. Fits the
         ``on_result`` hook of ``app.replay.replay`` as it is (a scenario's frame, passed second, is
         not needed here)."""
-        state = self.vehicle_state(result.t)
-        self.publish(result.t, result, fcw, status)
+        state = self.vehicle_state(result.t_s)
+        self.publish(result.t_s, result, fcw, status)
         return state
 
     def _update_frame(self, now_s: float, result: Any, fcw: Any) -> None:
         self.frames_published += 1
         tracks = list(getattr(result, "tracks", []) or [])
-        lead = next((t for t in tracks if t.id == result.lead_id), None) if result.lead_id is not None else None
+        lead = getattr(result, "lead", None)
         speed_ok = self._state is not None and self._state.speed_mps is not None
         if fcw is None:
             ttc, src = hm.ttc_of(lead)
-            fcw = {"level": int(getattr(result, "fcw_level", 0) or 0), "ttc_s": ttc, "ttc_source": src}
+            fcw = {"level": 0, "ttc_s": ttc, "ttc_source": src}
         get = fcw.get if isinstance(fcw, Mapping) else (lambda k, d=None: getattr(fcw, k, d))
         available = get("available")
         ttc = get("ttc_s")
@@ -226,7 +226,7 @@ class CanSession:
         lead_frames = [("HW_LEAD", hm.lead_signals(lead)), ("HW_LEAD_TTC", hm.lead_ttc_signals(lead))]
         self.scheduler.update("lead", lead_frames, now_s)
         chosen = hm.objects_by_range(tracks, self.max_objects)
-        header = hm.object_header_signals(getattr(result, "frame", 0), len(chosen), result.lead_id)
+        header = hm.object_header_signals(getattr(result, "frame", 0), len(chosen), None if lead is None else lead.id)
         objs = [("HW_OBJECT_HEADER", header)]
         for i, t in enumerate(chosen):
             p0, p1 = hm.object_signals(i, t, self.camera)

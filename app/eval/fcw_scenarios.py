@@ -56,7 +56,7 @@ def evaluate(name: str, config_path: Optional[str] = None) -> dict:
     truth_ttc: list[tuple[float, Optional[float]]] = []
 
     def on_result(r, decision, truth):
-        truth_ttc.append((r.t, _true_ttc(truth)))
+        truth_ttc.append((r.t_s, _true_ttc(truth)))
 
     with tempfile.TemporaryDirectory() as tmp:
         can_out = str(Path(tmp) / "out.log")

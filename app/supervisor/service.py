@@ -126,7 +126,7 @@ class Service:
             r = pipe.pop(timeout_s=TICK_S)
             now = time.monotonic()
             if r is not None:
-                latency_ms = (now - r.t) * 1000.0 if live else r.total_ms
+                latency_ms = (now - r.t_s) * 1000.0 if live else r.total_ms
                 self.health.on_result(now, latency_ms, r.image_stddev, r.image_change)
                 status = self.report.as_dict() if self.report else None
                 decision = sup.step(r, time.time(), pipe, status=status)

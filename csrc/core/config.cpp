@@ -1,5 +1,7 @@
 #include "core/config.hpp"
 
+#include <algorithm>
+
 namespace hw {
 
 using nlohmann::json;
@@ -44,6 +46,7 @@ Config Config::from_json(const std::string &text) {
             throw ConfigError(it.key() + ": unknown section of the core configuration");
     if (c.pipeline.reconnect_max_s < c.pipeline.reconnect_initial_s)
         throw ConfigError("pipeline.reconnect_max_s: must be >= pipeline.reconnect_initial_s");
+    composition_of(c.pipeline);  // the parts exist and fit together
     return c;
 }
 

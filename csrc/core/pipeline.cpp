@@ -1,30 +1,15 @@
 #include "core/pipeline.hpp"
 
-#include "core/stopwatch.hpp"
+#include "base/stopwatch.hpp"
+#include "core/parallax_stage.hpp"
 #include "detect/shadow.hpp"
-#include "detect/verify.hpp"
-#include "track/parallax_stage.hpp"
-#include "track/parallax_tracker.hpp"
-#include "track/thesis_tracker.hpp"
 
 #include <stdexcept>
 
 namespace hw {
 
-namespace {
-
-std::unique_ptr<VehicleTracker> make_tracker(const Config &c) {
-    if (c.pipeline.preset == "thesis") return std::make_unique<ThesisTracker>(c.shadow, c.verify, c.kalman);
-    if (c.pipeline.preset == "parallax")
-        return std::make_unique<ParallaxTracker>(c.road_features, c.homography, c.parallax, c.particles, c.camera);
-    if (c.pipeline.preset == "none") return nullptr;
-    throw ConfigError("pipeline.preset: unknown preset '" + c.pipeline.preset + "'");
-}
-
-} // namespace
-
 Pipeline::Pipeline(const Config &cfg)
-    : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), tracker_(make_tracker(cfg)), horizon_(cfg.horizon, cfg.camera),
+    : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), parts_(make_parts(cfg)), horizon_(cfg.horizon, cfg.camera),
       kinematics_(cfg.kinematics, cfg.camera), lead_(cfg.lead, cfg.camera) {}
 
 void Pipeline::check_frame(const cv::Mat &gray) const {
@@ -59,11 +44,17 @@ FrameOutput Pipeline::process(const Frame &frame) {
         lanes_.update(frame.gray, out.lanes);
         out.times.add("lanes", sw.ms());
     }
-    if (tracker_) {
-        FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera,
-                         EgoMotion{ego_speed_mps_, ego_yaw_rate_rps_}};
-        tracker_->step(ctx, out.tracks, out.times, out.full_detection);
-        out.road = tracker_->road_motion();
+    if (parts_.tracker) {
+        const EgoMotion ego{ego_speed_mps_, ego_yaw_rate_rps_};
+        const RoadMotionFrame *motion = nullptr;
+        if (parts_.road) {
+            motion = &parts_.road->update(frame.gray, frame.t_s, out.lanes, ego, last_tracks_, out.times);
+            out.road = motion->motion;
+        }
+        const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera, ego, motion};
+        parts_.tracker->step(ctx, parts_.detectors, out.tracks, out.times, out.full_detection);
+        for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
+        if (parts_.road) last_tracks_ = out.tracks;
     }
     {
         Stopwatch sw;
@@ -82,7 +73,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
 }
 
 FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
-    // Two-frame units (frames stacked vertically): see track/parallax_stage.hpp.
+    // Two-frame units (frames stacked vertically): see core/parallax_stage.hpp.
     if (is_parallax_stage(stage)) return run_parallax_stage(stage, gray, cfg_);
     check_frame(gray);
     Stopwatch total;
@@ -97,28 +88,34 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
         out.times.add("lanes", sw.ms());
     }
     out.horizon_row = float(cfg_.camera.horizon_row());
-    if (stage != "lanes") {
+    if (stage == "hypotheses") {
         Stopwatch sw;
-        const auto hyps = shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow);
-        out.times.add("hypotheses", sw.ms());
-        if (stage == "hypotheses") {
-            for (const auto &h : hyps) {
-                TrackState t;
-                t.box = h.box;
-                t.confidence = h.strength;
-                out.tracks.push_back(t);
-            }
-        } else {
-            Stopwatch sv;
-            const auto dets = verify_hypotheses(gray, hyps, out.lanes, cfg_.camera, cfg_.verify);
-            out.times.add("verify", sv.ms());
-            for (const auto &d : dets) {
-                TrackState t;
-                t.box = d.box;
-                t.confidence = d.score;
-                out.tracks.push_back(t);
-            }
+        for (const auto &h : shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow)) {
+            TrackState t;
+            t.box = h.box;
+            t.confidence = h.strength;
+            out.tracks.push_back(t);
         }
+        out.times.add("hypotheses", sw.ms());
+    } else if (stage == "detect") {
+        // The composition's single-image detectors (those that need no road motion), each alone.
+        std::vector<Hypothesis> hyps;
+        const RoadContext ctx{gray, 0.0, out.lanes, cfg_.camera, nullptr};
+        int ran = 0;
+        for (auto &d : parts_.detectors.parts)
+            if (!d->needs_road_motion()) ran += d->detect(ctx, hyps, out.times) ? 1 : 0;
+        if (ran == 0)
+            throw std::invalid_argument("stage 'detect' runs the detectors of pipeline.detectors that work on one image, "
+                                        "and this composition has none (the parallax detector needs two frames: stage "
+                                        "'parallax')");
+        for (const auto &h : hyps) {
+            TrackState t;
+            t.box = h.box;
+            t.confidence = h.score;
+            out.tracks.push_back(t);
+        }
+    }
+    if (stage != "lanes") {
         out.full_detection = true;
         // single-image range from the calibrated horizon (no history: no range rate or TTC)
         TrackKinematics(cfg_.kinematics, cfg_.camera).update(out.tracks, out.horizon_row, 0.0);
@@ -130,7 +127,10 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
 
 void Pipeline::reset() {
     lanes_.reset();
-    if (tracker_) tracker_->reset();
+    if (parts_.tracker) parts_.tracker->reset();
+    for (auto &d : parts_.detectors.parts) d->reset();
+    if (parts_.road) parts_.road->reset();
+    last_tracks_.clear();
     image_stats_.reset();
     horizon_.reset();
     kinematics_.reset();

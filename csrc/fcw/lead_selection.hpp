@@ -9,18 +9,13 @@
 // dropped and re-acquired on every wobble.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 #include <vector>
 
 namespace hw {
-
-struct EgoMotion {
-    double speed_mps = NAN;      // NaN = not available
-    double yaw_rate_rps = NAN;   // positive turning left; NaN = not available
-};
 
 struct LeadParams {
     double lane_width_m = 3.6;     // lane width assumed where no lane model is available

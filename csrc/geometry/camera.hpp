@@ -4,7 +4,8 @@
 // road is above the principal point: v_h = cy - fy * tan(pitch). Same convention as app/sim/camera.py.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 
 #include <cmath>
 
@@ -38,5 +39,12 @@ struct CameraParams {
     // Horizon row of a level road for the configured pitch.
     double horizon_row() const { return cy - fy * std::tan(pitch_deg * M_PI / 180.0); }
 };
+
+// The road's vanishing point for the road-motion parts: the lane model's, else the camera's horizon and yaw.
+inline cv::Point2f road_vanishing_point(const LaneModel &lanes, const CameraParams &cam) {
+    const cv::Point2f vp = lanes.vanishing_point;
+    if (std::isfinite(vp.x) && std::isfinite(vp.y)) return vp;
+    return {float(cam.cx - cam.fx * std::tan(cam.yaw_deg * M_PI / 180.0)), float(cam.horizon_row())};
+}
 
 } // namespace hw

@@ -7,8 +7,8 @@
 // the calibrated horizon while no vanishing point is measured.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 namespace hw {

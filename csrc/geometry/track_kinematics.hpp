@@ -12,8 +12,8 @@
 // Optionally (scale_rate_fusion) the fit also updates the filter's rate.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 #include <Eigen/Dense>

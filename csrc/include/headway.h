@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 2
+#define HW_ABI_VERSION 3
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -49,7 +49,8 @@ typedef enum {
     HW_ROAD_PREDICTED = 2  /* no acceptable measurement: the filter's prediction carries on (coasting) */
 } hw_road_motion;
 
-/* FCW levels. */
+/* FCW levels (the warning state machine runs in the supervisor, which has the ego speed, brake and turn
+ * signals; the core reports no level). */
 typedef enum { HW_FCW_NONE = 0, HW_FCW_PREWARNING = 1, HW_FCW_WARNING = 2 } hw_fcw_level;
 
 /* State of the frame source feeding a running loop. */
@@ -112,8 +113,6 @@ typedef struct {
     float vanishing_x, vanishing_y; /* NaN if no lane model yet */
     float horizon_row;     /* horizon row used for range, NaN if n/a */
     int32_t lead_id;       /* -1 if no lead */
-    int32_t fcw_level;     /* hw_fcw_level; always HW_FCW_NONE from the core: the warning state machine
-                              runs in the supervisor, which has the ego speed, brake and turn signals */
     int32_t n_stages;
     hw_stage_time stages[HW_MAX_STAGES];
     float total_ms;

@@ -11,8 +11,8 @@
 // edge) lose against the real boundary. Adjacent boundaries are the lines one lane further out.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/road_geometry.hpp"
 

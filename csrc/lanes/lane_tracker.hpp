@@ -13,8 +13,8 @@
 // turns from right to left (or back) and the model follows.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/hough_lines.hpp"
 #include "lanes/lane_assembly.hpp"

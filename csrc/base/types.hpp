@@ -18,7 +18,22 @@ struct Frame {
     cv::Mat gray;        // CV_8UC1, owned
     double t_s = 0.0;    // capture timestamp: monotonic clock for live sources, media time for files
     int64_t number = 0;  // 0-based frame number from the source
-    int events = 0;      // HW_EVENT_* bits that happened just before this frame
+    int events = 0;      // FrameEvent bits that happened just before this frame
+};
+
+// Health events of the frame source, as bits of Frame::events and FrameOutput::events (the ABI's
+// HW_EVENT_* carry the same values; abi.cpp checks that at compile time).
+enum FrameEvent : int {
+    kEventDecodeError = 1,   // a frame could not be decoded and was skipped
+    kEventSourceLost = 2,    // a live device stopped delivering
+    kEventReconnected = 4,   // a live device came back
+    kEventSizeChanged = 16,  // a frame of another size than the first one was skipped
+};
+
+// The car's own motion from the vehicle bus.
+struct EgoMotion {
+    double speed_mps = NAN;      // NaN = not available
+    double yaw_rate_rps = NAN;   // positive turning left; NaN = not available
 };
 
 // A lane boundary as an image line through two points (bottom of the road area and towards the VP).
@@ -75,12 +90,25 @@ struct StageTimes {
     }
 };
 
-// The road plane's motion from the previous frame to this one, as a tracker that estimates it reports it.
+// The road plane's motion from the previous frame to this one, as the road-motion stage reports it.
 struct RoadMotion {
     enum class State { kNone, kAccepted, kPredicted };
     State state = State::kNone;
     int coast_frames = 0;
     cv::Matx33d H = cv::Matx33d::eye();  // pixels, previous -> current
+};
+
+// What the road-motion stage (road/road_motion_stage.hpp) hands the parts that need it in one frame:
+// the filtered homography and the road band it aligned, at the pyramid level the parallax detector uses.
+struct RoadMotionFrame {
+    RoadMotion motion;          // state kNone: no estimate this frame
+    cv::Point2f vp{kNaN, kNaN}; // the road's vanishing point: the lane model's, else the camera's horizon and yaw
+    int band_top = 0;           // px; first image row of the road band
+    int level = 0;              // pyramid level of the bands below (0 = full resolution)
+    cv::Mat band;               // this frame's road band (rows band_top .. height-1) at that level
+    cv::Mat prev_band;          // the previous frame's, same size; empty when there is none
+    int hood_row = 0;           // px; first image row of the car's bonnet (height: none)
+    bool valid() const { return motion.state != RoadMotion::State::kNone; }
 };
 
 // Everything one frame produced.
@@ -94,7 +122,6 @@ struct FrameOutput {
     LaneModel lanes;
     float horizon_row = kNaN;
     int lead_id = -1;
-    int fcw_level = 0;
     StageTimes times;
     float total_ms = 0.f;
     float image_mean = kNaN, image_stddev = kNaN, image_change = kNaN;  // see capture/image_stats.hpp
