@@ -15,6 +15,8 @@ from types import SimpleNamespace
 
 import can
 
+from app.fcw_level import FcwLevel
+
 from .bus import CanOutput
 from .config_schema import defaults
 from .session import CanSession
@@ -32,7 +34,7 @@ def fake_track(i: int) -> SimpleNamespace:
                            in_path=i % 3 == 1)
 
 
-def fake_result(frame: int, n_objects: int, fcw_level: int = 0, lead: int = 1) -> SimpleNamespace:
+def fake_result(frame: int, n_objects: int, fcw_level: int = FcwLevel.NONE, lead: int = 1) -> SimpleNamespace:
     """A frame result (attributes as app.core.FrameResult) with ``n_objects`` tracks; track ``lead`` leads."""
     tracks = [fake_track(i) for i in range(n_objects)]
     return SimpleNamespace(frame=frame, t=frame / 30.0, t_done=frame / 30.0 + 0.02, tracks=tracks,
@@ -52,7 +54,7 @@ def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
         times, frames = [], 0
         for k in range(repeats):
             t = k * 0.1  # every group due every call
-            result = fake_result(k, n_objects, fcw_level=k % 3)
+            result = fake_result(k, n_objects, fcw_level=FcwLevel(k % len(FcwLevel)))
             t_start = time.thread_time()
             frames = len(session.publish(t, result))
             times.append(time.thread_time() - t_start)

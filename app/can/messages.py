@@ -10,9 +10,10 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Mapping, Optional
 
+from app.fcw_level import FcwLevel
+
 from .database import wire_id
 
-FCW_LEVELS = ("none", "prewarning", "warning")
 TTC_SOURCES = ("none", "range", "scale", "range_accel")
 STATES = ("starting", "ok", "degraded", "fault")
 # Faults of severity "fault" in the health registry (app/supervisor/faults.py): Headway cannot warn
@@ -28,11 +29,11 @@ def _num(x: Any) -> Optional[float]:
     return None if math.isnan(x) else x
 
 
-def fcw_signals(level: int = 0, available: bool = False, ttc_s: Optional[float] = None,
+def fcw_signals(level: int = FcwLevel.NONE, available: bool = False, ttc_s: Optional[float] = None,
                 ttc_source: str = "none", lead: Any = None) -> dict:
-    """HW_FCW. ``level`` is forced to 0 when FCW is not available: no warning without its inputs."""
+    """HW_FCW. ``level`` is forced to none when FCW is not available: no warning without its inputs."""
     if not available:
-        level = 0
+        level = FcwLevel.NONE
     return {"FCW_LEVEL": int(level), "FCW_AVAILABLE": int(bool(available)),
             "TTC_SOURCE": TTC_SOURCES.index(ttc_source) if _num(ttc_s) is not None else 0,
             "TTC_USED_S": _num(ttc_s),
