@@ -11,14 +11,13 @@ import math
 from typing import Any, Iterable, Mapping, Optional
 
 from app.fcw_level import FcwLevel
+from app.supervisor.faults import FAULT, FAULTS, STATES
 
 from .database import wire_id
 
 TTC_SOURCES = ("none", "range", "scale", "range_accel")
-STATES = ("starting", "ok", "degraded", "fault")
-# Faults of severity "fault" in the health registry (app/supervisor/faults.py): Headway cannot warn
-# the driver reliably; any other fault only degrades it. Tests keep the two in step.
-FATAL_FAULTS = frozenset({"camera_lost", "core_stalled", "can_error"})
+# Faults of severity "fault" in the health registry: Headway cannot warn the driver reliably.
+FATAL_FAULTS = frozenset(f.name for f in FAULTS if f.severity == FAULT)
 LANE_UNKNOWN = -1000  # app.core's lane_index for "unknown"
 
 
@@ -103,17 +102,6 @@ def objects_by_range(tracks: Iterable[Any], max_objects: int) -> list:
         r = _num(t.range_m)
         return (r is None, r if r is not None else 0.0, t.id)
     return sorted(tracks, key=key)[:max_objects]
-
-
-def overall_state(faults: Iterable[str], started: bool) -> str:
-    """The health monitor's rule, for runs without one (replay): fault on a fatal fault, else starting
-    until the first frame, degraded on any other fault, else ok."""
-    faults = set(faults)
-    if faults & FATAL_FAULTS:
-        return "fault"
-    if not started:
-        return "starting"
-    return "degraded" if faults else "ok"
 
 
 def status_signals(state: str, faults: Iterable[str], known_faults: Iterable[str],

@@ -24,6 +24,7 @@ from typing import Any, Mapping, Optional, Union
 import can
 
 from app.fcw_level import FcwLevel
+from app.supervisor.faults import overall_state
 
 from . import messages as hm
 from .bus import CanOutput, bus_from_config
@@ -192,7 +193,7 @@ class CanSession:
             latency = None if self.deterministic else status.get("latency_p99_ms")
         else:
             faults = self.faults(now_s)
-            state, fps = hm.overall_state(faults, self._started), self._frame_rate()
+            state, fps = overall_state(faults, self._started), self._frame_rate()
             latency = None if self.deterministic else self._latency_p99()
         self.scheduler.update("status", [("HW_STATUS", hm.status_signals(state, faults, self.faults_known, fps,
                                                                         latency))], now_s)

@@ -12,10 +12,7 @@ from typing import Optional
 import numpy as np
 
 from app.schema import key as _key
-from app.supervisor.faults import BY_NAME, DEGRADED, FAULT, fault_bits
-
-STARTING, OK, DEGRADED_STATE, FAULT_STATE = "starting", "ok", "degraded", "fault"
-STATE_CODES = {STARTING: 0, OK: 1, DEGRADED_STATE: 2, FAULT_STATE: 3}
+from app.supervisor.faults import fault_bits, overall_state
 
 
 # The configuration section `health`.
@@ -146,14 +143,7 @@ class HealthMonitor:
         fps = None
         if len(self._frame_times) >= 2 and self._frame_times[-1] > self._frame_times[0]:
             fps = (len(self._frame_times) - 1) / (self._frame_times[-1] - self._frame_times[0])
-        if self.frames == 0 and not any(BY_NAME[f].severity == FAULT for f in faults):
-            state = STARTING
-        elif any(BY_NAME[f].severity == FAULT for f in faults):
-            state = FAULT_STATE
-        elif any(BY_NAME[f].severity == DEGRADED for f in faults):
-            state = DEGRADED_STATE
-        else:
-            state = OK
-        return HealthReport(state=state, faults=faults, bits=fault_bits(faults), fps=fps,
+        return HealthReport(state=overall_state(faults, started=self.frames > 0), faults=faults,
+                            bits=fault_bits(faults), fps=fps,
                             latency_median_ms=median, latency_p99_ms=p99, frames=self.frames,
                             queue_drops=queue_drops, camera=camera)
