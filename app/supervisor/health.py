@@ -36,14 +36,16 @@ HEALTH_SCHEMA = {
 
 @dataclass
 class HealthParams:
-    camera_timeout_s: float = 0.5
-    stall_timeout_s: float = 2.0
-    blinded_stddev: float = 3.0
-    blinded_frames: int = 15
-    frozen_change: float = 0.05
-    frozen_frames: int = 30
-    latency_budget_ms: float = 50.0
-    window_frames: int = 300
+    """The section `health`; units, meaning and defaults are HEALTH_SCHEMA's."""
+
+    camera_timeout_s: float = HEALTH_SCHEMA["camera_timeout_s"]["default"]
+    stall_timeout_s: float = HEALTH_SCHEMA["stall_timeout_s"]["default"]
+    blinded_stddev: float = HEALTH_SCHEMA["blinded_stddev"]["default"]
+    blinded_frames: int = HEALTH_SCHEMA["blinded_frames"]["default"]
+    frozen_change: float = HEALTH_SCHEMA["frozen_change"]["default"]
+    frozen_frames: int = HEALTH_SCHEMA["frozen_frames"]["default"]
+    latency_budget_ms: float = HEALTH_SCHEMA["latency_budget_ms"]["default"]
+    window_frames: int = HEALTH_SCHEMA["window_frames"]["default"]
 
     @classmethod
     def from_config(cls, section: dict) -> "HealthParams":
