@@ -15,14 +15,13 @@ from types import SimpleNamespace
 
 import can
 
+from app import config as configuration
 from app.fcw_level import FcwLevel
 
 from .bus import CanOutput
 from .config_schema import defaults
 from .session import CanSession
 from .vehicle_input import VehicleInput
-
-CAMERA = {"fx": 700.0, "cx": 320.0}
 
 
 def fake_track(i: int) -> SimpleNamespace:
@@ -46,7 +45,7 @@ def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
     busy machine does not inflate it."""
     cfg = defaults()
     cfg["can"].update(max_objects=64)
-    cfg["camera"] = CAMERA
+    cfg["camera"] = configuration.defaults()["camera"]  # the product's camera, for the objects' angles
     with tempfile.TemporaryDirectory() as tmp, can.Bus(interface="virtual", channel="bench") as bus, \
             can.Bus(interface="virtual", channel="bench") as sink:
         output = CanOutput(bus, Path(tmp) / "out.log" if log else None)
