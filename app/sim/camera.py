@@ -153,6 +153,6 @@ def default_camera() -> dict[str, Any]:
 
 @functools.cache
 def _core_camera_defaults() -> dict[str, Any]:
-    from app.core import core_schema  # here, not at the top: only a camera built from a config needs the core
+    from app.core import core_schema  # on first use, so that `import app.sim` alone does not load the core
     section = core_schema()["camera"]
     return {k: section[k]["default"] for k in CAMERA_KEYS}
