@@ -23,6 +23,7 @@ import cv2
 from app import config as configuration
 from app.annotate import VideoOut, annotate
 from app.core import FrameResult, Pipeline
+from app.fcw_level import FcwLevel
 from app.tracks_file import TracksWriter
 
 IMAGE_EXTS = {".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff", ".webp"}
@@ -181,8 +182,8 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
             r = pipe.process(gray, t_s)
             decision = sup.step(r, r.t_s, pipe)
             summary.add(r)
-            if decision.changed and decision.level > 0:
-                summary.warnings.append((r.t_s, {1: "prewarning", 2: "warning"}[decision.level], decision.ttc_used_s))
+            if decision.changed and decision.level != FcwLevel.NONE:
+                summary.warnings.append((r.t_s, decision.level.label, decision.ttc_used_s))
             if writer:
                 writer.write(r, decision.level)
             if video:

@@ -10,8 +10,7 @@ import json
 from typing import IO, Optional
 
 from app.core import FrameResult
-
-FCW_NAMES = {0: "none", 1: "prewarning", 2: "warning"}
+from app.fcw_level import FcwLevel
 
 
 def _r(x: Optional[float], nd: int = 2) -> Optional[float]:
@@ -33,9 +32,9 @@ def frame_record(r: FrameResult, fcw_level: Optional[int] = None) -> dict:
         for t in r.tracks
         if t.confirmed
     ]
-    level = 0 if fcw_level is None else fcw_level
+    level = FcwLevel.NONE if fcw_level is None else fcw_level
     return {"frame": r.frame, "t": round(r.t_s, 6), "tracks": tracks, "lead_id": r.lead_id,
-            "fcw": FCW_NAMES.get(level, "none")}
+            "fcw": FcwLevel(level).label}
 
 
 class TracksWriter:

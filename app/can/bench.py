@@ -15,13 +15,14 @@ from types import SimpleNamespace
 
 import can
 
+from app import config as configuration
+from app.fcw_level import FcwLevel
+
 from .bus import CanOutput
 from .config_schema import defaults
 from .messages import ttc_of
 from .session import CanSession
 from .vehicle_input import VehicleInput
-
-CAMERA = {"fx": 700.0, "cx": 320.0}
 
 
 def fake_track(i: int) -> SimpleNamespace:
@@ -45,7 +46,7 @@ def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
     busy machine does not inflate it."""
     cfg = defaults()
     cfg["can"].update(max_objects=64)
-    cfg["camera"] = CAMERA
+    cfg["camera"] = configuration.defaults()["camera"]  # the product's camera, for the objects' angles
     with tempfile.TemporaryDirectory() as tmp, can.Bus(interface="virtual", channel="bench") as bus, \
             can.Bus(interface="virtual", channel="bench") as sink:
         output = CanOutput(bus, Path(tmp) / "out.log" if log else None)
@@ -55,7 +56,7 @@ def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
             t = k * 0.1  # every group due every call
             result = fake_result(k, n_objects)
             ttc, source = ttc_of(result.lead)
-            fcw = {"level": k % 3, "ttc_s": ttc, "ttc_source": source}
+            fcw = {"level": FcwLevel(k % len(FcwLevel)), "ttc_s": ttc, "ttc_source": source}
             t_start = time.thread_time()
             frames = len(session.publish(t, result, fcw=fcw))
             times.append(time.thread_time() - t_start)

@@ -23,6 +23,9 @@ from typing import Any, Mapping, Optional, Union
 
 import can
 
+from app.fcw_level import FcwLevel
+from app.supervisor.faults import overall_state
+
 from . import messages as hm
 from .bus import CanOutput, bus_from_config
 from .config_schema import with_defaults
@@ -190,7 +193,7 @@ class CanSession:
             latency = None if self.deterministic else status.get("latency_p99_ms")
         else:
             faults = self.faults(now_s)
-            state, fps = hm.overall_state(faults, self._started), self._frame_rate()
+            state, fps = overall_state(faults, self._started), self._frame_rate()
             latency = None if self.deterministic else self._latency_p99()
         self.scheduler.update("status", [("HW_STATUS", hm.status_signals(state, faults, self.faults_known, fps,
                                                                         latency))], now_s)
@@ -216,11 +219,11 @@ class CanSession:
         speed_ok = self._state is not None and self._state.speed_mps is not None
         if fcw is None:
             ttc, src = hm.ttc_of(lead)
-            fcw = {"level": 0, "ttc_s": ttc, "ttc_source": src}
+            fcw = {"level": FcwLevel.NONE, "ttc_s": ttc, "ttc_source": src}
         get = fcw.get if isinstance(fcw, Mapping) else (lambda k, d=None: getattr(fcw, k, d))
         available = get("available")
         ttc = get("ttc_s")
-        f = hm.fcw_signals(get("level", 0), speed_ok if available is None else available,
+        f = hm.fcw_signals(get("level", FcwLevel.NONE), speed_ok if available is None else available,
                            get("ttc_used_s") if ttc is None else ttc, get("ttc_source") or "none", lead)
         self.scheduler.update("fcw", [("HW_FCW", f)], now_s, key=(f["FCW_LEVEL"], f["FCW_AVAILABLE"]))
         lead_frames = [("HW_LEAD", hm.lead_signals(lead)), ("HW_LEAD_TTC", hm.lead_ttc_signals(lead))]

@@ -17,7 +17,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 import yaml
 
-from .camera import DEFAULT_CAMERA
+from .camera import CAMERA_KEYS
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 KMH = 1.0 / 3.6  # m/s per km/h
@@ -248,7 +248,7 @@ _CAMERA_LIMITS = {
 
 def read_camera(where: str, value: Any, path: str = "camera") -> dict:
     """Validated camera overrides (any subset of the documented camera keys)."""
-    reader = _Reader(where, value if value is not None else {}, path, tuple(DEFAULT_CAMERA))
+    reader = _Reader(where, value if value is not None else {}, path, CAMERA_KEYS)
     out: dict[str, float] = {}
     for name, (lo, hi) in _CAMERA_LIMITS.items():
         if reader.data.get(name) is not None:

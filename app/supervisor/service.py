@@ -18,6 +18,7 @@ from typing import Optional
 
 from app import config as configuration
 from app.core import Pipeline, SourceError
+from app.supervisor.faults import DEGRADED, FAULT
 from app.supervisor.health import HealthMonitor, HealthParams
 from app.supervisor.notify import Notifier
 from app.supervisor.stack import Stack
@@ -138,7 +139,7 @@ class Service:
                 mcu_up = None
                 if mcu is not None:
                     mcu_up = mcu.health().get("state") == "up"
-                    mcu.set_system_ok(self.report is None or self.report.state != "fault")
+                    mcu.set_system_ok(self.report is None or self.report.state != FAULT)
                 self.report = self.health.evaluate(now, h["last_alive_s"], h["running"], h["results_dropped"],
                                                    mcu_up=mcu_up, **inputs)
                 if r is None and can_session is not None:
@@ -147,7 +148,7 @@ class Service:
                     next_status = now + status_every
                     self._publish_status(h)
                 if self.report.state != last_state:
-                    level = logging.WARNING if self.report.state in ("degraded", "fault") else logging.INFO
+                    level = logging.WARNING if self.report.state in (DEGRADED, FAULT) else logging.INFO
                     log.log(level, "%s", self.report.summary())
                     last_state = self.report.state
                 if not self.ready_sent and self.health.frames > 0:
