@@ -21,9 +21,9 @@ def annotate(gray: np.ndarray, r: FrameResult, truth: Optional[list[dict]] = Non
     state machine's level, decided in the supervisor, as a caption)."""
     img = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
     for lane in r.lanes:
-        p0 = (int(round(lane.x_bottom)), int(round(lane.y_bottom)))
-        p1 = (int(round(lane.x_top)), int(round(lane.y_top)))
-        cv2.line(img, p0, p1, _LANE, 2 if lane.observed else 1, cv2.LINE_AA)
+        pts = lane.points or [(lane.x_bottom, lane.y_bottom), (lane.x_top, lane.y_top)]
+        cv2.polylines(img, [np.round(np.array(pts)).astype(np.int32)], False, _LANE, 2 if lane.observed else 1,
+                      cv2.LINE_AA)
     for t in truth or []:
         l, tp, rt, b = (int(round(v)) for v in t["box"])
         cv2.rectangle(img, (l, tp), (rt, b), _TRUTH, 1)

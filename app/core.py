@@ -115,6 +115,9 @@ class Lane:
     y_top: float
     position: int  # -2 outer left, -1 ego left, +1 ego right, +2 outer right
     observed: bool
+    # the boundary as it bends with the road: image points (x, y) from the bottom point to the top point,
+    # straight lines between them
+    points: list[tuple[float, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -142,6 +145,8 @@ class FrameResult:
     road_motion: Optional[str] = None
     road_coast_frames: int = 0
     road_homography: Optional[np.ndarray] = None
+    lane_width_m: Optional[float] = None   # ego-lane width, None unless both ego boundaries are known
+    lane_offset_m: Optional[float] = None  # the car's centre right of the ego lane's centre, None unless both known
 
     @property
     def lead_id(self) -> Optional[int]:
@@ -173,7 +178,8 @@ def _result(r: Any) -> FrameResult:
             )
         )
     lanes = [
-        Lane(float(l.x_bottom), float(l.y_bottom), float(l.x_top), float(l.y_top), int(l.position), bool(l.observed))
+        Lane(float(l.x_bottom), float(l.y_bottom), float(l.x_top), float(l.y_top), int(l.position), bool(l.observed),
+             [(float(l.px[j]), float(l.py[j])) for j in range(l.n_points)])
         for l in (r.lanes[i] for i in range(r.n_lanes))
     ]
     vp = None if math.isnan(r.vanishing_x) else (float(r.vanishing_x), float(r.vanishing_y))
@@ -190,6 +196,8 @@ def _result(r: Any) -> FrameResult:
         tracks=tracks,
         lanes=lanes,
         vanishing_point=vp,
+        lane_width_m=_opt(r.lane_width_m),
+        lane_offset_m=_opt(r.lane_offset_m),
         horizon_row=_opt(r.horizon_row),
         lead=lead,
         stages=stages,

@@ -54,6 +54,18 @@ def markdown(report: dict) -> str:
                 "| accuracy | false positives | false negatives | ego lane found |", "| ---: | ---: | ---: | ---: |",
                 f"| {_f(ln['accuracy'])} | {_f(ln['fp'])} | {_f(ln['fn'])} | {ln['ego_lane_found']} of {ln['images']} |",
                 ""]
+    lc = report.get("lane_clips")
+    if lc:
+        out += [f"### TuSimple lane clips ({lc['clips']} clips of 20 frames through the whole pipeline, "
+                "scored on frame 20)", "",
+                "| accuracy | false positives | false negatives |", "| ---: | ---: | ---: |",
+                f"| {_f(lc['accuracy'])} | {_f(lc['fp'])} | {_f(lc['fn'])} |", "",
+                "| clip | accuracy | FP | FN | lanes predicted | lanes labelled |",
+                "| --- | ---: | ---: | ---: | ---: | ---: |"]
+        for im in lc["per_image"]:
+            out.append(f"| {Path(im['raw_file']).parent.as_posix().removeprefix('clips/')} | {_f(im['accuracy'])} | "
+                       f"{_f(im['fp'], 2)} | {_f(im['fn'], 2)} | {im['n_pred']} | {im['n_gt']} |")
+        out += ["", "Predictions in TuSimple's format: `lane_clips_pred.json`, `lanes_sample_pred.json`.", ""]
     rc = report.get("range")
     if rc:
         out += [f"### Range on TuSimple train_clip1 (frame {rc['frames']}, range-sensor truth)", "",
@@ -133,9 +145,24 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
                 cv2.imwrite(str(out / "examples" / f"lanes_{name}.jpg"), annotate(gray, r))
 
             say("lane sample")
-            report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=keep_lane)
+            report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=keep_lane,
+                                                    predictions_out=str(out / "lanes_sample_pred.json"))
         else:
             report["skipped"]["lanes"] = f"{sample} not found"
+        clips = data / "tusimple" / "lane_clips"
+        if clips.exists():
+            from app.eval import lane_clips
+
+            def keep_clip(lab, gray, r):
+                name = Path(lab["raw_file"]).parent.name
+                cv2.imwrite(str(out / "examples" / f"lane_clip_{name}.jpg"), annotate(gray, r))
+
+            say("lane clips")
+            report["lane_clips"] = lane_clips.evaluate(str(clips), config_path, preset,
+                                                       predictions_out=str(out / "lane_clips_pred.json"),
+                                                       on_clip=keep_clip)
+        else:
+            report["skipped"]["lane_clips"] = f"{clips} not found"
     if "range" in parts:
         clip = data / "tusimple" / "train_clip1"
         if clip.exists():

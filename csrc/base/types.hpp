@@ -42,11 +42,26 @@ struct LaneBoundary {
     bool observed = false;  // measured in this frame
     cv::Point2f bottom{kNaN, kNaN};
     cv::Point2f top{kNaN, kNaN};
+    // Bend (lanes/lane_curve.hpp): the boundary is x = a + b d + bend d^2 + curve / d, d = y - curve_row,
+    // through bottom and top; curve (road curvature) and bend (image second order) 0 = straight.
+    float curve = 0.f;        // px^2
+    float bend = 0.f;         // 1/px
+    float curve_row = kNaN;   // px; horizon row of the curve term
 
-    // x of the line at image row y (NaN when not valid or horizontal).
+    // x of the chord from bottom to top at image row y (NaN when not valid or horizontal).
     float x_at(float y) const {
         if (!valid || top.y == bottom.y) return kNaN;
         return bottom.x + (top.x - bottom.x) * (y - bottom.y) / (top.y - bottom.y);
+    }
+    // x of the curved boundary at row y (also beyond top, extrapolated): the chord plus curve times
+    // (1/d minus its chord) plus bend times (d^2 minus its chord).
+    float curve_x(float y) const {
+        const float x = x_at(y);
+        if ((curve == 0.f && bend == 0.f) || !std::isfinite(curve_row) || y <= curve_row) return x;
+        const float db = bottom.y - curve_row, dt = top.y - curve_row, d = y - curve_row;
+        const float s = (y - bottom.y) / (top.y - bottom.y);
+        return x + curve * (1.f / d - (1.f / db + (1.f / dt - 1.f / db) * s)) +
+               bend * (d * d - (db * db + (dt * dt - db * db) * s));
     }
 };
 
@@ -57,6 +72,9 @@ struct LaneModel {
     LaneBoundary adj_left, adj_right;  // outer boundaries of the adjacent lanes, where visible
     cv::Point2f vanishing_point{kNaN, kNaN};
     int frames_since_observed = 0;     // frames since both ego boundaries were last measured
+    float far_row = kNaN;   // px; row the reported boundaries reach (curve extrapolated), NaN = their top
+    float width_m = kNaN;   // ego-lane width at the bottom row (flat road), NaN unless both ego boundaries
+    float offset_m = kNaN;  // the car's centre right of the ego lane's centre, m, NaN unless both
     std::vector<cv::Point> road_polygon;  // area the detectors scan; empty = none known
 
     // Ego lane width in pixels at row y, NaN when unknown.

@@ -134,7 +134,10 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     int n = 0;
     auto add_lane = [&](const hw::LaneBoundary &b, int position) {
         if (!b.valid || n >= HW_MAX_LANES) return;
-        r->lanes[n++] = hw_lane{b.bottom.x, b.bottom.y, b.top.x, b.top.y, position, b.observed ? 1 : 0};
+        hw_lane &l = r->lanes[n++];
+        l = hw_lane{b.bottom.x, b.bottom.y, b.top.x, b.top.y, position, b.observed ? 1 : 0, 0, {}, {}};
+        hw::sample_boundary(b, o.lanes.far_row, HW_LANE_POINTS, l.px, l.py);
+        l.n_points = HW_LANE_POINTS;
     };
     add_lane(o.lanes.adj_left, -2);
     add_lane(o.lanes.ego_left, -1);
@@ -143,6 +146,8 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->n_lanes = n;
     r->vanishing_x = o.lanes.vanishing_point.x;
     r->vanishing_y = o.lanes.vanishing_point.y;
+    r->lane_width_m = o.lanes.width_m;
+    r->lane_offset_m = o.lanes.offset_m;
     r->horizon_row = o.horizon_row;
     r->lead_id = o.lead_id;
     r->n_stages = int32_t(std::min<size_t>(o.times.items.size(), HW_MAX_STAGES));

@@ -23,10 +23,11 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 3
+#define HW_ABI_VERSION 4
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
+#define HW_LANE_POINTS 12
 #define HW_MAX_STAGES 12
 #define HW_STAGE_NAME_LEN 16
 
@@ -92,6 +93,11 @@ typedef struct {
     float x_bottom, y_bottom, x_top, y_top;
     int32_t position;      /* -2 left of left boundary, -1 ego left, +1 ego right, +2 right of it */
     int32_t observed;      /* 1 measured in this frame, 0 carried over by lane tracking */
+    /* the boundary as it bends with the road: n_points image points from the bottom point up to
+     * lanes.curve_far_range_m (beyond the top point the fitted curve is extrapolated), spaced evenly in
+     * log range (denser far away, where the bend is); straight lines between them */
+    int32_t n_points;
+    float px[HW_LANE_POINTS], py[HW_LANE_POINTS];
 } hw_lane;
 
 typedef struct {
@@ -111,6 +117,8 @@ typedef struct {
     int32_t n_lanes;
     hw_lane lanes[HW_MAX_LANES];
     float vanishing_x, vanishing_y; /* NaN if no lane model yet */
+    float lane_width_m;    /* ego-lane width at the bottom row, m; NaN unless both ego boundaries are known */
+    float lane_offset_m;   /* the car's centre right of the ego lane's centre, m; NaN unless both are known */
     float horizon_row;     /* horizon row used for range, NaN if n/a */
     int32_t lead_id;       /* -1 if no lead */
     int32_t n_stages;
