@@ -17,6 +17,8 @@ import yaml
 from app.can.config_schema import CAN_SCHEMA
 from app.core import core_schema
 from app.fcw import FCW_SCHEMA
+from app.recording import FPS_MAX, FPS_MIN
+from app.safe_yaml import YamlLimitError, load_yaml, short, short_name
 from app.schema import key as _key
 from app.supervisor.health import HEALTH_SCHEMA
 
@@ -35,7 +37,7 @@ SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
         "index": _key(0, "FireWire: index of the camera on the bus (when guid is empty)", 0, 63),
         "guid": _key("", "FireWire: the camera's GUID in hex; empty = use index"),
         "fps": _key(30.0, "frames/s asked of the camera; for a folder, the rate its images were taken at",
-                    0.1, 1000.0),
+                    FPS_MIN, FPS_MAX),
         "pixel_format": _key("", "V4L2 FOURCC such as YUYV, MJPG or GREY; empty = the driver's default"),
         "path": _key("", "video file, image folder or FIFO for kind video / folder / fifo"),
         "wait_for_device": _key(True, "start even if the camera is not there yet and keep reconnecting "
@@ -61,6 +63,34 @@ SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
 }
 
 
+def _fcw_order(cfg: dict) -> Optional[str]:
+    f = cfg["fcw"]
+    if f["ttc_warning_s"] >= f["ttc_prewarning_s"]:
+        return (f"fcw.ttc_warning_s ({f['ttc_warning_s']:g}) must be below fcw.ttc_prewarning_s "
+                f"({f['ttc_prewarning_s']:g}), or the pre-warning is never given: lower ttc_warning_s or raise "
+                f"ttc_prewarning_s")
+    return None
+
+
+def _mcu_timing(cfg: dict) -> Optional[str]:
+    m = cfg["mcu"]
+    if m["silent_after_s"] <= m["heartbeat_s"]:
+        return (f"mcu.silent_after_s ({m['silent_after_s']:g}) must be above mcu.heartbeat_s ({m['heartbeat_s']:g}), "
+                f"or every heartbeat is late: make silent_after_s several heartbeats")
+    return None
+
+
+def _source_path(cfg: dict) -> Optional[str]:
+    src = cfg["source"]
+    if src["kind"] in ("video", "folder", "fifo") and not src["path"]:
+        return f"source.path: required for source.kind {src['kind']}"
+    return None
+
+
+# Rules between keys, checked after every key is valid alone; each says what to change.
+CROSS_FIELD_RULES = (_fcw_order, _mcu_timing, _source_path)
+
+
 def schema() -> dict[str, dict[str, dict]]:
     """Every key of the configuration: {section: {key: {default, type, min, max, choices, doc}}}."""
     s = core_schema()
@@ -76,25 +106,25 @@ def _check_value(path: str, value: Any, spec: dict) -> Any:
     t = spec["type"]
     if t == "bool":
         if not isinstance(value, bool):
-            raise ConfigFileError(f"{path}: expected true or false, got {value!r}")
+            raise ConfigFileError(f"{path}: expected true or false, got {short(value)}")
         return value
     if t == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigFileError(f"{path}: expected an integer, got {value!r}")
+            raise ConfigFileError(f"{path}: expected an integer, got {short(value)}")
     elif t == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigFileError(f"{path}: expected a number, got {value!r}")
+            raise ConfigFileError(f"{path}: expected a number, got {short(value)}")
         value = float(value)
     elif t == "str":
         if isinstance(value, int) and not isinstance(value, bool) and path.endswith("source.device"):
             value = str(value)  # `device: 0` means /dev/video0 by index
         if not isinstance(value, str):
-            raise ConfigFileError(f"{path}: expected a string, got {value!r}")
+            raise ConfigFileError(f"{path}: expected a string, got {short(value)}")
         if "choices" in spec and value not in spec["choices"].split("|"):
-            raise ConfigFileError(f"{path}: {value!r} is not one of {spec['choices'].replace('|', ', ')}")
+            raise ConfigFileError(f"{path}: {short(value)} is not one of {spec['choices'].replace('|', ', ')}")
         return value
     if "min" in spec and not (spec["min"] <= value <= spec["max"]):
-        raise ConfigFileError(f"{path}: {value!r} is outside [{spec['min']}, {spec['max']}]")
+        raise ConfigFileError(f"{path}: {short(value)} is outside [{spec['min']}, {spec['max']}]")
     return value
 
 
@@ -108,16 +138,31 @@ def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[s
     cfg = defaults()
     for sec, values in overrides.items():
         if sec not in sch:
-            raise ConfigFileError(f"{origin}: {sec}: unknown section (known: {', '.join(sorted(sch))})")
+            raise ConfigFileError(f"{origin}: {short_name(sec)}: unknown section (known: {', '.join(sorted(sch))})")
         if values is None:
             continue
         if not isinstance(values, dict):
             raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
         for key, value in values.items():
             if key not in sch[sec]:
-                raise ConfigFileError(f"{origin}: {sec}.{key}: unknown key (known: {', '.join(sorted(sch[sec]))})")
+                raise ConfigFileError(f"{origin}: {sec}.{short_name(key)}: unknown key (known: {', '.join(sorted(sch[sec]))})")
             cfg[sec][key] = _check_value(f"{origin}: {sec}.{key}", value, sch[sec][key])
+    for rule in CROSS_FIELD_RULES:
+        problem = rule(cfg)
+        if problem:
+            raise ConfigFileError(f"{origin}: {problem}")
     return cfg
+
+
+def parse(text: str, origin: str = "configuration") -> dict:
+    """The sections of a configuration text (not yet validated); ConfigFileError if it is not one."""
+    try:
+        data = load_yaml(text) or {}
+    except YamlLimitError as exc:
+        raise ConfigFileError(f"{origin}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
+    return data
 
 
 def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = None) -> dict[str, dict[str, Any]]:
@@ -129,16 +174,12 @@ def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = No
         p = Path(path)
         if not p.is_file():
             raise ConfigFileError(f"{origin}: no such file")
-        try:
-            data = yaml.safe_load(p.read_text()) or {}
-        except yaml.YAMLError as exc:
-            raise ConfigFileError(f"{origin}: not valid YAML: {exc}".replace("\n", " ")) from None
-        if not isinstance(data, dict):
-            raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
+        data = parse(p.read_text(errors="replace"), origin)
     merged = copy.deepcopy(data)
     for sec, values in (overrides or {}).items():
-        merged.setdefault(sec, {})
-        merged[sec] = {**(merged[sec] or {}), **values}
+        if not isinstance(merged.get(sec) or {}, dict):
+            raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
+        merged[sec] = {**(merged.get(sec) or {}), **values}
     return validate(merged, origin)
 
 
@@ -181,6 +222,15 @@ def scaled_camera(camera: dict, width: int, height: int) -> dict:
     cam.update(width=width, height=height, fx=camera["fx"] * sx, fy=camera["fy"] * sy,
                cx=camera["cx"] * sx, cy=camera["cy"] * sy)
     return cam
+
+
+def frame_size_problem(width: int, height: int) -> Optional[str]:
+    """Why frames of this size cannot be processed (outside the camera's width/height range), or None."""
+    cam = schema()["camera"]
+    lo_w, hi_w, lo_h, hi_h = cam["width"]["min"], cam["width"]["max"], cam["height"]["min"], cam["height"]["max"]
+    if lo_w <= width <= hi_w and lo_h <= height <= hi_h:
+        return None
+    return f"{width}x{height} px: frames must be {lo_w}x{lo_h} to {hi_w}x{hi_h} px"
 
 
 def default_yaml() -> str:
