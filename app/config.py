@@ -9,6 +9,8 @@ wrong types and out-of-range values are rejected with a message that names the f
 from __future__ import annotations
 
 import copy
+import difflib
+import functools
 from pathlib import Path
 from typing import Any, Optional, Union
 
@@ -98,8 +100,14 @@ def schema() -> dict[str, dict[str, dict]]:
     return s
 
 
+@functools.lru_cache(maxsize=1)
+def _registry() -> dict[str, dict[str, dict]]:
+    """schema() built once (the core's part is compiled in): read only, for validation."""
+    return schema()
+
+
 def defaults() -> dict[str, dict[str, Any]]:
-    return {sec: {k: d["default"] for k, d in keys.items()} for sec, keys in schema().items()}
+    return {sec: {k: d["default"] for k, d in keys.items()} for sec, keys in _registry().items()}
 
 
 def _check_value(path: str, value: Any, spec: dict) -> Any:
@@ -128,24 +136,33 @@ def _check_value(path: str, value: Any, spec: dict) -> Any:
     return value
 
 
+def _known(name: Any, options) -> str:
+    """The known names when they are few, else the closest ones: an error line stays short."""
+    known = ", ".join(sorted(options))
+    if len(known) <= 160:
+        return f"known: {known}"
+    close = difflib.get_close_matches(str(name)[:60], sorted(options), n=3)
+    return (f"did you mean {' or '.join(close)}? " if close else "") + "`headway config default` lists every key"
+
+
 def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[str, Any]]:
     """Defaults updated with `overrides` (a partial configuration), every key checked."""
     if overrides is None:
         overrides = {}
     if not isinstance(overrides, dict):
         raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
-    sch = schema()
+    sch = _registry()
     cfg = defaults()
     for sec, values in overrides.items():
         if sec not in sch:
-            raise ConfigFileError(f"{origin}: {short_name(sec)}: unknown section (known: {', '.join(sorted(sch))})")
+            raise ConfigFileError(f"{origin}: {short_name(sec)}: unknown section ({_known(sec, sch)})")
         if values is None:
             continue
         if not isinstance(values, dict):
             raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
         for key, value in values.items():
             if key not in sch[sec]:
-                raise ConfigFileError(f"{origin}: {sec}.{short_name(key)}: unknown key (known: {', '.join(sorted(sch[sec]))})")
+                raise ConfigFileError(f"{origin}: {sec}.{short_name(key)}: unknown key ({_known(key, sch[sec])})")
             cfg[sec][key] = _check_value(f"{origin}: {sec}.{key}", value, sch[sec][key])
     for rule in CROSS_FIELD_RULES:
         problem = rule(cfg)

@@ -8,12 +8,12 @@ overwritten but renamed NAME.1.SUFFIX (older ones shifted to .2, .3, ... and the
 ``can.output_log_keep`` removed), and a last line cut by a crash or power cut is trimmed from it, so every
 kept log parses whole. While running, every batch of frames is written whole and flushed to the
 operating system at once (a killed process loses nothing already sent), and forced to the disk
-(fsync) at least every ``can.output_log_sync_s``: a power cut loses at most that much."""
+(fsync, by a thread of its own) at least every ``can.output_log_sync_s``: a power cut loses at most that much."""
 from __future__ import annotations
 
 import math
 import os
-import time
+import threading
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Union
@@ -131,7 +131,7 @@ def rotate_log(path: Union[str, Path], keep: int) -> Optional[Path]:
     p = Path(path)
     if not p.exists() or p.stat().st_size == 0:
         return None
-    if p.suffix.lower() in (".log", ".asc"):
+    if suffix_is_text(p):
         _trim_partial_line(p)
     oldest = rotated_name(p, keep)
     if oldest.exists():
@@ -144,6 +144,10 @@ def rotate_log(path: Union[str, Path], keep: int) -> Optional[Path]:
         return None
     os.replace(p, rotated_name(p, 1))
     return rotated_name(p, 1)
+
+
+def suffix_is_text(path: Path) -> bool:
+    return path.suffix.lower() in (".log", ".asc")
 
 
 class CanOutput:
@@ -164,9 +168,13 @@ class CanOutput:
         self.channel = channel
         self.log_path = Path(log_path) if log_path else None
         self.previous_log = rotate_log(self.log_path, keep) if self.log_path and keep is not None else None
-        self._sync_s = sync_s
-        self._synced = time.monotonic()
         self._log = open_log_writer(self.log_path, channel, start_s) if self.log_path else None
+        self._sync_stop = threading.Event()
+        if self._log is not None and sync_s is not None and suffix_is_text(self.log_path):
+            # fsync off the caller's thread: on a busy disk it can take a second, the frame loop must not wait
+            fd = self._log.file.fileno()
+            threading.Thread(target=self._sync_loop, args=(fd, max(sync_s, 0.01)), name="can-log-sync",
+                             daemon=True).start()
         self._timeout = send_timeout_s
         self.sent = 0
         self.logged = 0
@@ -200,15 +208,20 @@ class CanOutput:
         f = getattr(self._log, "file", None)
         if f is not None and not isinstance(self._log, can.BLFWriter) and not f.closed:
             f.flush()
-            if self._sync_s is not None and time.monotonic() - self._synced >= self._sync_s:
-                os.fsync(f.fileno())
-                self._synced = time.monotonic()
+
+    def _sync_loop(self, fd: int, every_s: float) -> None:
+        while not self._sync_stop.wait(every_s):
+            try:
+                os.fsync(fd)
+            except OSError:  # closed meanwhile
+                return
 
     def tx_error(self, now_s: float, hold_s: float) -> bool:
         """True while the last send failure is less than ``hold_s`` old."""
         return now_s - self.last_error_s < hold_s
 
     def close(self) -> None:
+        self._sync_stop.set()
         if self._log is not None:
             self._log.stop()
             self._log = None

@@ -102,7 +102,7 @@ CAN_SCHEMA: dict[str, dict[str, dict]] = {
         "output_log_keep": _k(10, "previous runs' output logs kept beside the current one (NAME.1 newest); the "
                                   "failing run's log is the one an engineer needs after a crash, 10 covers a day "
                                   "of restarts", min=1, max=1000),
-        "output_log_sync_s": _k(0.5, "s; the output log is forced to the disk (fsync) at least this often: a power "
+        "output_log_sync_s": _k(0.5, "s; the output log is forced to the disk (fsync, off the frame loop) at least this often: a power "
                                      "cut loses at most this much (every batch reaches the OS at once, so a killed "
                                      "process loses nothing); 0 = after every batch", min=0.0, max=60.0),
     },
