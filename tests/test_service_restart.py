@@ -78,16 +78,18 @@ def test_rotation_keeps_the_configured_count_and_trims_a_cut_last_line(tmp_path)
     assert whole_candump(tmp_path / "out.1.log") == 4 and not out.exists()
 
 
-def test_sighup_takes_the_stop_path(service, tmp_path):
+def test_sighup_takes_the_stop_path_and_asks_systemd_for_a_restart(service, tmp_path):
+    from app.supervisor.service import RESTART_EXIT
+
     p, _ = service()
     writer = FrameWriter(tmp_path / "frames.fifo", frames())
     writer.thread.start()
     wait_for_lines(tmp_path / "out.log")
     p.send_signal(signal.SIGHUP)
-    assert p.wait(timeout=5) == 0
+    assert p.wait(timeout=5) == RESTART_EXIT != 0  # Restart=on-failure starts it again, config read anew
     writer.stop.set()
     _, err = p.communicate()
-    assert "stopping" in err and "Traceback" not in err
+    assert "stopping" in err and "configuration read anew" in err and "Traceback" not in err
     assert whole_candump(tmp_path / "out.log") > 10
 
 

@@ -3,9 +3,10 @@
 A thin loop: pop results from the core, hand each to the stack (vehicle inputs -> FCW -> CAN -> MCU),
 and several times a second evaluate health, refresh the status file and the status CAN frame, and
 talk to systemd: READY=1 once the camera delivers and the bus is open, WATCHDOG=1 only while the
-core's real-time loop goes round, STATUS= with a one-line summary. SIGTERM, SIGINT or SIGHUP stop
-everything within a second, flushing the logs; exit 0 (SIGHUP does not reload the configuration: a
-changed configuration takes effect on `systemctl restart headway`, after `headway config check`).
+core's real-time loop goes round, STATUS= with a one-line summary. SIGTERM or SIGINT stop everything
+within a second, flushing the logs; exit 0. SIGHUP runs the same stop path, then exits RESTART_EXIT
+(75) so that systemd (Restart=on-failure) starts the service again with its configuration file read
+anew: a reload that never runs half-reconfigured (check the file first: `headway config check`).
 
 Before anything starts, the configuration and what it points to are checked (``app.config_check``, the
 same as `headway config check` without opening the bus): a problem is exit 2 with the key named.
@@ -31,6 +32,7 @@ log = logging.getLogger("headway")
 
 LIVE_KINDS = ("v4l2", "firewire", "fifo")
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)  # each runs the same stop path
+RESTART_EXIT = 75  # EX_TEMPFAIL: after SIGHUP, so that systemd's Restart=on-failure starts it again
 TICK_S = 0.05  # loop period when no frame arrives: health is evaluated at least this often
 
 
@@ -197,6 +199,17 @@ def main(args) -> int:
     if found:
         return 2
     service = Service(cfg)
+    received: list[int] = []
+
+    def on_signal(signum, _frame):
+        received.append(signum)
+        service.stop.set()
+
     for sig in STOP_SIGNALS:
-        signal.signal(sig, lambda *_: service.stop.set())
-    return service.run()
+        signal.signal(sig, on_signal)
+    rc = service.run()
+    if rc == 0 and received and received[0] == signal.SIGHUP:
+        log.info("SIGHUP: stopped; exit %d so that systemd starts the service again with the configuration "
+                 "read anew", RESTART_EXIT)
+        return RESTART_EXIT
+    return rc
