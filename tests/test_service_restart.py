@@ -3,6 +3,7 @@ overwritten, whole lines), the next run writes its own; SIGHUP takes the stop pa
 is a regular file is refused before anything starts."""
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
@@ -90,6 +91,9 @@ def test_sighup_takes_the_stop_path_and_asks_systemd_for_a_restart(service, tmp_
     writer.stop.set()
     _, err = p.communicate()
     assert "stopping" in err and "configuration read anew" in err and "Traceback" not in err
+    # the vehicle-bus input account is in the status (nothing on this virtual bus but Headway's own frames)
+    status = json.loads((tmp_path / "status.json").read_text())
+    assert status["can_input"] == {"read": 0, "used": 0, "dropped": {}}
     assert whole_candump(tmp_path / "out.log") > 10
 
 
