@@ -42,7 +42,7 @@ def _cmd_status(args) -> int:
     import json
     import os
 
-    from app.supervisor.status_file import format_status, read_status
+    from app.supervisor.status_file import StatusFileError, format_status, is_stale, read_status
 
     path = args.file
     if path is None:
@@ -52,9 +52,15 @@ def _cmd_status(args) -> int:
 
         cfg = configuration.load(args.config if os.path.exists(args.config) else None)
         path = cfg["service"]["status_file"]
-    st = read_status(path)
+    try:
+        st = read_status(path)
+    except StatusFileError as exc:
+        print(f"state: unknown\nheadway: {exc}")
+        return 1
     print(json.dumps(st, indent=1) if args.json and st else format_status(st, path))
-    return 0 if st else 1
+    if st is None:
+        return 1
+    return 3 if is_stale(st) else 0  # 3: state unknown (as systemctl's "not running")
 
 
 def _cmd_config(args) -> int:
@@ -67,9 +73,13 @@ def _cmd_config(args) -> int:
         print(configuration.markdown())
         return 0
     cfg = configuration.load(args.file)
-    from app.core import Pipeline
+    from app.config_check import problems
 
-    Pipeline(configuration.core_sections(cfg)).close()  # the core checks its sections too
+    found = problems(cfg)  # everything that would stop the service (the core checks its sections too)
+    for line in found:
+        print(f"headway: configuration error: {args.file}: {line}", file=sys.stderr)
+    if found:
+        return 2
     print(f"{args.file}: ok")
     return 0
 
@@ -92,7 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("replay", help="run a video file, an image folder or a scenario through the pipeline")
     s.add_argument("source", help="video file, image folder (give --fps) or scenario")
     s.add_argument("--config", help="configuration YAML (default: built-in defaults)")
-    s.add_argument("--fps", type=float, help="frame rate of an image folder")
+    s.add_argument("--fps", type=float, help="frame rate of an image folder, or to override a video's own "
+                                              "(0.1 to 1000 frames/s)")
     s.add_argument("--out-video", help="write an annotated video here (.mp4)")
     s.add_argument("--tracks", help="write the tracks here (.jsonl, one line per frame)")
     s.add_argument("--can-in", help="vehicle CAN log replayed on the frame clock (.log candump, .asc, .blf); "

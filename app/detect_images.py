@@ -2,33 +2,44 @@
 
 Output: [{"file_name", "bbox": [{"left","top","right","bottom","score"}]}]. Each image is detected
 alone (the "detect" stage: lanes, shadow hypotheses, vertical-edge verification), with the camera
-fitted to the image's size.
+fitted to the image's size. An image that cannot be used (unreadable, truncated, too small) is left
+out of the output and listed with the reason; the others are written.
 """
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Iterable, Optional
 
-import cv2
-
 from app import config as configuration
 from app.core import Pipeline
+from app.recording import read_image
 
 
 class DetectError(RuntimeError):
     pass
 
 
-def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False) -> list[dict]:
+def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False,
+                  bad: Optional[list[str]] = None) -> list[dict]:
+    """One entry per usable image. Images that cannot be used go to ``bad`` ("path: why") when it is
+    given; without it the first one raises DetectError."""
     base = configuration.load(config_path)
     pipes: dict[tuple[int, int], Pipeline] = {}
     out = []
     try:
         for path in paths:
-            gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+            gray, why = read_image(path)
             if gray is None:
-                raise DetectError(f"{path}: cannot be read as an image")
+                why = f"cannot be read as an image ({why})"
+            else:
+                why = configuration.frame_size_problem(gray.shape[1], gray.shape[0]) or ""
+            if why:
+                if bad is None:
+                    raise DetectError(f"{path}: {why}")
+                bad.append(f"{path}: {why}")
+                continue
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # one pipeline per image size, camera scaled to it
                 cfg = dict(base)
@@ -45,7 +56,12 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
 
 
 def main(args) -> int:
-    result = detect_images(args.images, args.config)
+    bad: list[str] = []
+    result = detect_images(args.images, args.config, bad=bad)
+    if not result and bad:
+        raise DetectError(bad[0] if len(bad) == 1 else f"none of the {len(bad)} images can be used: " + "; ".join(bad[:5]))
     Path(args.out).write_text(json.dumps(result, indent=1))
     print(f"{len(result)} images, {sum(len(e['bbox']) for e in result)} vehicles -> {args.out}")
-    return 0
+    for line in bad:
+        print(f"headway: skipped {line}", file=sys.stderr)
+    return 1 if bad else 0

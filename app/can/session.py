@@ -30,7 +30,7 @@ from . import messages as hm
 from .bus import CanOutput, bus_from_config
 from .config_schema import with_defaults
 from .database import fault_names, headway_database
-from .log_replay import CanLogReader
+from .log_replay import CanLogReader, channel_map
 from .packer import CanPacker
 from .scheduler import CanScheduler
 from .vehicle_input import VehicleInput, VehicleState
@@ -89,7 +89,8 @@ class CanSession:
         reader = None
         if can_in:
             ids = vehicle.frame_ids() if not via_bus else None  # the reader passes over other ids early
-            reader = CanLogReader(can_in, offset_s=float(veh["log_offset_s"]), ids=ids)
+            reader = CanLogReader(can_in, offset_s=float(veh["log_offset_s"]), ids=ids,
+                                  channels=channel_map(veh.get("log_channels", "")))
         base = (reader.t0 or 0.0) - float(veh["log_offset_s"]) if reader else 0.0
         rx = play = tx = None
         if via_bus:
@@ -106,7 +107,8 @@ class CanSession:
         vehicle = VehicleInput.from_config(veh)
         tx = bus_from_config(c)
         rx = bus_from_config(c, c.get("input_channel") or None) if c.get("input_channel") else tx
-        output = CanOutput(tx, c.get("output_log") or None, channel=c["channel"])
+        output = CanOutput(tx, c.get("output_log") or None, channel=c["channel"],
+                           sync_s=float(c["output_log_sync_s"]), keep=int(c["output_log_keep"]))
         return cls(cfg, output, vehicle, rx_bus=rx)
 
     # ---- inputs ------------------------------------------------------------------------------------
@@ -246,7 +248,25 @@ class CanSession:
             s["input_log"] = self.input_log.summary()
         if self.vehicle is not None:
             s["vehicle_inputs"] = self.vehicle.stats()
+            s["input"] = self.input_counts()
+            s["never_decoded"] = self.vehicle.never_decoded() if self.input_log is not None else []
         return s
+
+    def input_counts(self) -> dict[str, Any]:
+        """Every vehicle-bus frame read, accounted once: {"read", "used", "dropped": {reason: n}} and, in
+        replay, "not_reached" (frames of the log after the recording's end). read = used + dropped (+ not_reached)."""
+        if self.vehicle is None:
+            return {}
+        v = self.vehicle.counts()
+        dropped = dict(v["dropped"])
+        out: dict[str, Any] = {"read": v["used"] + sum(dropped.values()), "used": v["used"]}
+        if self.input_log is not None and self.play_bus is None:
+            r = self.input_log.counts()
+            for k, n in r["dropped"].items():
+                dropped[k] = dropped.get(k, 0) + n
+            out.update(read=r["read"], not_reached=r["not_reached"])
+        out["dropped"] = dict(sorted(dropped.items()))
+        return out
 
     def close(self) -> None:
         self.output.close()
