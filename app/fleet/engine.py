@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import uuid
 from typing import Callable, Iterable, Iterator, Optional
 
 from distributed import WorkerPlugin
@@ -117,7 +118,8 @@ def run_tasks(client, fn: Callable, items: Iterable[tuple[str, tuple]], on_done:
     None when it returned). A task whose worker died more often than allowed ends with its error line."""
     from distributed import as_completed
 
-    futures = {client.submit(fn, *args, key=f"headway-{name}-{os.getpid()}", pure=False, retries=0): name
+    run_id = uuid.uuid4().hex[:12]   # two runs on one scheduler never share a task
+    futures = {client.submit(fn, *args, key=f"headway-{name}-{run_id}", pure=False, retries=0): name
                for name, args in items}
     for fut in as_completed(futures):
         name = futures[fut]
