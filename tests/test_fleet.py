@@ -265,3 +265,17 @@ def test_eval_synthetic_through_the_engine_matches_one_process(world, tmp_path):
     assert rep["synthetic"]["per_scenario"] == alone["per_scenario"]
     assert rep["synthetic"]["overall"] == alone["overall"]
     assert rep["synthetic"]["per_scenario"][scen[0]]["tp"] > 0
+
+
+def test_local_cluster_is_pinned_single_threaded_and_local():
+    from app.fleet.engine import cluster
+
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("needs two cores to pin two workers to different ones")
+    with cluster(None, 2) as client:
+        assert client.scheduler.address.startswith("tcp://127.0.0.1:")
+        assert all(a.startswith("tcp://127.0.0.1:") for a in client.nthreads())
+        assert sorted(client.nthreads().values()) == [1, 1]
+        cores = client.run(lambda: sorted(os.sched_getaffinity(0)))
+        assert sorted(len(c) for c in cores.values()) == [1, 1]
+        assert len({c[0] for c in cores.values()}) == 2
