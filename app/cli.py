@@ -154,6 +154,22 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
     s.add_argument("--out", help="report folder (default reports/eval-PIPELINE)")
     s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--workers", type=int, help="run the synthetic and FCW scenarios on a local Dask cluster of N "
+                                               "worker processes (docs/fleet.md)")
+    s.add_argument("--scheduler", help="... or on an existing Dask cluster (tcp://HOST:8786)")
+
+    # ---- headway fleet (app/fleet/) ----
+    s = sub.add_parser("fleet", help="replay many drives in parallel on Dask (local or an existing cluster); "
+                                     "one report; --compare two runs")
+    s.add_argument("manifest", nargs="?", help="manifest YAML: one entry per drive (docs/fleet.md)")
+    s.add_argument("--out", help="output folder: drives/NAME/ per drive, report.md, report.json")
+    s.add_argument("--scheduler", help="address of an existing Dask scheduler, e.g. tcp://HOST:8786 "
+                                       "(default: a local cluster on this machine)")
+    s.add_argument("--workers", type=int, help="local cluster: worker processes (default: one per core)")
+    s.add_argument("--config", help="configuration YAML under every drive's own overrides")
+    s.add_argument("--compare", nargs=2, metavar=("OLD_DIR", "NEW_DIR"),
+                   help="compare two fleet runs' outputs drive by drive (FCW events, tracks, metrics, CAN)")
+    # ---- end fleet ----
 
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
@@ -193,6 +209,10 @@ def _dispatch(args) -> int:
         from app import bench
 
         return bench.main(args)
+    if args.command == "fleet":
+        from app.fleet import run
+
+        return run.main(args)
     if args.command == "config":
         return _cmd_config(args)
     if args.command == "eval":

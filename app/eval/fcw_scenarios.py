@@ -26,7 +26,7 @@ NO_WARNING = ("steady_following", "adjacent_passing", "cut_out_stopped_car", "ov
               "empty_road", "cut_in", "lane_change", "overtaking_from_side")
 
 
-def _true_ttc(truth: list[dict]) -> Optional[float]:
+def true_ttc(truth: list[dict]) -> Optional[float]:
     """TTC to the ego front of the most urgent vehicle in the ego lane (None if nobody is closing)."""
     ttcs = [v["ttc_s"] for v in truth if v["lane"] == 0 and v["ttc_s"] is not None]
     return min(ttcs) if ttcs else None
@@ -57,7 +57,7 @@ def evaluate(name: str, config_path: Optional[str] = None) -> dict:
     truth_ttc: list[tuple[float, Optional[float]]] = []
 
     def on_result(r, decision, truth):
-        truth_ttc.append((r.t_s, _true_ttc(truth)))
+        truth_ttc.append((r.t_s, true_ttc(truth)))
 
     with tempfile.TemporaryDirectory() as tmp:
         can_out = str(Path(tmp) / "out.log")

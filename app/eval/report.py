@@ -103,7 +103,17 @@ def markdown(report: dict) -> str:
 
 
 def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data", config_path: Optional[str] = None,
-        scenarios: Optional[list[str]] = None, examples: int = 4) -> dict:
+        scenarios: Optional[list[str]] = None, examples: int = 4, workers: Optional[int] = None,
+        scheduler: Optional[str] = None) -> dict:
+    """With `workers` or `scheduler`, the synthetic suite and the FCW scenarios run one task per scenario on
+    the fleet's engine (app/fleet/engine.py); the other parts run here."""
+    mapper = None
+    if workers is not None or scheduler is not None:
+        import functools
+
+        from app.fleet.engine import map_ordered
+
+        mapper = functools.partial(map_ordered, scheduler=scheduler, workers=workers)
     out = Path(out_dir)
     (out / "examples").mkdir(parents=True, exist_ok=True)
     data = Path(data_dir)
@@ -116,7 +126,7 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
         from app.eval import synthetic
 
         report["synthetic"] = synthetic.evaluate_suite(preset, scenarios, config_path,
-                                                       progress=lambda n: say(f"scenario {n}"))
+                                                       progress=lambda n: say(f"scenario {n}"), mapper=mapper)
     if "tusimple" in parts:
         supp = data / "tusimple" / "supp"
         if supp.exists():
@@ -175,10 +185,14 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
     if "fcw" in parts:
         from app.eval import fcw_scenarios
 
-        report["fcw"] = []
-        for name in list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING):
-            say(f"FCW {name}")
-            report["fcw"].append(fcw_scenarios.evaluate(name, config_path))
+        names = list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING)
+        if mapper is not None:
+            report["fcw"] = mapper(fcw_scenarios.evaluate, [(n, config_path) for n in names], names, "FCW")
+        else:
+            report["fcw"] = []
+            for name in names:
+                say(f"FCW {name}")
+                report["fcw"].append(fcw_scenarios.evaluate(name, config_path))
     if "road_motion" in parts:
         from app.eval import road_motion
 
@@ -195,8 +209,10 @@ def main(args) -> int:
     if unknown:
         raise ValueError(f"--parts: unknown part(s) {', '.join(sorted(unknown))}; choose from {', '.join(PARTS)}")
     out = args.out or f"reports/eval-{args.pipeline}"
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers {args.workers}: need at least one worker")
     report = run(args.pipeline, out, parts, args.data, args.config,
-                 args.scenarios.split(",") if args.scenarios else None)
+                 args.scenarios.split(",") if args.scenarios else None, workers=args.workers, scheduler=args.scheduler)
     print(markdown(report))
     print(f"\nreport: {Path(out).resolve()}/report.json, report.md, examples/")
     return 0
