@@ -21,6 +21,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("homography", c.homography);
     fn("parallax", c.parallax);
     fn("particles", c.particles);
+    fn("cascade", c.cascade);
 }
 
 } // namespace

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "core/params.hpp"
+#include "detect/cascade_detector.hpp"
 #include "detect/verify.hpp"
 #include "fcw/lead_selection.hpp"
 #include "geometry/horizon.hpp"
@@ -57,6 +58,7 @@ struct Config {
     HomographyParams homography;      //   road homography (DLT + Kalman)
     ParallaxTrackerParams parallax;   //   aligned-difference detector
     ParticleParams particles;         //   joint particle filter
+    CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
 
     // Parses the JSON text; throws ConfigError naming the key on any problem.
     static Config from_json(const std::string &text);

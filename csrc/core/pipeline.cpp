@@ -89,15 +89,25 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
     FrameOutput out;
     out.width = gray.cols;
     out.height = gray.rows;
-    if (stage != "lanes" && stage != "hypotheses" && stage != "detect")
-        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, homography, parallax");
+    if (stage != "lanes" && stage != "hypotheses" && stage != "detect" && stage != "cascade")
+        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, cascade, homography, parallax");
     {
         Stopwatch sw;
         out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
         out.times.add("lanes", sw.ms());
     }
     out.horizon_row = float(cfg_.camera.horizon_row());
-    if (stage != "lanes") {
+    if (stage == "cascade") {  // the trained Haar cascade alone (detect/cascade_detector.hpp)
+        Stopwatch sw;
+        if (!cascade_) cascade_ = std::make_unique<CascadeDetector>(cfg_.cascade);
+        for (const auto &d : cascade_->detect(gray, out.lanes, cfg_.camera)) {
+            TrackState t;
+            t.box = d.box;
+            t.confidence = d.confidence;
+            out.tracks.push_back(t);
+        }
+        out.times.add("cascade", sw.ms());
+    } else if (stage != "lanes") {
         Stopwatch sw;
         const auto hyps = shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow);
         out.times.add("hypotheses", sw.ms());
@@ -119,6 +129,8 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
                 out.tracks.push_back(t);
             }
         }
+    }
+    if (stage != "lanes") {
         out.full_detection = true;
         // single-image range from the calibrated horizon (no history: no range rate or TTC)
         TrackKinematics(cfg_.kinematics, cfg_.camera).update(out.tracks, out.horizon_row, 0.0);

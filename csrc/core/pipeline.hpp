@@ -40,6 +40,7 @@ private:
     Config cfg_;
     LaneTracker lanes_;
     std::unique_ptr<VehicleTracker> tracker_;  // null for preset "none"
+    std::unique_ptr<CascadeDetector> cascade_;  // the "cascade" stage, loaded on first use
     ImageStatsMeter image_stats_;
     HorizonTracker horizon_;
     TrackKinematics kinematics_;

@@ -16,7 +16,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .model import Stage
+from .model import Stage, stage_passes
 
 
 def _best_stumps(xs: np.ndarray, order: np.ndarray, w: np.ndarray, wy: np.ndarray, chunk: int = 512):
@@ -72,13 +72,13 @@ def train_stage(values: np.ndarray, feature_ids: np.ndarray, y: np.ndarray, min_
         st.thresholds.append(float(t))
         st.left.append(float(a))
         st.right.append(float(b))
-        ps = np.sort(total[pos])
-        kth = ps[int(np.floor((1.0 - min_hit_rate) * len(ps)))]
-        thr = np.float32(kth)
-        if thr > kth:
-            thr = np.nextafter(thr, np.float32(-np.inf))
-        hit = float((total[pos] >= thr).mean())
-        fa = float((total[neg] >= thr).mean())
+        # T halfway between the k-th lowest positive sum and the next lower sum of any sample, so that
+        # no sum lies within rounding (or OpenCV's 1e-5 allowance) of it
+        kth = np.sort(total[pos])[int(np.floor((1.0 - min_hit_rate) * len(total[pos])))]
+        below = total[total < kth]
+        thr = np.float32((kth + below.max()) / 2) if len(below) else np.float32(kth - 1.0)
+        hit = float(stage_passes(total[pos], thr).mean())
+        fa = float(stage_passes(total[neg], thr).mean())
         st.threshold = float(thr)
         if on_round:
             on_round(r + 1, hit, fa)

@@ -14,6 +14,15 @@ import numpy as np
 from .haar import FeatureSet, integrals, responses, variance_norm
 
 
+# OpenCV lowers every stage threshold by this when it reads the XML (Data::read: THRESHOLD_EPS = 1e-5f).
+THRESHOLD_EPS = np.float32(1e-5)
+
+
+def stage_passes(sums: np.ndarray, threshold: float) -> np.ndarray:
+    """OpenCV's test: sum (double) >= (float)threshold - THRESHOLD_EPS, the difference in single precision."""
+    return sums >= np.float32(np.float32(threshold) - THRESHOLD_EPS)
+
+
 @dataclass
 class Stage:
     features: list[int] = field(default_factory=list)   # index into the FeatureSet, one per stump
@@ -53,7 +62,7 @@ class Cascade:
                 break
             vals = responses(fs, np.asarray(st.features), ii[ids], norm[ids])
             s = st.sums(vals)
-            ok = s >= np.float32(st.threshold)
+            ok = stage_passes(s, st.threshold)
             score[ids] = s
             depth[ids[ok]] = si + 1
             alive[ids[~ok]] = False
