@@ -132,6 +132,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("images", nargs="+", help="image files")
     s.add_argument("--out", required=True, help="output JSON file")
     s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--detector", choices=["thesis", "cascade", "fused"], default="thesis",
+                   help="thesis: shadows + vertical edges (default); cascade: the trained Haar cascade; "
+                        "fused: both merged")
 
     s = sub.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM "
                                    "(the service, in a terminal)")

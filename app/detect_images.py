@@ -1,8 +1,8 @@
 """`headway detect`: single-image vehicle detection, one JSON entry per image.
 
 Output: [{"file_name", "bbox": [{"left","top","right","bottom","score"}]}]. Each image is detected
-alone (the "detect" stage: lanes, shadow hypotheses, vertical-edge verification), with the camera
-fitted to the image's size.
+alone (by default the "detect" stage: lanes, shadow hypotheses, vertical-edge verification; with
+detector "cascade" the trained Haar cascade, with "fused" both merged), with the camera fitted to the image's size.
 """
 from __future__ import annotations
 
@@ -20,7 +20,12 @@ class DetectError(RuntimeError):
     pass
 
 
-def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False) -> list[dict]:
+STAGES = {"thesis": "detect", "cascade": "cascade", "fused": "fused"}  # --detector -> the core's single-image stage
+
+
+def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False,
+                  detector: str = "thesis") -> list[dict]:
+    stage = STAGES[detector]
     base = configuration.load(config_path)
     pipes: dict[tuple[int, int], Pipeline] = {}
     out = []
@@ -34,7 +39,7 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
                 cfg = dict(base)
                 cfg["camera"] = configuration.scaled_camera(base["camera"], *size)
                 pipes[size] = Pipeline(configuration.core_sections(cfg))
-            r = pipes[size].run_stage("detect", gray)
+            r = pipes[size].run_stage(stage, gray)
             out.append({"file_name": Path(path).name, "bbox": [
                 {"left": round(t.box[0], 1), "top": round(t.box[1], 1), "right": round(t.box[2], 1),
                  "bottom": round(t.box[3], 1), "score": round(t.confidence, 4)} for t in r.tracks]})
@@ -45,7 +50,7 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
 
 
 def main(args) -> int:
-    result = detect_images(args.images, args.config)
+    result = detect_images(args.images, args.config, detector=args.detector)
     Path(args.out).write_text(json.dumps(result, indent=1))
     print(f"{len(result)} images, {sum(len(e['bbox']) for e in result)} vehicles -> {args.out}")
     return 0

@@ -22,6 +22,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("parallax", c.parallax);
     fn("particles", c.particles);
     fn("cascade", c.cascade);
+    fn("fuse", c.fuse);
 }
 
 } // namespace

@@ -3,6 +3,7 @@
 
 #include "core/params.hpp"
 #include "detect/cascade_detector.hpp"
+#include "detect/fuse_detections.hpp"
 #include "detect/verify.hpp"
 #include "fcw/lead_selection.hpp"
 #include "geometry/horizon.hpp"
@@ -59,6 +60,7 @@ struct Config {
     ParallaxTrackerParams parallax;   //   aligned-difference detector
     ParticleParams particles;         //   joint particle filter
     CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
+    FuseParams fuse;                  // fused stage: cascade + shadow detections merged
 
     // Parses the JSON text; throws ConfigError naming the key on any problem.
     static Config from_json(const std::string &text);

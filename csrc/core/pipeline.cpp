@@ -89,45 +89,42 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
     FrameOutput out;
     out.width = gray.cols;
     out.height = gray.rows;
-    if (stage != "lanes" && stage != "hypotheses" && stage != "detect" && stage != "cascade")
-        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, cascade, homography, parallax");
+    if (stage != "lanes" && stage != "hypotheses" && stage != "detect" && stage != "cascade" && stage != "fused")
+        throw std::invalid_argument("unknown stage '" + stage +
+                                    "': one of lanes, hypotheses, detect, cascade, fused, homography, parallax");
     {
         Stopwatch sw;
         out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
         out.times.add("lanes", sw.ms());
     }
     out.horizon_row = float(cfg_.camera.horizon_row());
-    if (stage == "cascade") {  // the trained Haar cascade alone (detect/cascade_detector.hpp)
+    std::vector<CascadeDetection> cdets;  // the trained Haar cascade (detect/cascade_detector.hpp)
+    if (stage == "cascade" || stage == "fused") {
         Stopwatch sw;
         if (!cascade_) cascade_ = std::make_unique<CascadeDetector>(cfg_.cascade);
-        for (const auto &d : cascade_->detect(gray, out.lanes, cfg_.camera)) {
-            TrackState t;
-            t.box = d.box;
-            t.confidence = d.confidence;
-            out.tracks.push_back(t);
-        }
+        cdets = cascade_->detect(gray, out.lanes, cfg_.camera);
         out.times.add("cascade", sw.ms());
+    }
+    auto add = [&](const cv::Rect2f &box, float confidence) {
+        TrackState t;
+        t.box = box;
+        t.confidence = confidence;
+        out.tracks.push_back(t);
+    };
+    if (stage == "cascade") {
+        for (const auto &d : cdets) add(d.box, d.confidence);
     } else if (stage != "lanes") {
         Stopwatch sw;
         const auto hyps = shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow);
         out.times.add("hypotheses", sw.ms());
         if (stage == "hypotheses") {
-            for (const auto &h : hyps) {
-                TrackState t;
-                t.box = h.box;
-                t.confidence = h.strength;
-                out.tracks.push_back(t);
-            }
+            for (const auto &h : hyps) add(h.box, h.strength);
         } else {
             Stopwatch sv;
-            const auto dets = verify_hypotheses(gray, hyps, out.lanes, cfg_.camera, cfg_.verify);
+            auto dets = verify_hypotheses(gray, hyps, out.lanes, cfg_.camera, cfg_.verify);
             out.times.add("verify", sv.ms());
-            for (const auto &d : dets) {
-                TrackState t;
-                t.box = d.box;
-                t.confidence = d.score;
-                out.tracks.push_back(t);
-            }
+            if (stage == "fused") dets = fuse_detections(cdets, dets, cfg_.fuse);
+            for (const auto &d : dets) add(d.box, d.score);
         }
     }
     if (stage != "lanes") {

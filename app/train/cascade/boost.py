@@ -11,7 +11,6 @@ the negatives passing fall to `max_false_alarm` or `max_weak` stumps are used.
 """
 from __future__ import annotations
 
-import time
 from typing import Callable, Optional
 
 import numpy as np
