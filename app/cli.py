@@ -75,6 +75,14 @@ def _cmd_config(args) -> int:
 
 
 def _cmd_train(args) -> int:
+    if args.model == "verifier":
+        from app import config as configuration
+        from app.eval.tusimple_boxes import tusimple_config
+        from app.train import verifier
+
+        cfg = configuration.load(args.config) if args.config else tusimple_config(configuration.load(None))
+        verifier.train(args.data, args.cascade, args.out, cfg, every=args.every, c=args.c)
+        return 0
     # `headway train cascade`: the Viola-Jones trainer (app/train/cascade, independent of the rest of app)
     from app.train.cascade import TrainParams, train
 
@@ -190,6 +198,13 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-false-alarm", type=float, default=0.5, help="per stage (default 0.5)")
     t.add_argument("--max-minutes", type=float, default=55.0, help="no stage starts after this (default 55)")
     t.add_argument("--log", help="also write the per-stage log here")
+    t = ts.add_parser("verifier", help="HOG + logistic regression judging the cascade's detections")
+    t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, as for the cascade)")
+    t.add_argument("--cascade", required=True, help="the cascade XML whose detections are judged")
+    t.add_argument("--out", required=True, help="verifier model (.yml)")
+    t.add_argument("--every", type=int, default=4, help="use every N-th image (default 4)")
+    t.add_argument("--c", type=float, default=10.0, help="inverse L2 regularisation (default 10)")
+    t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")
 
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")

@@ -144,6 +144,8 @@ def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = No
 
 # The Haar cascade trained by `headway train cascade` (recipe and log in docs/cascade.md).
 SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.xml"
+# Its second stage, trained by `headway train verifier` on the cascade's detections (docs/cascade.md).
+SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml"
 
 
 def core_sections(cfg: dict) -> dict:
@@ -151,6 +153,8 @@ def core_sections(cfg: dict) -> dict:
     core = {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
     if "cascade" in core and not core["cascade"].get("model"):
         core["cascade"]["model"] = str(SHIPPED_CASCADE)
+    if "cascade" in core and not core["cascade"].get("verifier"):
+        core["cascade"]["verifier"] = str(SHIPPED_VERIFIER)
     return core
 
 

@@ -1,4 +1,5 @@
 #include "detect/cascade_detector.hpp"
+#include "detect/vehicle_verifier.hpp"
 
 #include <opencv2/imgproc.hpp>
 #include <opencv2/objdetect.hpp>
@@ -16,6 +17,7 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p), cc_(std::make_
         throw std::invalid_argument("cascade.model: OpenCV cannot load '" + p_.model +
                                     "' as a cascade XML; train one with `headway train cascade` or leave the key empty");
     win_ = cc_->getOriginalWindowSize();
+    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = std::make_unique<VehicleVerifier>(p_.verifier);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }
@@ -101,7 +103,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n));
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
-        d.confidence = float(n / (n + p_.neighbors_half));
+        d.confidence = verifier_ ? verifier_->probability(gray, d.box) : float(n / (n + p_.neighbors_half));
         out.push_back(d);
     }
     return out;

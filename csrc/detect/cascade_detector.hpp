@@ -13,7 +13,8 @@
 // `scale_factor` from the model's own up to `max_window_frac` of the image height.
 // Raw windows accepted by every stage are grouped (IoU >= group_iou with the group's strongest
 // window, box = mean of the group); a group of n windows gets confidence n / (n + neighbors_half),
-// and groups of fewer than min_neighbors windows are dropped.
+// and groups of fewer than min_neighbors windows are dropped. With a verifier (vehicle_verifier.hpp)
+// the confidence is instead its probability that the group's box holds a vehicle.
 #pragma once
 
 #include "core/params.hpp"
@@ -33,6 +34,7 @@ namespace hw {
 
 struct CascadeParams {
     std::string model;                  // path of the cascade XML; "" = the shipped model (filled in by Python)
+    std::string verifier;               // path of the verifier model; "" = the shipped one (Python), "off" = none
     RoadPriorParams road;               // scan area (keys in this section)
     double min_vehicle_height_m = 1.0;  // m; lowest vehicle box (a low car, partly hidden)
     double max_vehicle_height_m = 4.5;  // m; highest vehicle box (a truck)
@@ -47,6 +49,9 @@ struct CascadeParams {
         m.add("model", model, nullptr,
               "path of the OpenCV cascade XML; empty = the model shipped with Headway "
               "(app/models/vehicle_cascade.xml, recipe in docs/cascade.md)");
+        m.add("verifier", verifier, nullptr,
+              "path of the HOG + logistic-regression verifier judging every cascade detection; empty = the "
+              "model shipped with Headway (app/models/vehicle_verifier.yml); off = the cascade's neighbour count alone");
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
               "m; lowest vehicle box on a flat road; with the camera height it bounds how far below the "
@@ -70,8 +75,10 @@ struct CascadeDetection {
     cv::Rect2f box;     // px, whole vehicle as annotated
     int neighbors = 0;  // raw windows grouped
     float stage_sum = 0.f;  // the strongest window's last-stage sum
-    float confidence = 0.f; // 0..1, from neighbors
+    float confidence = 0.f; // 0..1: the verifier's probability, or from neighbors without one
 };
+
+class VehicleVerifier;
 
 class CascadeDetector {
 public:
@@ -83,6 +90,7 @@ public:
 private:
     CascadeParams p_;
     std::unique_ptr<cv::CascadeClassifier> cc_;
+    std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
     cv::Size win_;
 };
 
