@@ -84,6 +84,43 @@ def _cmd_config(args) -> int:
     return 0
 
 
+def _cmd_train(args) -> int:
+    if args.model == "verifier":
+        from app import config as configuration
+        from app.eval.tusimple_boxes import tusimple_config
+        from app.train import verifier
+
+        cfg = configuration.load(args.config) if args.config else tusimple_config(configuration.load(None))
+        verifier.train(args.data, args.cascade, args.out, cfg, every=args.every, c=args.c)
+        return 0
+    # `headway train cascade`: the Viola-Jones trainer (app/train/cascade, independent of the rest of app)
+    from app.train.cascade import TrainParams, train
+
+    try:
+        w, h = (int(v) for v in args.window.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--window {args.window!r}: give WIDTHxHEIGHT in pixels, e.g. 30x20") from None
+    if min(w, h) < 6:
+        raise ValueError(f"--window {args.window}: at least 6 px each way (OpenCV ignores a 1-px border)")
+    p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
+                    features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
+                    seed=args.seed, max_minutes=args.max_minutes)
+    log_fh = open(args.log, "w") if args.log else None
+
+    def log(line: str) -> None:
+        print(line, flush=True)
+        if log_fh:
+            log_fh.write(line + "\n")
+            log_fh.flush()
+
+    try:
+        train(args.data, args.out, p, log=log)
+    finally:
+        if log_fh:
+            log_fh.close()
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="headway", description="Camera-based vehicle detection, tracking and "
                                                             "forward-collision warning.")
@@ -114,6 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("images", nargs="+", help="image files")
     s.add_argument("--out", required=True, help="output JSON file")
     s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--detector", choices=["thesis", "cascade", "fused"], default="thesis",
+                   help="thesis: shadows + vertical edges (default); cascade: the trained Haar cascade; "
+                        "fused: both merged")
 
     s = sub.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM "
                                    "(the service, in a terminal)")
@@ -171,6 +211,30 @@ def build_parser() -> argparse.ArgumentParser:
                    help="compare two fleet runs' outputs drive by drive (FCW events, tracks, metrics, CAN)")
     # ---- end fleet ----
 
+    s = sub.add_parser("train", help="train a learned model from annotated images")
+    ts = s.add_subparsers(dest="model", required=True, metavar="MODEL")
+    t = ts.add_parser("cascade", help="a Viola-Jones Haar cascade (OpenCV cascade XML) for vehicles")
+    t.add_argument("--data", nargs="+", required=True,
+                   help="folders with annotation.json in the TuSimple velocity format (every vehicle boxed)")
+    t.add_argument("--out", required=True, help="cascade XML written after every stage")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--window", default="30x20", help="window WIDTHxHEIGHT, px (default 30x20)")
+    t.add_argument("--stages", type=int, default=20, help="most stages (default 20)")
+    t.add_argument("--num-pos", type=int, default=3000, help="positives per stage (default 3000)")
+    t.add_argument("--num-neg", type=int, default=3000, help="negatives per stage (default 3000)")
+    t.add_argument("--features", type=int, default=1500, help="random candidate features per stage (default 1500)")
+    t.add_argument("--min-hit-rate", type=float, default=0.995, help="per stage (default 0.995)")
+    t.add_argument("--max-false-alarm", type=float, default=0.5, help="per stage (default 0.5)")
+    t.add_argument("--max-minutes", type=float, default=55.0, help="no stage starts after this (default 55)")
+    t.add_argument("--log", help="also write the per-stage log here")
+    t = ts.add_parser("verifier", help="HOG + logistic regression judging the cascade's detections")
+    t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, as for the cascade)")
+    t.add_argument("--cascade", required=True, help="the cascade XML whose detections are judged")
+    t.add_argument("--out", required=True, help="verifier model (.yml)")
+    t.add_argument("--every", type=int, default=4, help="use every N-th image (default 4)")
+    t.add_argument("--c", type=float, default=10.0, help="inverse L2 regularisation (default 10)")
+    t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")
+
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
     c = cs.add_parser("check", help="validate FILE; prints what is wrong and exits 2")
@@ -215,6 +279,8 @@ def _dispatch(args) -> int:
         return run.main(args)
     if args.command == "config":
         return _cmd_config(args)
+    if args.command == "train":
+        return _cmd_train(args)
     if args.command == "eval":
         from app.eval import report
 

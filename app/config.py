@@ -209,9 +209,20 @@ def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = No
     return validate(merged, origin)
 
 
+# The Haar cascade trained by `headway train cascade` (recipe and log in docs/cascade.md).
+SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.xml"
+# Its second stage, trained by `headway train verifier` on the cascade's detections (docs/cascade.md).
+SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml"
+
+
 def core_sections(cfg: dict) -> dict:
-    """The part of a validated configuration that the C++ core takes."""
-    return {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
+    """The part of a validated configuration that the C++ core takes (cascade.model empty: the shipped one)."""
+    core = {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
+    if "cascade" in core and not core["cascade"].get("model"):
+        core["cascade"]["model"] = str(SHIPPED_CASCADE)
+    if "cascade" in core and not core["cascade"].get("verifier"):
+        core["cascade"]["verifier"] = str(SHIPPED_VERIFIER)
+    return core
 
 
 def source_spec(cfg: dict) -> dict:

@@ -23,6 +23,8 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("homography", c.homography);
     fn("parallax", c.parallax);
     fn("particles", c.particles);
+    fn("cascade", c.cascade);
+    fn("fuse", c.fuse);
 }
 
 } // namespace

@@ -3,7 +3,9 @@
 
 #include "base/params.hpp"
 #include "core/parts.hpp"
+#include "detect/cascade_detector.hpp"
 #include "detect/detector_parallax.hpp"
+#include "detect/fuse_detections.hpp"
 #include "detect/lane_features.hpp"
 #include "detect/verify.hpp"
 #include "fcw/lead_selection.hpp"
@@ -70,6 +72,8 @@ struct Config {
     HomographyParams homography;      //   road homography (DLT + Kalman)
     ParallaxSection parallax;         //   aligned-difference detector and its road band
     ParticleParams particles;         //   joint particle filter
+    CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
+    FuseParams fuse;                  // fused stage: cascade + shadow detections merged
 
     // Parses the JSON text; throws ConfigError naming the key on any problem.
     static Config from_json(const std::string &text);

@@ -2,6 +2,7 @@
 
 #include "base/stopwatch.hpp"
 #include "core/parallax_stage.hpp"
+#include "detect/fuse_detections.hpp"
 #include "detect/shadow.hpp"
 
 #include <stdexcept>
@@ -80,8 +81,9 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
     FrameOutput out;
     out.width = gray.cols;
     out.height = gray.rows;
-    if (stage != "lanes" && stage != "hypotheses" && stage != "detect")
-        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, homography, parallax");
+    if (stage != "lanes" && stage != "hypotheses" && stage != "detect" && stage != "cascade" && stage != "fused")
+        throw std::invalid_argument("unknown stage '" + stage +
+                                    "': one of lanes, hypotheses, detect, cascade, fused, homography, parallax");
     {
         Stopwatch sw;
         out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
@@ -113,6 +115,28 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
             t.box = h.box;
             t.confidence = h.score;
             out.tracks.push_back(t);
+        }
+    } else if (stage == "cascade" || stage == "fused") {
+        // The trained Haar cascade (detect/cascade_detector.hpp), alone or merged with the verified shadow
+        // detections (detect/fuse_detections.hpp). Loaded on first use: most compositions never need it.
+        Stopwatch sw;
+        if (!cascade_) cascade_ = std::make_unique<CascadeDetector>(cfg_.cascade);
+        const auto cdets = cascade_->detect(gray, out.lanes, cfg_.camera);
+        out.times.add("cascade", sw.ms());
+        auto add = [&](const cv::Rect2f &box, float confidence) {
+            TrackState t;
+            t.box = box;
+            t.confidence = confidence;
+            out.tracks.push_back(t);
+        };
+        if (stage == "cascade") {
+            for (const auto &d : cdets) add(d.box, d.confidence);
+        } else {
+            Stopwatch sv;
+            const auto hyps = shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow);
+            const auto dets = verify_hypotheses(gray, hyps, out.lanes, cfg_.camera, cfg_.verify);
+            out.times.add("verify", sv.ms());
+            for (const auto &d : fuse_detections(cdets, dets, cfg_.fuse)) add(d.box, d.score);
         }
     }
     if (stage != "lanes") {
