@@ -142,6 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", help="report folder (default reports/eval-PIPELINE)")
     s.add_argument("--config", help="configuration YAML")
 
+    s = sub.add_parser("calibrate", help="camera intrinsics and lens distortion from chessboard photos -> camera: YAML")
+    s.add_argument("images", nargs="+", help="chessboard photos from the camera, the board in different poses")
+    s.add_argument("--board", default="9x6", help="inner corners per row x per column (default 9x6)")
+    s.add_argument("--out", required=True, help="write the camera section here (.yaml)")
+
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
     c = cs.add_parser("check", help="validate FILE; prints what is wrong and exits 2")
@@ -182,6 +187,10 @@ def _dispatch(args) -> int:
         return bench.main(args)
     if args.command == "config":
         return _cmd_config(args)
+    if args.command == "calibrate":
+        from app import calibrate
+
+        return calibrate.main(args)
     if args.command == "eval":
         from app.eval import report
 

@@ -1,8 +1,9 @@
 """The tracks file: one JSON object per frame, the record of what Headway saw.
 
 {"frame", "t", "tracks": [{"id", "box": [l,t,r,b], "range_m", "lateral_m", "range_rate_mps", "ttc_s",
-"ttc_scale_s", "in_path"}], "lead_id", "fcw"} with null where a value is not available. Only confirmed
-tracks are written: they are what the rest of the system acts on.
+"ttc_scale_s", "in_path"}], "lead_id", "fcw", "calibration": {"pitch_deg", "yaw_deg", "height_m",
+"pitch_sigma_deg", "yaw_sigma_deg", "height_sigma_m", "updates", "active"}} with null where a value is not
+available. Only confirmed tracks are written: they are what the rest of the system acts on.
 """
 from __future__ import annotations
 
@@ -34,8 +35,12 @@ def frame_record(r: FrameResult, fcw_level: Optional[int] = None) -> dict:
         if t.confirmed
     ]
     level = r.fcw_level if fcw_level is None else fcw_level
-    return {"frame": r.frame, "t": round(r.t, 6), "tracks": tracks, "lead_id": r.lead_id,
-            "fcw": FCW_NAMES.get(level, "none")}
+    rec = {"frame": r.frame, "t": round(r.t, 6), "tracks": tracks, "lead_id": r.lead_id,
+           "fcw": FCW_NAMES.get(level, "none")}
+    if r.calibration is not None:
+        c = r.calibration
+        rec["calibration"] = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in c.items()}
+    return rec
 
 
 class TracksWriter:

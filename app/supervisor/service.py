@@ -56,6 +56,7 @@ class Service:
         self.ready_sent = False
         self.report = None
         self._status_warned = False
+        self._calibration = None  # the last frame's self-calibration estimate, for the status file
 
     def _open_mcu(self, stack: ExitStack):
         port = self.cfg["mcu"]["port"]
@@ -130,6 +131,7 @@ class Service:
                 self.health.on_result(now, latency_ms, r.image_stddev, r.image_change)
                 status = self.report.as_dict() if self.report else None
                 decision = sup.step(r, time.time(), pipe, status=status)
+                self._calibration = r.calibration
                 if tracks:
                     tracks.write(r, decision.level)
             if now >= next_status or r is None:
@@ -167,6 +169,8 @@ class Service:
         st = rep.as_dict()
         st.update(camera=rep.camera, source_state=core_health["source_state"],
                   frames_captured=core_health["frames_captured"], fcw=None)
+        if self._calibration is not None:
+            st["calibration"] = self._calibration
         try:
             write_status(self.cfg["service"]["status_file"], st)
         except OSError as exc:

@@ -5,6 +5,7 @@
 #include "detect/verify.hpp"
 #include "fcw/lead_selection.hpp"
 #include "geometry/horizon.hpp"
+#include "geometry/self_calibration.hpp"
 #include "geometry/track_kinematics.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/lane_tracker.hpp"
@@ -51,6 +52,7 @@ struct Config {
     VerifyParams verify;
     KalmanBoxParams kalman;
     HorizonParams horizon;
+    SelfCalibrationParams self_calibration;
     KinematicsParams kinematics;
     LeadParams lead;
     LaneFeatureParams road_features;  // parallax preset: lane-marking features

@@ -6,6 +6,7 @@
 #include "core/types.hpp"
 #include "fcw/lead_selection.hpp"
 #include "geometry/horizon.hpp"
+#include "geometry/self_calibration.hpp"
 #include "geometry/track_kinematics.hpp"
 #include "lanes/lane_tracker.hpp"
 #include "track/tracker.hpp"
@@ -41,11 +42,13 @@ private:
     LaneTracker lanes_;
     std::unique_ptr<VehicleTracker> tracker_;  // null for preset "none"
     ImageStatsMeter image_stats_;
+    SelfCalibration calib_;
     HorizonTracker horizon_;
     TrackKinematics kinematics_;
     LeadSelector lead_;
     std::atomic<double> ego_speed_mps_{NAN}, ego_yaw_rate_rps_{NAN};
     double last_t_s_ = -1e300;
+    double prev_t_s_ = NAN;  // the previous frame's time (yaw rate from the road motion)
 };
 
 } // namespace hw
