@@ -235,6 +235,11 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--c", type=float, default=10.0, help="inverse L2 regularisation (default 10)")
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")
 
+    s = sub.add_parser("calibrate", help="camera intrinsics and lens distortion from chessboard photos -> camera: YAML")
+    s.add_argument("images", nargs="+", help="chessboard photos from the camera, the board in different poses")
+    s.add_argument("--board", default="9x6", help="inner corners per row x per column (default 9x6)")
+    s.add_argument("--out", required=True, help="write the camera section here (.yaml)")
+
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
     c = cs.add_parser("check", help="validate FILE; prints what is wrong and exits 2")
@@ -281,6 +286,10 @@ def _dispatch(args) -> int:
         return _cmd_config(args)
     if args.command == "train":
         return _cmd_train(args)
+    if args.command == "calibrate":
+        from app import calibrate
+
+        return calibrate.main(args)
     if args.command == "eval":
         from app.eval import report
 

@@ -145,6 +145,8 @@ class FrameResult:
     road_motion: Optional[str] = None
     road_coast_frames: int = 0
     road_homography: Optional[np.ndarray] = None
+    # the camera as self-calibration has it: {pitch_deg, yaw_deg, height_m, *_sigma, updates, active}
+    calibration: Optional[dict] = None
     lane_width_m: Optional[float] = None   # ego-lane width, None unless both ego boundaries are known
     lane_offset_m: Optional[float] = None  # the car's centre right of the ego lane's centre, None unless both known
 
@@ -209,7 +211,17 @@ def _result(r: Any) -> FrameResult:
         road_coast_frames=int(r.road_coast_frames),
         road_homography=(None if r.road_motion == lib.HW_ROAD_NONE
                          else np.array([r.road_homography[i] for i in range(9)], dtype=float).reshape(3, 3)),
+        calibration=_calibration(r),
     )
+
+
+def _calibration(r: Any) -> Optional[dict]:
+    if math.isnan(r.calib_pitch_deg):
+        return None  # single-image stages: no calibration state
+    return {"pitch_deg": float(r.calib_pitch_deg), "yaw_deg": float(r.calib_yaw_deg),
+            "height_m": float(r.calib_height_m), "pitch_sigma_deg": float(r.calib_pitch_sigma_deg),
+            "yaw_sigma_deg": float(r.calib_yaw_sigma_deg), "height_sigma_m": float(r.calib_height_sigma_m),
+            "updates": int(r.calib_updates), "active": bool(r.calib_active)}
 
 
 def abi_version() -> int:

@@ -99,6 +99,7 @@ class RoadSpec:
     marking_width_m: float = 0.15
     dash_length_m: float = 3.0
     dash_gap_m: float = 9.0
+    markings: str = "painted"  # "none": bare asphalt, no painted lines (worn roads, lead without lanes)
     overpass: OverpassSpec | None = None
 
     @property
@@ -292,7 +293,8 @@ def _read_road(top: _Reader) -> RoadSpec:
         overpass = OverpassSpec(**_numbers(o, OverpassSpec, {
             "z_m": (5.0, 1000.0), "depth_m": (2.0, 60.0), "clearance_m": (4.5, 10.0), "thickness_m": (0.5, 4.0),
             "shadow_offset_m": (-30.0, 30.0)}))
-    return RoadSpec(lanes=lanes, ego_lane=ego_lane, overpass=overpass, **_numbers(r, RoadSpec, {
+    markings = r.string("markings", RoadSpec.markings, ("painted", "none"))
+    return RoadSpec(lanes=lanes, ego_lane=ego_lane, overpass=overpass, markings=markings, **_numbers(r, RoadSpec, {
         "lane_width_m": (2.5, 5.0), "shoulder_m": (0.2, 4.0), "marking_width_m": (0.08, 0.5),
         "dash_length_m": (0.5, 20.0), "dash_gap_m": (0.5, 30.0)}))
 

@@ -65,6 +65,7 @@ class Service:
         self.report = None
         self._status_warned = False
         self.can_session = None
+        self._calibration = None  # the last frame's self-calibration estimate, for the status file
 
     def _open_mcu(self, stack: ExitStack):
         port = self.cfg["mcu"]["port"]
@@ -141,6 +142,7 @@ class Service:
                 self.health.on_result(now, latency_ms, r.image_stddev, r.image_change)
                 status = self.report.as_dict() if self.report else None
                 decision = sup.step(r, time.time(), pipe, status=status)
+                self._calibration = r.calibration
                 if tracks:
                     tracks.write(r, decision.level)
             if now >= next_status or r is None:
@@ -180,6 +182,8 @@ class Service:
                   frames_captured=core_health["frames_captured"], fcw=None)
         if self.can_session is not None:
             st["can_input"] = self.can_session.input_counts()  # vehicle-bus frames read, used, dropped by reason
+        if self._calibration is not None:
+            st["calibration"] = self._calibration
         try:
             write_status(self.cfg["service"]["status_file"], st)
         except OSError as exc:

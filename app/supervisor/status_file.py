@@ -67,4 +67,15 @@ def format_status(status: Optional[dict], path: str, stale_after_s: float = STAL
                 "ego_speed", "mcu", "fcw", "lead_id", "can_input_drops"):
         if key in status:
             lines.append(f"{key}: {status[key]}")
+    if status.get("calibration"):
+        lines.append("calibration: " + format_calibration(status["calibration"]))
     return "\n".join(lines)
+
+
+def format_calibration(c: dict) -> str:
+    """The camera as self-calibration has it, with 1-sigma uncertainties."""
+    if not c.get("active"):
+        return f"off (configured pitch {c['pitch_deg']:.2f} deg, yaw {c['yaw_deg']:.2f} deg, height {c['height_m']:.2f} m)"
+    return (f"pitch {c['pitch_deg']:.2f} +- {c['pitch_sigma_deg']:.2f} deg, yaw {c['yaw_deg']:.2f} +- "
+            f"{c['yaw_sigma_deg']:.2f} deg, height {c['height_m']:.3f} +- {c['height_sigma_m']:.3f} m "
+            f"({c['updates']} frames used)")

@@ -144,6 +144,11 @@ struct FrameOutput {
     float total_ms = 0.f;
     float image_mean = kNaN, image_stddev = kNaN, image_change = kNaN;  // see capture/image_stats.hpp
     RoadMotion road;
+    // the camera's pitch, yaw and height as self-calibration has them, 1-sigma (geometry/self_calibration.hpp)
+    float calib_pitch_deg = kNaN, calib_yaw_deg = kNaN, calib_height_m = kNaN;
+    float calib_pitch_sigma_deg = kNaN, calib_yaw_sigma_deg = kNaN, calib_height_sigma_m = kNaN;
+    int calib_updates = 0;
+    bool calib_active = false;
 };
 
 } // namespace hw

@@ -165,6 +165,14 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->road_coast_frames = o.road.coast_frames;
     for (int i = 0; i < 9; ++i)
         r->road_homography[i] = r->road_motion == HW_ROAD_NONE ? NAN : float(o.road.H.val[i]);
+    r->calib_pitch_deg = o.calib_pitch_deg;
+    r->calib_yaw_deg = o.calib_yaw_deg;
+    r->calib_height_m = o.calib_height_m;
+    r->calib_pitch_sigma_deg = o.calib_pitch_sigma_deg;
+    r->calib_yaw_sigma_deg = o.calib_yaw_sigma_deg;
+    r->calib_height_sigma_m = o.calib_height_sigma_m;
+    r->calib_updates = o.calib_updates;
+    r->calib_active = o.calib_active ? 1 : 0;
 }
 
 cv::Mat wrap_gray(const uint8_t *gray, int32_t width, int32_t height, int32_t stride) {

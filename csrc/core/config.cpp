@@ -17,6 +17,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("verify", c.verify);
     fn("kalman", c.kalman);
     fn("horizon", c.horizon);
+    fn("self_calibration", c.self_calibration);
     fn("kinematics", c.kinematics);
     fn("lead", c.lead);
     fn("road_features", c.road_features);

@@ -11,6 +11,7 @@
 #include "fcw/lead_selection.hpp"
 #include "geometry/camera.hpp"
 #include "geometry/horizon.hpp"
+#include "geometry/self_calibration.hpp"
 #include "geometry/track_kinematics.hpp"
 #include "lanes/lane_tracker.hpp"
 #include "road/road_motion_stage.hpp"
@@ -66,6 +67,7 @@ struct Config {
     VerifyParams verify;
     KalmanBoxParams kalman;
     HorizonParams horizon;
+    SelfCalibrationParams self_calibration;
     KinematicsParams kinematics;
     LeadParams lead;
     LaneFeatureParams road_features;  // road-motion stage: lane-marking features

@@ -10,7 +10,8 @@
 namespace hw {
 
 Pipeline::Pipeline(const Config &cfg)
-    : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), parts_(make_parts(cfg)), horizon_(cfg.horizon, cfg.camera),
+    : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), parts_(make_parts(cfg)), calib_(cfg.self_calibration, cfg.camera),
+      horizon_(cfg.horizon, cfg.camera),
       kinematics_(cfg.kinematics, cfg.camera), lead_(cfg.lead, cfg.camera) {}
 
 void Pipeline::check_frame(const cv::Mat &gray) const {
@@ -57,6 +58,31 @@ FrameOutput Pipeline::process(const Frame &frame) {
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
         if (parts_.road) last_tracks_ = out.tracks;
     }
+    // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset)
+    EgoMotion ego{ego_speed_mps_, ego_yaw_rate_rps_};
+    if (!std::isfinite(ego.yaw_rate_rps) && out.road.state == RoadMotion::State::kAccepted)
+        ego.yaw_rate_rps = yaw_rate_of_road_motion(out.road.H, cfg_.camera, frame.t_s - prev_t_s_);
+    prev_t_s_ = frame.t_s;
+    {
+        Stopwatch sw;
+        calib_.update(out.lanes, ego.yaw_rate_rps, frame.t_s);
+        const CalibrationEstimate e = calib_.estimate();
+        if (e.active) {
+            const CameraParams cam = calib_.camera();
+            horizon_.set_camera(cam);
+            kinematics_.set_camera(cam);
+            lead_.set_camera(cam);
+        }
+        out.calib_active = e.active;
+        out.calib_pitch_deg = float(e.pitch_deg);
+        out.calib_yaw_deg = float(e.yaw_deg);
+        out.calib_height_m = float(e.height_m);
+        out.calib_pitch_sigma_deg = float(e.pitch_sigma_deg);
+        out.calib_yaw_sigma_deg = float(e.yaw_sigma_deg);
+        out.calib_height_sigma_m = float(e.height_sigma_m);
+        out.calib_updates = e.updates;
+        out.times.add("calibration", sw.ms());
+    }
     {
         Stopwatch sw;
         out.horizon_row = float(horizon_.update(out.lanes));
@@ -65,7 +91,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
     }
     {
         Stopwatch sw;
-        out.lead_id = lead_.update(out.tracks, out.lanes, EgoMotion{ego_speed_mps_, ego_yaw_rate_rps_});
+        out.lead_id = lead_.update(out.tracks, out.lanes, ego, out.horizon_row);
         out.times.add("lead", sw.ms());
     }
     out.total_ms = total.ms();
@@ -156,7 +182,12 @@ void Pipeline::reset() {
     if (parts_.road) parts_.road->reset();
     last_tracks_.clear();
     image_stats_.reset();
+    calib_.reset();
+    horizon_.set_camera(cfg_.camera);
     horizon_.reset();
+    kinematics_.set_camera(cfg_.camera);
+    lead_.set_camera(cfg_.camera);
+    prev_t_s_ = NAN;
     kinematics_.reset();
     lead_.reset();
     last_t_s_ = -1e300;

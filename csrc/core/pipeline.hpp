@@ -7,6 +7,7 @@
 #include "core/parts.hpp"
 #include "fcw/lead_selection.hpp"
 #include "geometry/horizon.hpp"
+#include "geometry/self_calibration.hpp"
 #include "geometry/track_kinematics.hpp"
 #include "lanes/lane_tracker.hpp"
 
@@ -46,11 +47,13 @@ private:
     std::vector<TrackState> last_tracks_;  // the tracker's output of the previous frame (road-motion stage)
     std::unique_ptr<CascadeDetector> cascade_;  // the "cascade" and "fused" stages, loaded on first use
     ImageStatsMeter image_stats_;
+    SelfCalibration calib_;
     HorizonTracker horizon_;
     TrackKinematics kinematics_;
     LeadSelector lead_;
     std::atomic<double> ego_speed_mps_{NAN}, ego_yaw_rate_rps_{NAN};
     double last_t_s_ = -1e300;
+    double prev_t_s_ = NAN;  // the previous frame's time (yaw rate from the road motion)
 };
 
 } // namespace hw

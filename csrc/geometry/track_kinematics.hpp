@@ -62,6 +62,7 @@ public:
     // Fills range_m, range_sigma_m, lateral_m, range_rate_mps, ttc_s, ttc_scale_s of every track.
     void update(std::vector<TrackState> &tracks, double horizon_row, double t_s);
     void reset() { state_.clear(); }
+    void set_camera(const CameraParams &cam) { cam_ = cam; }  // self-calibration's estimate
 
 private:
     struct State {

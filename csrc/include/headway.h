@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 4
+#define HW_ABI_VERSION 5
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -133,6 +133,13 @@ typedef struct {
     int32_t road_motion;
     int32_t road_coast_frames;
     float road_homography[9];
+    /* the camera as self-calibration has it (the configured one when self_calibration.enabled is false):
+     * pitch (deg, down positive), yaw (deg, right positive), height (m) and their 1-sigma uncertainties,
+     * the frames whose lane measurement was used, 1 when self-calibration runs */
+    float calib_pitch_deg, calib_yaw_deg, calib_height_m;
+    float calib_pitch_sigma_deg, calib_yaw_sigma_deg, calib_height_sigma_m;
+    int32_t calib_updates;
+    int32_t calib_active;
 } hw_frame_result;
 
 typedef struct {
