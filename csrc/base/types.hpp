@@ -11,6 +11,13 @@
 
 namespace hw {
 
+// Intersection over union of two boxes (0 when they do not overlap or both are empty).
+inline float box_iou(const cv::Rect2f &a, const cv::Rect2f &b) {
+    const float inter = (a & b).area();
+    const float uni = a.area() + b.area() - inter;
+    return uni > 0.f ? inter / uni : 0.f;
+}
+
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 // One gray frame as it leaves a frame source.

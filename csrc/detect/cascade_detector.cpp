@@ -26,11 +26,6 @@ CascadeDetector::~CascadeDetector() = default;
 
 namespace {
 
-float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
-    const float inter = (a & b).area();
-    return inter <= 0 ? 0.f : inter / (a.area() + b.area() - inter);
-}
-
 struct Raw {
     cv::Rect2f box;
     float weight;
@@ -93,7 +88,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         double l = 0, t = 0, r = 0, b = 0;
         int n = 0;
         for (size_t j = i; j < raw.size(); ++j) {
-            if (used[j] || iou(raw[i].box, raw[j].box) < p_.group_iou) continue;
+            if (used[j] || box_iou(raw[i].box, raw[j].box) < p_.group_iou) continue;
             used[j] = 1;
             ++n;
             l += raw[j].box.x; t += raw[j].box.y; r += raw[j].box.br().x; b += raw[j].box.br().y;

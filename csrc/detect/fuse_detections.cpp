@@ -4,13 +4,6 @@
 
 namespace hw {
 
-namespace {
-float box_iou(const cv::Rect2f &a, const cv::Rect2f &b) {
-    const float inter = (a & b).area();
-    return inter <= 0 ? 0.f : inter / (a.area() + b.area() - inter);
-}
-} // namespace
-
 std::vector<Detection> fuse_detections(const std::vector<CascadeDetection> &cascade,
                                        const std::vector<Detection> &shadow, const FuseParams &p) {
     std::vector<Detection> out;

@@ -11,12 +11,6 @@ namespace hw {
 
 namespace {
 
-float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
-    const float inter = (a & b).area();
-    const float uni = a.area() + b.area() - inter;
-    return uni > 0.f ? inter / uni : 0.f;
-}
-
 // Texture of the road under a bottom edge: mean (|S_x| + |S_y|) / 4 over a strip 0.15 widths high
 // two rows below it, divided by the strip's mean gray level; NaN when the strip leaves the image.
 float texture_below(const cv::Mat &gray, float left, float right, float bottom) {
@@ -102,7 +96,7 @@ std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<
     std::vector<Detection> out;
     for (const Detection &d : found) {
         bool overlapped = false;
-        for (const Detection &k : out) overlapped = overlapped || iou(d.box, k.box) > p.nms_iou;
+        for (const Detection &k : out) overlapped = overlapped || box_iou(d.box, k.box) > p.nms_iou;
         if (!overlapped) out.push_back(d);
     }
     return out;

@@ -89,12 +89,6 @@ void KalmanTracker::reset() {
 
 namespace {
 
-float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
-    const float inter = (a & b).area();
-    const float uni = a.area() + b.area() - inter;
-    return uni > 0.f ? inter / uni : 0.f;
-}
-
 // Quality of a measurement for the confidence: 0.5 when the weaker side just passes, towards 1.
 float side_quality(float side_excess) { return 1.f - 0.5f / std::sqrt(std::max(1.f, side_excess)); }
 
@@ -176,7 +170,7 @@ bool KalmanTracker::measure_by_detection(Track &t, std::vector<Hypothesis> &dets
     int best = -1;
     float best_iou = float(kalman_.match_iou);
     for (size_t i = 0; i < dets.size(); ++i) {
-        const float o = iou(pred, dets[i].box);
+        const float o = box_iou(pred, dets[i].box);
         if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
     }
     if (best < 0) return false;
@@ -224,7 +218,7 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
         for (const Track &t : tracks_) {
             const cv::Rect2f tb = box_of(t);
             // A detection on a tracked vehicle's body (window, bumper) is not a new vehicle either.
-            explained = explained || iou(tb, b) >= 0.2f ||
+            explained = explained || box_iou(tb, b) >= 0.2f ||
                         (foot.x >= tb.x && foot.x <= tb.x + tb.width && foot.y >= tb.y && foot.y <= tb.y + tb.height);
         }
         if (explained) continue;
@@ -250,7 +244,7 @@ void KalmanTracker::prune(const FrameContext &ctx) {
         for (size_t j = i + 1; j < tracks_.size(); ++j) {
             Track &a = tracks_[i], &b = tracks_[j];
             if (a.duplicate || b.duplicate) continue;
-            if (iou(box_of(a), box_of(b)) < kalman_.duplicate_iou) continue;
+            if (box_iou(box_of(a), box_of(b)) < kalman_.duplicate_iou) continue;
             Track &loser = (a.hits > b.hits || (a.hits == b.hits && a.id < b.id)) ? b : a;
             loser.duplicate = true;
         }
@@ -315,7 +309,7 @@ void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::v
             }
             const cv::Rect2f tb = box_of(t);
             for (size_t i = 0; i < dets.size(); ++i)
-                if (!used[i] && iou(tb, dets[i].box) >= kalman_.match_iou) {
+                if (!used[i] && box_iou(tb, dets[i].box) >= kalman_.match_iou) {
                     used[i] = true;
                     take_aspect(t, dets[i]);
                 }
