@@ -21,6 +21,10 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("homography", c.homography);
     fn("parallax", c.parallax);
     fn("particles", c.particles);
+    fn("phd", c.phd);
+    fn("gmphd", c.phd.phd);
+    fn("phd_features", c.phd.features);
+    fn("phd_ukf", c.phd.ukf);
 }
 
 } // namespace

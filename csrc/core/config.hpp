@@ -9,6 +9,7 @@
 #include "geometry/camera.hpp"
 #include "lanes/lane_tracker.hpp"
 #include "track/parallax_tracker.hpp"
+#include "track/phd_tracker.hpp"
 #include "track/thesis_tracker.hpp"
 
 #include <string>
@@ -26,9 +27,10 @@ struct PipelineParams {
     double debug_stall_after_s = 0.0;   // >0: the loop stops making progress after this many seconds (watchdog tests)
 
     void bind(ParamMap &m) {
-        m.add("preset", preset, "thesis|parallax|none",
+        m.add("preset", preset, "thesis|parallax|phd|none",
               "which detector + tracker runs: thesis (shadow + vertical edges + Kalman), parallax (road homography + "
-              "aligned-difference detector + joint particle filter, paper 000), none (lanes only)");
+              "aligned-difference detector + joint particle filter, paper 000), phd (shadow + vertical edges to find vehicles, "
+              "their feature points by a GM-PHD filter and a UKF per vehicle, paper 004), none (lanes only)");
         m.add("queue_capacity", queue_capacity, 1, 1024,
               "results; queue to the supervisor; small so a slow consumer sees fresh results, the oldest is dropped and counted");
         m.add("push_queue_capacity", push_queue_capacity, 1, 1024,
@@ -57,6 +59,7 @@ struct Config {
     HomographyParams homography;      //   road homography (DLT + Kalman)
     ParallaxTrackerParams parallax;   //   aligned-difference detector
     ParticleParams particles;         //   joint particle filter
+    PhdTrackerParams phd;             // phd preset (paper 004): the tracker; its parts in the next three sections
 
     // Parses the JSON text; throws ConfigError naming the key on any problem.
     static Config from_json(const std::string &text);

@@ -5,6 +5,7 @@
 #include "detect/verify.hpp"
 #include "track/parallax_stage.hpp"
 #include "track/parallax_tracker.hpp"
+#include "track/phd_tracker.hpp"
 #include "track/thesis_tracker.hpp"
 
 #include <stdexcept>
@@ -17,6 +18,8 @@ std::unique_ptr<VehicleTracker> make_tracker(const Config &c) {
     if (c.pipeline.preset == "thesis") return std::make_unique<ThesisTracker>(c.shadow, c.verify, c.kalman);
     if (c.pipeline.preset == "parallax")
         return std::make_unique<ParallaxTracker>(c.road_features, c.homography, c.parallax, c.particles, c.camera);
+    if (c.pipeline.preset == "phd")
+        return std::make_unique<PhdTracker>(c.shadow, c.verify, c.horizon, c.phd, c.camera);
     if (c.pipeline.preset == "none") return nullptr;
     throw ConfigError("pipeline.preset: unknown preset '" + c.pipeline.preset + "'");
 }
