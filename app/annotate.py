@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 
 from app.core import FrameResult
+from app.fcw_level import FcwLevel
 
 _LANE = (0, 200, 255)
 _TRACK = (0, 220, 0)
@@ -15,19 +16,20 @@ _LEAD = (0, 0, 255)
 _TRUTH = (255, 160, 0)
 
 
-def annotate(gray: np.ndarray, r: FrameResult, truth: Optional[list[dict]] = None) -> np.ndarray:
-    """A BGR picture of `gray` with the result drawn on it (truth boxes thin, in blue, if given)."""
+def annotate(gray: np.ndarray, r: FrameResult, truth: Optional[list[dict]] = None, fcw_level: int = FcwLevel.NONE) -> np.ndarray:
+    """A BGR picture of `gray` with the result drawn on it (truth boxes thin, in blue, if given; the FCW
+    state machine's level, decided in the supervisor, as a caption)."""
     img = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
     for lane in r.lanes:
-        p0 = (int(round(lane.x_bottom)), int(round(lane.y_bottom)))
-        p1 = (int(round(lane.x_top)), int(round(lane.y_top)))
-        cv2.line(img, p0, p1, _LANE, 2 if lane.observed else 1, cv2.LINE_AA)
+        pts = lane.points or [(lane.x_bottom, lane.y_bottom), (lane.x_top, lane.y_top)]
+        cv2.polylines(img, [np.round(np.array(pts)).astype(np.int32)], False, _LANE, 2 if lane.observed else 1,
+                      cv2.LINE_AA)
     for t in truth or []:
         l, tp, rt, b = (int(round(v)) for v in t["box"])
         cv2.rectangle(img, (l, tp), (rt, b), _TRUTH, 1)
     for t in r.tracks:
         l, tp, rt, b = (int(round(v)) for v in t.box)
-        color = _LEAD if r.lead_id is not None and t.id == r.lead_id else (_TRACK if t.confirmed else _TENTATIVE)
+        color = _LEAD if t is r.lead else (_TRACK if t.confirmed else _TENTATIVE)
         cv2.rectangle(img, (l, tp), (rt, b), color, 2 if t.confirmed else 1)
         label = f"#{t.id}" if t.id >= 0 else ""
         if t.range_m is not None:
@@ -38,8 +40,8 @@ def annotate(gray: np.ndarray, r: FrameResult, truth: Optional[list[dict]] = Non
             cv2.putText(img, label, (l, max(10, tp - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.4, color, 1, cv2.LINE_AA)
     status = f"frame {r.frame}  {r.total_ms:.2f} ms" + ("  full detection" if r.full_detection else "")
     cv2.putText(img, status, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
-    if r.fcw_level > 0:
-        text = "BRAKE!" if r.fcw_level == 2 else "caution"
+    if fcw_level != FcwLevel.NONE:
+        text = "BRAKE!" if fcw_level == FcwLevel.WARNING else "caution"
         cv2.putText(img, text, (img.shape[1] // 2 - 60, 40), cv2.FONT_HERSHEY_DUPLEX, 1.0, _LEAD, 2, cv2.LINE_AA)
     return img
 

@@ -103,7 +103,7 @@ def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, co
             c0 = time.process_time()
             sup.step(r, time.time(), pipe)
             cpu_ms.append((time.process_time() - c0) * 1000.0)
-            latencies.append((monotonic_s() - r.t) * 1000.0)
+            latencies.append((monotonic_s() - r.t_s) * 1000.0)
         stop.set()
         cam.join()
         dropped = pipe.health()["results_dropped"]

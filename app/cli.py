@@ -42,7 +42,7 @@ def _cmd_status(args) -> int:
     import json
     import os
 
-    from app.supervisor.status_file import format_status, read_status
+    from app.supervisor.status_file import StatusFileError, format_status, is_stale, read_status
 
     path = args.file
     if path is None:
@@ -52,9 +52,15 @@ def _cmd_status(args) -> int:
 
         cfg = configuration.load(args.config if os.path.exists(args.config) else None)
         path = cfg["service"]["status_file"]
-    st = read_status(path)
+    try:
+        st = read_status(path)
+    except StatusFileError as exc:
+        print(f"state: unknown\nheadway: {exc}")
+        return 1
     print(json.dumps(st, indent=1) if args.json and st else format_status(st, path))
-    return 0 if st else 1
+    if st is None:
+        return 1
+    return 3 if is_stale(st) else 0  # 3: state unknown (as systemctl's "not running")
 
 
 def _cmd_config(args) -> int:
@@ -67,10 +73,51 @@ def _cmd_config(args) -> int:
         print(configuration.markdown())
         return 0
     cfg = configuration.load(args.file)
-    from app.core import Pipeline
+    from app.config_check import problems
 
-    Pipeline(configuration.core_sections(cfg)).close()  # the core checks its sections too
+    found = problems(cfg)  # everything that would stop the service (the core checks its sections too)
+    for line in found:
+        print(f"headway: configuration error: {args.file}: {line}", file=sys.stderr)
+    if found:
+        return 2
     print(f"{args.file}: ok")
+    return 0
+
+
+def _cmd_train(args) -> int:
+    if args.model == "verifier":
+        from app import config as configuration
+        from app.eval.tusimple_boxes import tusimple_config
+        from app.train import verifier
+
+        cfg = configuration.load(args.config) if args.config else tusimple_config(configuration.load(None))
+        verifier.train(args.data, args.cascade, args.out, cfg, every=args.every, c=args.c)
+        return 0
+    # `headway train cascade`: the Viola-Jones trainer (app/train/cascade, independent of the rest of app)
+    from app.train.cascade import TrainParams, train
+
+    try:
+        w, h = (int(v) for v in args.window.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--window {args.window!r}: give WIDTHxHEIGHT in pixels, e.g. 30x20") from None
+    if min(w, h) < 6:
+        raise ValueError(f"--window {args.window}: at least 6 px each way (OpenCV ignores a 1-px border)")
+    p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
+                    features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
+                    seed=args.seed, max_minutes=args.max_minutes)
+    log_fh = open(args.log, "w") if args.log else None
+
+    def log(line: str) -> None:
+        print(line, flush=True)
+        if log_fh:
+            log_fh.write(line + "\n")
+            log_fh.flush()
+
+    try:
+        train(args.data, args.out, p, log=log)
+    finally:
+        if log_fh:
+            log_fh.close()
     return 0
 
 
@@ -92,7 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("replay", help="run a video file, an image folder or a scenario through the pipeline")
     s.add_argument("source", help="video file, image folder (give --fps) or scenario")
     s.add_argument("--config", help="configuration YAML (default: built-in defaults)")
-    s.add_argument("--fps", type=float, help="frame rate of an image folder")
+    s.add_argument("--fps", type=float, help="frame rate of an image folder, or to override a video's own "
+                                              "(0.1 to 1000 frames/s)")
     s.add_argument("--out-video", help="write an annotated video here (.mp4)")
     s.add_argument("--tracks", help="write the tracks here (.jsonl, one line per frame)")
     s.add_argument("--can-in", help="vehicle CAN log replayed on the frame clock (.log candump, .asc, .blf); "
@@ -103,6 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("images", nargs="+", help="image files")
     s.add_argument("--out", required=True, help="output JSON file")
     s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--detector", choices=["thesis", "cascade", "fused"], default="thesis",
+                   help="thesis: shadows + vertical edges (default); cascade: the trained Haar cascade; "
+                        "fused: both merged")
 
     s = sub.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM "
                                    "(the service, in a terminal)")
@@ -135,12 +186,59 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seconds", type=float, default=10.0, help="length of the --latency run")
 
     s = sub.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
-    s.add_argument("--pipeline", default="thesis", help="preset to evaluate (default thesis)")
+    s.add_argument("--pipeline", default="thesis",
+                   help="preset (named composition of detector and tracker parts) to evaluate: thesis, parallax, "
+                        "parallax_kalman, shadow_particles, phd (default thesis)")
     s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range,fcw,road_motion (default all)")
     s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
     s.add_argument("--out", help="report folder (default reports/eval-PIPELINE)")
     s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--workers", type=int, help="run the synthetic and FCW scenarios on a local Dask cluster of N "
+                                               "worker processes (docs/fleet.md)")
+    s.add_argument("--scheduler", help="... or on an existing Dask cluster (tcp://HOST:8786)")
+
+    # ---- headway fleet (app/fleet/) ----
+    s = sub.add_parser("fleet", help="replay many drives in parallel on Dask (local or an existing cluster); "
+                                     "one report; --compare two runs")
+    s.add_argument("manifest", nargs="?", help="manifest YAML: one entry per drive (docs/fleet.md)")
+    s.add_argument("--out", help="output folder: drives/NAME/ per drive, report.md, report.json")
+    s.add_argument("--scheduler", help="address of an existing Dask scheduler, e.g. tcp://HOST:8786 "
+                                       "(default: a local cluster on this machine)")
+    s.add_argument("--workers", type=int, help="local cluster: worker processes (default: one per core)")
+    s.add_argument("--config", help="configuration YAML under every drive's own overrides")
+    s.add_argument("--compare", nargs=2, metavar=("OLD_DIR", "NEW_DIR"),
+                   help="compare two fleet runs' outputs drive by drive (FCW events, tracks, metrics, CAN)")
+    # ---- end fleet ----
+
+    s = sub.add_parser("train", help="train a learned model from annotated images")
+    ts = s.add_subparsers(dest="model", required=True, metavar="MODEL")
+    t = ts.add_parser("cascade", help="a Viola-Jones Haar cascade (OpenCV cascade XML) for vehicles")
+    t.add_argument("--data", nargs="+", required=True,
+                   help="folders with annotation.json in the TuSimple velocity format (every vehicle boxed)")
+    t.add_argument("--out", required=True, help="cascade XML written after every stage")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--window", default="30x20", help="window WIDTHxHEIGHT, px (default 30x20)")
+    t.add_argument("--stages", type=int, default=20, help="most stages (default 20)")
+    t.add_argument("--num-pos", type=int, default=3000, help="positives per stage (default 3000)")
+    t.add_argument("--num-neg", type=int, default=3000, help="negatives per stage (default 3000)")
+    t.add_argument("--features", type=int, default=1500, help="random candidate features per stage (default 1500)")
+    t.add_argument("--min-hit-rate", type=float, default=0.995, help="per stage (default 0.995)")
+    t.add_argument("--max-false-alarm", type=float, default=0.5, help="per stage (default 0.5)")
+    t.add_argument("--max-minutes", type=float, default=55.0, help="no stage starts after this (default 55)")
+    t.add_argument("--log", help="also write the per-stage log here")
+    t = ts.add_parser("verifier", help="HOG + logistic regression judging the cascade's detections")
+    t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, as for the cascade)")
+    t.add_argument("--cascade", required=True, help="the cascade XML whose detections are judged")
+    t.add_argument("--out", required=True, help="verifier model (.yml)")
+    t.add_argument("--every", type=int, default=4, help="use every N-th image (default 4)")
+    t.add_argument("--c", type=float, default=10.0, help="inverse L2 regularisation (default 10)")
+    t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")
+
+    s = sub.add_parser("calibrate", help="camera intrinsics and lens distortion from chessboard photos -> camera: YAML")
+    s.add_argument("images", nargs="+", help="chessboard photos from the camera, the board in different poses")
+    s.add_argument("--board", default="9x6", help="inner corners per row x per column (default 9x6)")
+    s.add_argument("--out", required=True, help="write the camera section here (.yaml)")
 
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
@@ -180,8 +278,18 @@ def _dispatch(args) -> int:
         from app import bench
 
         return bench.main(args)
+    if args.command == "fleet":
+        from app.fleet import run
+
+        return run.main(args)
     if args.command == "config":
         return _cmd_config(args)
+    if args.command == "train":
+        return _cmd_train(args)
+    if args.command == "calibrate":
+        from app import calibrate
+
+        return calibrate.main(args)
     if args.command == "eval":
         from app.eval import report
 

@@ -9,6 +9,8 @@ wrong types and out-of-range values are rejected with a message that names the f
 from __future__ import annotations
 
 import copy
+import difflib
+import functools
 from pathlib import Path
 from typing import Any, Optional, Union
 
@@ -17,6 +19,8 @@ import yaml
 from app.can.config_schema import CAN_SCHEMA
 from app.core import core_schema
 from app.fcw import FCW_SCHEMA
+from app.recording import FPS_MAX, FPS_MIN
+from app.safe_yaml import YamlLimitError, load_yaml, short, short_name
 from app.schema import key as _key
 from app.supervisor.health import HEALTH_SCHEMA
 
@@ -35,7 +39,7 @@ SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
         "index": _key(0, "FireWire: index of the camera on the bus (when guid is empty)", 0, 63),
         "guid": _key("", "FireWire: the camera's GUID in hex; empty = use index"),
         "fps": _key(30.0, "frames/s asked of the camera; for a folder, the rate its images were taken at",
-                    0.1, 1000.0),
+                    FPS_MIN, FPS_MAX),
         "pixel_format": _key("", "V4L2 FOURCC such as YUYV, MJPG or GREY; empty = the driver's default"),
         "path": _key("", "video file, image folder or FIFO for kind video / folder / fifo"),
         "wait_for_device": _key(True, "start even if the camera is not there yet and keep reconnecting "
@@ -61,6 +65,34 @@ SUPERVISOR_SCHEMA: dict[str, dict[str, dict]] = {
 }
 
 
+def _fcw_order(cfg: dict) -> Optional[str]:
+    f = cfg["fcw"]
+    if f["ttc_warning_s"] >= f["ttc_prewarning_s"]:
+        return (f"fcw.ttc_warning_s ({f['ttc_warning_s']:g}) must be below fcw.ttc_prewarning_s "
+                f"({f['ttc_prewarning_s']:g}), or the pre-warning is never given: lower ttc_warning_s or raise "
+                f"ttc_prewarning_s")
+    return None
+
+
+def _mcu_timing(cfg: dict) -> Optional[str]:
+    m = cfg["mcu"]
+    if m["silent_after_s"] <= m["heartbeat_s"]:
+        return (f"mcu.silent_after_s ({m['silent_after_s']:g}) must be above mcu.heartbeat_s ({m['heartbeat_s']:g}), "
+                f"or every heartbeat is late: make silent_after_s several heartbeats")
+    return None
+
+
+def _source_path(cfg: dict) -> Optional[str]:
+    src = cfg["source"]
+    if src["kind"] in ("video", "folder", "fifo") and not src["path"]:
+        return f"source.path: required for source.kind {src['kind']}"
+    return None
+
+
+# Rules between keys, checked after every key is valid alone; each says what to change.
+CROSS_FIELD_RULES = (_fcw_order, _mcu_timing, _source_path)
+
+
 def schema() -> dict[str, dict[str, dict]]:
     """Every key of the configuration: {section: {key: {default, type, min, max, choices, doc}}}."""
     s = core_schema()
@@ -68,34 +100,58 @@ def schema() -> dict[str, dict[str, dict]]:
     return s
 
 
+@functools.lru_cache(maxsize=1)
+def _registry() -> dict[str, dict[str, dict]]:
+    """schema() built once (the core's part is compiled in): read only, for validation."""
+    return schema()
+
+
 def defaults() -> dict[str, dict[str, Any]]:
-    return {sec: {k: d["default"] for k, d in keys.items()} for sec, keys in schema().items()}
+    return {sec: {k: d["default"] for k, d in keys.items()} for sec, keys in _registry().items()}
 
 
 def _check_value(path: str, value: Any, spec: dict) -> Any:
     t = spec["type"]
+    if spec.get("list"):  # names, as a YAML list or one string separated by commas; kept as that string
+        names = value.split(",") if isinstance(value, str) else value
+        if not isinstance(names, list) or not all(isinstance(v, str) for v in names):
+            raise ConfigFileError(f"{path}: expected a list of names, got {short(value)}")
+        names = [v.strip() for v in names if v.strip()]
+        for v in names:
+            if "choices" in spec and v not in spec["choices"].split("|"):
+                raise ConfigFileError(f"{path}: {v!r} is not one of {_choices(spec)}")
+        return ",".join(names)
     if t == "bool":
         if not isinstance(value, bool):
-            raise ConfigFileError(f"{path}: expected true or false, got {value!r}")
+            raise ConfigFileError(f"{path}: expected true or false, got {short(value)}")
         return value
     if t == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigFileError(f"{path}: expected an integer, got {value!r}")
+            raise ConfigFileError(f"{path}: expected an integer, got {short(value)}")
     elif t == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigFileError(f"{path}: expected a number, got {value!r}")
+            raise ConfigFileError(f"{path}: expected a number, got {short(value)}")
         value = float(value)
     elif t == "str":
         if isinstance(value, int) and not isinstance(value, bool) and path.endswith("source.device"):
             value = str(value)  # `device: 0` means /dev/video0 by index
         if not isinstance(value, str):
-            raise ConfigFileError(f"{path}: expected a string, got {value!r}")
+            raise ConfigFileError(f"{path}: expected a string, got {short(value)}")
         if "choices" in spec and value not in spec["choices"].split("|"):
-            raise ConfigFileError(f"{path}: {value!r} is not one of {spec['choices'].replace('|', ', ')}")
+            raise ConfigFileError(f"{path}: {short(value)} is not one of {spec['choices'].replace('|', ', ')}")
         return value
     if "min" in spec and not (spec["min"] <= value <= spec["max"]):
-        raise ConfigFileError(f"{path}: {value!r} is outside [{spec['min']}, {spec['max']}]")
+        raise ConfigFileError(f"{path}: {short(value)} is outside [{spec['min']}, {spec['max']}]")
     return value
+
+
+def _known(name: Any, options) -> str:
+    """The known names when they are few, else the closest ones: an error line stays short."""
+    known = ", ".join(sorted(options))
+    if len(known) <= 160:
+        return f"known: {known}"
+    close = difflib.get_close_matches(str(name)[:60], sorted(options), n=3)
+    return (f"did you mean {' or '.join(close)}? " if close else "") + "`headway config default` lists every key"
 
 
 def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[str, Any]]:
@@ -104,20 +160,35 @@ def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[s
         overrides = {}
     if not isinstance(overrides, dict):
         raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
-    sch = schema()
+    sch = _registry()
     cfg = defaults()
     for sec, values in overrides.items():
         if sec not in sch:
-            raise ConfigFileError(f"{origin}: {sec}: unknown section (known: {', '.join(sorted(sch))})")
+            raise ConfigFileError(f"{origin}: {short_name(sec)}: unknown section ({_known(sec, sch)})")
         if values is None:
             continue
         if not isinstance(values, dict):
             raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
         for key, value in values.items():
             if key not in sch[sec]:
-                raise ConfigFileError(f"{origin}: {sec}.{key}: unknown key (known: {', '.join(sorted(sch[sec]))})")
+                raise ConfigFileError(f"{origin}: {sec}.{short_name(key)}: unknown key ({_known(key, sch[sec])})")
             cfg[sec][key] = _check_value(f"{origin}: {sec}.{key}", value, sch[sec][key])
+    for rule in CROSS_FIELD_RULES:
+        problem = rule(cfg)
+        if problem:
+            raise ConfigFileError(f"{origin}: {problem}")
     return cfg
+
+
+def parse(text: str, origin: str = "configuration") -> dict:
+    """The sections of a configuration text (not yet validated); ConfigFileError if it is not one."""
+    try:
+        data = load_yaml(text) or {}
+    except YamlLimitError as exc:
+        raise ConfigFileError(f"{origin}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
+    return data
 
 
 def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = None) -> dict[str, dict[str, Any]]:
@@ -129,22 +200,29 @@ def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = No
         p = Path(path)
         if not p.is_file():
             raise ConfigFileError(f"{origin}: no such file")
-        try:
-            data = yaml.safe_load(p.read_text()) or {}
-        except yaml.YAMLError as exc:
-            raise ConfigFileError(f"{origin}: not valid YAML: {exc}".replace("\n", " ")) from None
-        if not isinstance(data, dict):
-            raise ConfigFileError(f"{origin}: expected a mapping of sections (camera:, source:, ...)")
+        data = parse(p.read_text(errors="replace"), origin)
     merged = copy.deepcopy(data)
     for sec, values in (overrides or {}).items():
-        merged.setdefault(sec, {})
-        merged[sec] = {**(merged[sec] or {}), **values}
+        if not isinstance(merged.get(sec) or {}, dict):
+            raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
+        merged[sec] = {**(merged.get(sec) or {}), **values}
     return validate(merged, origin)
 
 
+# The Haar cascade trained by `headway train cascade` (recipe and log in docs/cascade.md).
+SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.xml"
+# Its second stage, trained by `headway train verifier` on the cascade's detections (docs/cascade.md).
+SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml"
+
+
 def core_sections(cfg: dict) -> dict:
-    """The part of a validated configuration that the C++ core takes."""
-    return {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
+    """The part of a validated configuration that the C++ core takes (cascade.model empty: the shipped one)."""
+    core = {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
+    if "cascade" in core and not core["cascade"].get("model"):
+        core["cascade"]["model"] = str(SHIPPED_CASCADE)
+    if "cascade" in core and not core["cascade"].get("verifier"):
+        core["cascade"]["verifier"] = str(SHIPPED_VERIFIER)
+    return core
 
 
 def source_spec(cfg: dict) -> dict:
@@ -183,6 +261,20 @@ def scaled_camera(camera: dict, width: int, height: int) -> dict:
     return cam
 
 
+def _choices(spec: dict) -> str:
+    """A key's allowed values for people (an empty name, "keep the preset's", is left out)."""
+    return ", ".join(c for c in spec.get("choices", "").split("|") if c)
+
+
+def frame_size_problem(width: int, height: int) -> Optional[str]:
+    """Why frames of this size cannot be processed (outside the camera's width/height range), or None."""
+    cam = schema()["camera"]
+    lo_w, hi_w, lo_h, hi_h = cam["width"]["min"], cam["width"]["max"], cam["height"]["min"], cam["height"]["max"]
+    if lo_w <= width <= hi_w and lo_h <= height <= hi_h:
+        return None
+    return f"{width}x{height} px: frames must be {lo_w}x{lo_h} to {hi_w}x{hi_h} px"
+
+
 def default_yaml() -> str:
     """The documented default configuration, every key with its reason (for `headway config default`)."""
     lines = ["# Headway configuration. Give only the keys you change; the rest are these defaults.", ""]
@@ -190,7 +282,7 @@ def default_yaml() -> str:
         lines.append(f"{sec}:")
         for key, spec in keys.items():
             rng = f" [{spec['min']}, {spec['max']}]" if "min" in spec else ""
-            ch = f" one of {spec['choices'].replace('|', ', ')}" if "choices" in spec else ""
+            ch = f" one of {_choices(spec)}" if "choices" in spec else ""
             lines.append(f"  # {spec['doc']}{rng}{ch}")
             lines.append(f"  {key}: {yaml.safe_dump(spec['default'], default_flow_style=True).strip().removesuffix('...').strip()}")
         lines.append("")
@@ -205,7 +297,7 @@ def markdown() -> str:
     for sec, keys in schema().items():
         out += [f"## `{sec}`", "", "| key | default | range | meaning |", "| --- | --- | --- | --- |"]
         for key, spec in keys.items():
-            rng = f"{spec['min']} .. {spec['max']}" if "min" in spec else spec.get("choices", "").replace("|", ", ")
+            rng = f"{spec['min']} .. {spec['max']}" if "min" in spec else _choices(spec)
             default = spec["default"] if spec["default"] != "" else '""'
             out.append(f"| `{key}` | `{default}` | {rng} | {spec['doc'].replace('|', '/')} |")
         out.append("")

@@ -75,6 +75,9 @@ def _check(status: int) -> None:
         raise _ERRORS.get(status, CoreError)(msg or ffi.string(lib.hw_error_message(status)).decode())
 
 
+_LANE_UNKNOWN = -1000  # hw_track.lane_index when the lane is not known (in_path: -1)
+
+
 def _opt(x: float) -> Optional[float]:
     """NaN means "not available" in the core; None in Python."""
     x = float(x)
@@ -83,21 +86,24 @@ def _opt(x: float) -> Optional[float]:
 
 @dataclass
 class Track:
+    """One vehicle as the core reports it: the one track record on the Python side (the FCW's lead, the
+    tracks file and the CAN objects read it). Units in the names; None = not available (NaN and the ABI's
+    "unknown" values are turned into None here and nowhere else)."""
     id: int
     confirmed: bool
     age_frames: int
     box: tuple[float, float, float, float]  # left, top, right, bottom (px)
-    confidence: float
-    vx_px_s: Optional[float]
+    confidence: float                       # 0..1
+    vx_px_s: Optional[float]                # image velocity of the bottom centre
     vy_px_s: Optional[float]
     range_m: Optional[float]
     range_sigma_m: Optional[float]
-    lateral_m: Optional[float]
-    range_rate_mps: Optional[float]
+    lateral_m: Optional[float]              # right positive
+    range_rate_mps: Optional[float]         # negative when closing
     range_accel_mps2: Optional[float]
-    ttc_s: Optional[float]
-    ttc_scale_s: Optional[float]
-    lane_index: Optional[int]
+    ttc_s: Optional[float]                  # range-based time to collision
+    ttc_scale_s: Optional[float]            # scale-based
+    lane_index: Optional[int]               # 0 ego lane, -1 left, +1 right ...
     in_path: Optional[bool]
 
 
@@ -109,13 +115,16 @@ class Lane:
     y_top: float
     position: int  # -2 outer left, -1 ego left, +1 ego right, +2 outer right
     observed: bool
+    # the boundary as it bends with the road: image points (x, y) from the bottom point to the top point,
+    # straight lines between them
+    points: list[tuple[float, float]] = field(default_factory=list)
 
 
 @dataclass
 class FrameResult:
     frame: int
-    t: float
-    t_done: float
+    t_s: float          # capture time (monotonic clock for live sources, media time otherwise)
+    t_done_s: float     # monotonic clock when the core finished the frame
     width: int
     height: int
     events: list[str]
@@ -124,8 +133,7 @@ class FrameResult:
     lanes: list[Lane]
     vanishing_point: Optional[tuple[float, float]]
     horizon_row: Optional[float]
-    lead_id: Optional[int]
-    fcw_level: int
+    lead: Optional[Track]  # the in-path vehicle the FCW watches: one of `tracks`, None if there is none
     stages: dict[str, float] = field(default_factory=dict)
     total_ms: float = 0.0
     image_mean: Optional[float] = None     # gray level
@@ -137,6 +145,14 @@ class FrameResult:
     road_motion: Optional[str] = None
     road_coast_frames: int = 0
     road_homography: Optional[np.ndarray] = None
+    # the camera as self-calibration has it: {pitch_deg, yaw_deg, height_m, *_sigma, updates, active}
+    calibration: Optional[dict] = None
+    lane_width_m: Optional[float] = None   # ego-lane width, None unless both ego boundaries are known
+    lane_offset_m: Optional[float] = None  # the car's centre right of the ego lane's centre, None unless both known
+
+    @property
+    def lead_id(self) -> Optional[int]:
+        return None if self.lead is None else self.lead.id
 
 
 def _result(r: Any) -> FrameResult:
@@ -159,20 +175,22 @@ def _result(r: Any) -> FrameResult:
                 range_accel_mps2=_opt(t.range_accel_mps2),
                 ttc_s=_opt(t.ttc_s),
                 ttc_scale_s=_opt(t.ttc_scale_s),
-                lane_index=None if t.lane_index == -1000 else int(t.lane_index),
+                lane_index=None if t.lane_index == _LANE_UNKNOWN else int(t.lane_index),
                 in_path=None if t.in_path < 0 else bool(t.in_path),
             )
         )
     lanes = [
-        Lane(float(l.x_bottom), float(l.y_bottom), float(l.x_top), float(l.y_top), int(l.position), bool(l.observed))
+        Lane(float(l.x_bottom), float(l.y_bottom), float(l.x_top), float(l.y_top), int(l.position), bool(l.observed),
+             [(float(l.px[j]), float(l.py[j])) for j in range(l.n_points)])
         for l in (r.lanes[i] for i in range(r.n_lanes))
     ]
     vp = None if math.isnan(r.vanishing_x) else (float(r.vanishing_x), float(r.vanishing_y))
+    lead = next((t for t in tracks if t.id == r.lead_id), None) if r.lead_id >= 0 else None
     stages = {ffi.string(r.stages[i].name).decode(): float(r.stages[i].ms) for i in range(r.n_stages)}
     return FrameResult(
         frame=int(r.frame_number),
-        t=float(r.t_capture_s),
-        t_done=float(r.t_done_s),
+        t_s=float(r.t_capture_s),
+        t_done_s=float(r.t_done_s),
         width=int(r.width),
         height=int(r.height),
         events=[name for bit, name in EVENTS.items() if r.events & bit],
@@ -180,9 +198,10 @@ def _result(r: Any) -> FrameResult:
         tracks=tracks,
         lanes=lanes,
         vanishing_point=vp,
+        lane_width_m=_opt(r.lane_width_m),
+        lane_offset_m=_opt(r.lane_offset_m),
         horizon_row=_opt(r.horizon_row),
-        lead_id=None if r.lead_id < 0 else int(r.lead_id),
-        fcw_level=int(r.fcw_level),
+        lead=lead,
         stages=stages,
         total_ms=float(r.total_ms),
         image_mean=_opt(r.image_mean),
@@ -192,7 +211,17 @@ def _result(r: Any) -> FrameResult:
         road_coast_frames=int(r.road_coast_frames),
         road_homography=(None if r.road_motion == lib.HW_ROAD_NONE
                          else np.array([r.road_homography[i] for i in range(9)], dtype=float).reshape(3, 3)),
+        calibration=_calibration(r),
     )
+
+
+def _calibration(r: Any) -> Optional[dict]:
+    if math.isnan(r.calib_pitch_deg):
+        return None  # single-image stages: no calibration state
+    return {"pitch_deg": float(r.calib_pitch_deg), "yaw_deg": float(r.calib_yaw_deg),
+            "height_m": float(r.calib_height_m), "pitch_sigma_deg": float(r.calib_pitch_sigma_deg),
+            "yaw_sigma_deg": float(r.calib_yaw_sigma_deg), "height_sigma_m": float(r.calib_height_sigma_m),
+            "updates": int(r.calib_updates), "active": bool(r.calib_active)}
 
 
 def abi_version() -> int:
@@ -200,7 +229,7 @@ def abi_version() -> int:
 
 
 def monotonic_s() -> float:
-    """The core's monotonic clock (the clock of live capture timestamps and ``t_done``)."""
+    """The core's monotonic clock (the clock of live capture timestamps and ``t_done_s``)."""
     return float(lib.hw_monotonic_s())
 
 
@@ -343,7 +372,7 @@ class Pipeline:
         self.close()
 
 
-# ---- BEGIN paper 004 units, reachable alone for tests (ABI 3) ----------------------------------------------
+# ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) ----------------------------------------------
 
 def _points(xy: Any) -> np.ndarray:
     a = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))

@@ -21,7 +21,7 @@ def main(args) -> int:
     truth_f = open(out / "truth.jsonl", "w")
 
     def on_result(r, decision, truth):
-        truth_f.write(json.dumps({"frame": r.frame, "t": r.t, "vehicles": truth}) + "\n")
+        truth_f.write(json.dumps({"frame": r.frame, "t": r.t_s, "vehicles": truth}) + "\n")
         # vehicles a driver would care about: mostly visible and within 60 m
         for v in truth:
             if v["visible_fraction"] >= 0.9 and v["longitudinal_m"] <= 60:

@@ -17,10 +17,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Optional
 
+from app.fcw_level import FcwLevel
 from app.schema import key as _key
 
-NONE, PREWARNING, WARNING = 0, 1, 2
-LEVEL_NAMES = {NONE: "none", PREWARNING: "prewarning", WARNING: "warning"}
+NONE, PREWARNING, WARNING = FcwLevel.NONE, FcwLevel.PREWARNING, FcwLevel.WARNING
 
 
 # The configuration section `fcw` (merged into app/config.py's registry).
@@ -106,7 +106,7 @@ class EgoState:
 
 @dataclass
 class FcwOutput:
-    level: int
+    level: FcwLevel
     ttc_used_s: Optional[float]
     ttc_source: Optional[str]       # "range" | "range_accel" | "scale" | None
     lead_id: Optional[int]

@@ -18,19 +18,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator, Optional
 
-import cv2
-
 from app import config as configuration
 from app.annotate import VideoOut, annotate
 from app.core import FrameResult, Pipeline
+from app.fcw_level import FcwLevel
+from app.recording import RecordingError, open_recording
 from app.tracks_file import TracksWriter
 
-IMAGE_EXTS = {".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff", ".webp"}
 SIM_DBC = Path(__file__).resolve().parent / "sim" / "ego_speed_placeholder.dbc"
 
 
 class ReplayError(RuntimeError):
     """A source that cannot be replayed; the message says what and how to fix it."""
+
+
+def _recording(source: str, fps: Optional[float]):
+    try:
+        return open_recording(source, fps)
+    except RecordingError as exc:
+        raise ReplayError(str(exc)) from None
 
 
 @dataclass
@@ -43,6 +49,7 @@ class ReplaySummary:
     warnings: list[tuple[float, str, Optional[float]]] = field(default_factory=list)  # (t, level, ttc used)
     can: dict = field(default_factory=dict)
     outputs: dict[str, str] = field(default_factory=dict)
+    decoded: str = ""   # a recording's "N of M frames decoded"
 
     def add(self, r: FrameResult) -> None:
         self.frames += 1
@@ -51,7 +58,8 @@ class ReplaySummary:
 
     def text(self) -> str:
         lines = [f"{self.source}: {self.frames} frames processed"
-                 + (f", {len(self.skipped)} skipped" if self.skipped else "")]
+                 + (f", {len(self.skipped)} skipped" if self.skipped else "")
+                 + (f" ({self.decoded})" if self.decoded else "")]
         lines += [f"  skipped: {s}" for s in self.skipped[:5]]
         if self.total_ms:
             lines.append(f"  per frame: median {statistics.median(self.total_ms):.2f} ms, "
@@ -63,6 +71,13 @@ class ReplaySummary:
             lines.append(f"  CAN: {self.can.get('frames_sent', 0)} frames sent")
             if self.can.get("input_log"):
                 lines.append(f"  CAN in: {self.can['input_log']}")
+                c = self.can.get("input") or {}
+                if c:
+                    dropped = ", ".join(f"{k} {n}" for k, n in c["dropped"].items()) or "none"
+                    lines.append(f"  CAN in: {c['read']} frames read, {c['used']} used, dropped: {dropped}"
+                                 + (f", {c['not_reached']} after the recording's end" if c.get("not_reached") else ""))
+            for line in self.can.get("never_decoded", []):
+                lines.append(f"  WARNING: {line}")
         for name, path in self.outputs.items():
             lines.append(f"  {name}: {path}")
         return "\n".join(lines)
@@ -79,84 +94,12 @@ def is_scenario(source: str) -> bool:
     return source in list_scenarios()
 
 
-def _folder_images(folder: Path) -> list[Path]:
-    return sorted(x for x in folder.iterdir() if x.suffix.lower() in IMAGE_EXTS)
-
-
-def recording_frames(source: str, fps: Optional[float], summary: ReplaySummary) -> tuple[Iterator, float, tuple]:
-    """(iterator of (index, t_s, gray), frame rate, (width, height)) for a video file or image folder.
-
-    Frames that cannot be decoded, or whose size differs from the first frame's, are skipped and
-    listed in the summary with the reason."""
-    p = Path(source)
-    if p.is_dir():
-        if fps is None:
-            raise ReplayError(f"{source}: an image folder needs its frame rate: give --fps N")
-        names = _folder_images(p)
-        if not names:
-            raise ReplayError(f"{source}: the folder contains no images (.png .jpg .bmp .pgm .tif)")
-        first = cv2.imread(str(names[0]), cv2.IMREAD_GRAYSCALE)
-        if first is None:
-            raise ReplayError(f"{names[0]}: cannot be decoded as an image")
-        size = (first.shape[1], first.shape[0])
-
-        def gen():
-            for i, name in enumerate(names):
-                img = cv2.imread(str(name), cv2.IMREAD_GRAYSCALE)
-                if img is None:
-                    summary.skipped.append(f"{name.name}: cannot be decoded")
-                elif (img.shape[1], img.shape[0]) != size:
-                    summary.skipped.append(f"{name.name}: {img.shape[1]}x{img.shape[0]}, the folder's first image is "
-                                           f"{size[0]}x{size[1]}")
-                else:
-                    yield i, i / fps, img
-
-        return gen(), float(fps), size
-    if not p.exists():
-        raise ReplayError(f"{source}: no such file or folder")
-    if p.suffix.lower() in IMAGE_EXTS:
-        raise ReplayError(f"{source}: is a still image; replay a folder of images (with --fps) or use `headway detect`")
-    cap = cv2.VideoCapture(str(p), cv2.CAP_FFMPEG)
-    ok, frame = cap.read() if cap.isOpened() else (False, None)
-    if not ok:
-        cap.release()
-        raise ReplayError(f"{source}: cannot be read as a video (not a video file, or empty/corrupt)")
-    rate = float(fps or cap.get(cv2.CAP_PROP_FPS) or 0.0)
-    if not 0 < rate < 1000:
-        rate = 30.0
-    size = (frame.shape[1], frame.shape[0])
-
-    def gen_video():
-        i, current = 0, frame
-        try:
-            while current is not None:
-                yield i, i / rate, cv2.cvtColor(current, cv2.COLOR_BGR2GRAY)
-                ok, current = cap.read()
-                i += 1
-                if not ok:
-                    current = None
-        finally:
-            cap.release()
-
-    return gen_video(), rate, size
-
-
 def _progress(total: Optional[int], desc: str, enabled: bool):
     if not enabled or not sys.stderr.isatty():
         return contextlib.nullcontext(None)
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit="frame", file=sys.stderr, leave=False)
-
-
-def _frame_count(source: str) -> Optional[int]:
-    p = Path(source)
-    if p.is_dir():
-        return len(_folder_images(p))
-    cap = cv2.VideoCapture(str(p), cv2.CAP_FFMPEG)
-    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
-    cap.release()
-    return n or None
 
 
 def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], label: str,
@@ -179,15 +122,14 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
         bar = stack.enter_context(_progress(n_frames, label, progress))
         for index, t_s, gray, truth in frames:
             r = pipe.process(gray, t_s)
-            decision = sup.step(r, r.t, pipe)
+            decision = sup.step(r, r.t_s, pipe)
             summary.add(r)
-            if decision.changed and decision.level > 0:
-                summary.warnings.append((r.t, {1: "prewarning", 2: "warning"}[decision.level], decision.ttc_used_s))
+            if decision.changed and decision.level != FcwLevel.NONE:
+                summary.warnings.append((r.t_s, decision.level.label, decision.ttc_used_s))
             if writer:
                 writer.write(r, decision.level)
             if video:
-                r.fcw_level = decision.level
-                video.write(annotate(gray, r, truth))
+                video.write(annotate(gray, r, truth, decision.level))
             if on_result:
                 on_result(r, decision, truth)
             if bar is not None:
@@ -207,13 +149,20 @@ def replay_recording(source: str, config_path: Optional[str] = None, fps: Option
                      can_in: Optional[str] = None, can_out: Optional[str] = None,
                      on_result: Optional[Callable] = None, progress: bool = True) -> ReplaySummary:
     summary = ReplaySummary(source)
-    frames, rate, size = recording_frames(source, fps, summary)
+    rec = _recording(source, fps)
+    summary.skipped = rec.skipped  # the reader lists what it could not use, as it goes
     cfg = configuration.load(config_path)
+    size = rec.size
+    problem = configuration.frame_size_problem(*size)
+    if problem:
+        raise ReplayError(f"{source}: {problem}")
     if (cfg["camera"]["width"], cfg["camera"]["height"]) != size:
         # a camera calibrated for another size: same field of view, intrinsics scaled to the recording
         cfg["camera"] = configuration.scaled_camera(cfg["camera"], *size)
-    return _run(((i, t, g, None) for i, t, g in frames), cfg, summary, _frame_count(source), Path(source).name,
-                out_video, rate, tracks_path, can_in, can_out, on_result, progress)
+    out = _run(((i, t, g, None) for i, t, g in rec.frames()), cfg, summary, rec.expected, Path(source).name,
+               out_video, rec.fps, tracks_path, can_in, can_out, on_result, progress)
+    summary.decoded = rec.account()
+    return out
 
 
 def replay_scenario(source: str, config_path: Optional[str] = None, out_video: Optional[str] = None,

@@ -1,8 +1,14 @@
 """The tracks file: one JSON object per frame, the record of what Headway saw.
 
 {"frame", "t", "tracks": [{"id", "box": [l,t,r,b], "range_m", "lateral_m", "range_rate_mps", "ttc_s",
-"ttc_scale_s", "in_path"}], "lead_id", "fcw"} with null where a value is not available. Only confirmed
-tracks are written: they are what the rest of the system acts on.
+"ttc_scale_s", "in_path"}], "lead_id", "fcw", "lanes": {"width_m", "offset_m", "boundaries": [{"position",
+"observed", "points": [[x, y], ...]}]}, "calibration": {"pitch_deg", "yaw_deg", "height_m", "pitch_sigma_deg",
+"yaw_sigma_deg", "height_sigma_m", "updates", "active"}} with null where a value is not available. Only
+confirmed tracks are written: they are what the rest of the system acts on. Lanes are written for every frame:
+the boundaries the lane model holds (position -2 outer left, -1 ego left, +1 ego right, +2 outer right;
+observed false when carried over by lane tracking) as image points from the bottom up (straight lines between
+them), the ego-lane width and the car's lateral offset from the ego lane's centre (m, right positive). The
+calibration is the camera as self-calibration has it, when it runs.
 """
 from __future__ import annotations
 
@@ -10,8 +16,7 @@ import json
 from typing import IO, Optional
 
 from app.core import FrameResult
-
-FCW_NAMES = {0: "none", 1: "prewarning", 2: "warning"}
+from app.fcw_level import FcwLevel
 
 
 def _r(x: Optional[float], nd: int = 2) -> Optional[float]:
@@ -33,9 +38,23 @@ def frame_record(r: FrameResult, fcw_level: Optional[int] = None) -> dict:
         for t in r.tracks
         if t.confirmed
     ]
-    level = r.fcw_level if fcw_level is None else fcw_level
-    return {"frame": r.frame, "t": round(r.t, 6), "tracks": tracks, "lead_id": r.lead_id,
-            "fcw": FCW_NAMES.get(level, "none")}
+    level = FcwLevel.NONE if fcw_level is None else fcw_level
+    rec = {"frame": r.frame, "t": round(r.t_s, 6), "tracks": tracks, "lead_id": r.lead_id,
+           "fcw": FcwLevel(level).label, "lanes": lanes_record(r)}
+    if r.calibration is not None:
+        c = r.calibration
+        rec["calibration"] = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in c.items()}
+    return rec
+
+
+def lanes_record(r: FrameResult) -> dict:
+    boundaries = [
+        {"position": ln.position, "observed": ln.observed,
+         "points": [[round(x, 1), round(y, 1)] for x, y in
+                    (ln.points or [(ln.x_bottom, ln.y_bottom), (ln.x_top, ln.y_top)])]}
+        for ln in r.lanes
+    ]
+    return {"width_m": _r(r.lane_width_m), "offset_m": _r(r.lane_offset_m), "boundaries": boundaries}
 
 
 class TracksWriter:

@@ -32,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         while (now := time.monotonic()) < end:
             if a.warn_cycle:
-                level = WarningLevel(int((now - start) / 2.0) % 3)
+                level = WarningLevel(int((now - start) / 2.0) % len(WarningLevel))
                 link.send_warning(level, 1.5 if level else None, 20.0 if level else None)
             link.poll(now)
             if now >= next_print:

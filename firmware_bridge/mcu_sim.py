@@ -159,7 +159,7 @@ class McuSimulator:
         level = self.warning.level
         if level is m.WarningLevel.WARNING:
             return Outputs(True, "red")
-        return Outputs(False, "amber" if level is m.WarningLevel.PRE_WARNING else "off")
+        return Outputs(False, "amber" if level is m.WarningLevel.PREWARNING else "off")
 
     def inject_garbage(self, data: bytes | None = None, n: int = 32) -> None:
         """Write garbage now (random n bytes unless given)."""

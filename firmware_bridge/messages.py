@@ -16,6 +16,8 @@ from dataclasses import astuple, dataclass
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
+from app.fcw_level import FcwLevel
+
 from .errors import FieldRangeError, PayloadLengthError, UnknownMessageError
 
 PROTOCOL_MAJOR = 1  # a change here means an incompatible layout: the host refuses the MCU
@@ -36,15 +38,11 @@ class MsgId(IntEnum):
     VEHICLE_SIGNALS = 0x20
 
 
-class WarningLevel(IntEnum):
-    """Forward-collision warning level (the FCW state machine's output)."""
-
-    NONE = 0
-    PRE_WARNING = 1  # MCU: amber LED, no sound
-    WARNING = 2  # MCU: red LED and buzzer
-
+# The WARNING message's level is the FCW state machine's output, with the same numbers on the wire.
+WarningLevel = FcwLevel
 
 _LEVELS = frozenset(int(v) for v in WarningLevel)
+_LEVELS_TEXT = ", ".join(f"{int(v)} ({v.label})" for v in WarningLevel)
 
 
 class HostStatus(IntFlag):
@@ -225,7 +223,7 @@ class FcwWarning(Message):
     def __post_init__(self):
         level = self.level
         if isinstance(level, bool) or not isinstance(level, int) or level not in _LEVELS:
-            raise FieldRangeError(f"WARNING.level={self.level!r} is not one of 0 (none), 1 (pre-warning), 2 (warning)")
+            raise FieldRangeError(f"WARNING.level={self.level!r} is not one of {_LEVELS_TEXT}")
         object.__setattr__(self, "level", WarningLevel(self.level))
         _check_centi("WARNING", "ttc_s", self.ttc_s)
         _check_centi("WARNING", "lead_range_m", self.lead_range_m)

@@ -58,7 +58,7 @@ def test_live_session_on_a_virtual_bus(tmp_path):
         time.sleep(0.05)
         state = s.vehicle_state(time.time())
         assert state.speed_mps == pytest.approx(27.5)
-        sent = s.publish(time.time(), fake_result(0, 2, fcw_level=1),
+        sent = s.publish(time.time(), fake_result(0, 2),
                          fcw={"level": 1, "available": True, "ttc_s": 2.2, "ttc_source": "range"})
         assert [m.arbitration_id for m in sent][:3] == [0x600, 0x601, 0x602]
         parser = CanParser(headway_database())

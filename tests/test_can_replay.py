@@ -68,7 +68,7 @@ def run(cfg, can_in, can_out, seconds=5.0, fail_at_s=None, via_bus=False) -> Can
             if fail_at_s is not None and t >= fail_at_s:
                 raise RuntimeError("the core failed")
             state = s.vehicle_state(t)
-            s.publish(t, fake_result(k, 5, fcw_level=fcw_level_at(k)),
+            s.publish(t, fake_result(k, 5),
                       fcw={"level": fcw_level_at(k), "available": state.speed_mps is not None,
                            "ttc_s": 1.9, "ttc_source": "range"})
     return s

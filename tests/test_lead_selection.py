@@ -15,7 +15,7 @@ def test_lead_changing_lanes_stops_being_lead_once_it_has_left():
         v1 = next((v for v in truth if v["id"] == 1), None)
         lead = next((t for t in r.tracks if t.id == r.lead_id), None)
         is_v1 = bool(lead and v1 and match([v1["box_clipped"]], [lead.box], 0.3))
-        rows.append((r.t, r.lead_id, is_v1, v1))
+        rows.append((r.t_s, r.lead_id, is_v1, v1))
 
     replay_scenario("lane_change", on_result=on_result, progress=False)
     settled = [row for row in rows if row[0] > 0.5]

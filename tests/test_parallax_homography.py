@@ -1,5 +1,5 @@
 """The parallax pipeline's two-frame units (paper 000): the filtered road homography and the aligned
-difference, driven through run_stage on frames stacked vertically (csrc/track/parallax_stage.hpp)."""
+difference, driven through run_stage on frames stacked vertically (csrc/core/parallax_stage.hpp)."""
 from __future__ import annotations
 
 from pathlib import Path

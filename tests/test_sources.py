@@ -30,7 +30,7 @@ def test_video_file_plays_every_frame_with_media_time(make_video):
     path = make_video(n=45, fps=15.0)
     results, health = play({"kind": "video", "path": str(path)})
     assert [r.frame for r in results] == list(range(45))
-    assert results[1].t == pytest.approx(1 / 15) and results[-1].t == pytest.approx(44 / 15)
+    assert results[1].t_s == pytest.approx(1 / 15) and results[-1].t_s == pytest.approx(44 / 15)
     assert health["source_state"] == "ended" and health["decode_errors"] == 0 and health["results_dropped"] == 0
 
 
@@ -54,7 +54,7 @@ def test_image_folder_sorted_names_given_fps(tmp_path):
             cv2.imwrite(str(tmp_path / name), np.full((480, 640), ord(name[0]), np.uint8))
     results, health = play({"kind": "folder", "path": str(tmp_path), "fps": 20.0})
     assert [r.frame for r in results] == [0, 1, 2]
-    assert [r.t for r in results] == pytest.approx([0.0, 0.05, 0.10])
+    assert [r.t_s for r in results] == pytest.approx([0.0, 0.05, 0.10])
 
 
 def test_folder_of_mixed_sizes_skips_and_counts_the_odd_frames(tmp_path):

@@ -55,9 +55,9 @@ def closing_lead(frame: int, gap_m: float) -> FrameResult:
                  vx_px_s=0.0, vy_px_s=0.0, range_m=gap_m + 2.0, range_sigma_m=0.5, lateral_m=0.0,
                  range_rate_mps=-20.0, range_accel_mps2=0.0, ttc_s=gap_m / 20.0, ttc_scale_s=gap_m / 20.0,
                  lane_index=0, in_path=True)
-    return FrameResult(frame=frame, t=frame / 30, t_done=frame / 30, width=640, height=480, events=[],
+    return FrameResult(frame=frame, t_s=frame / 30, t_done_s=frame / 30, width=640, height=480, events=[],
                        full_detection=True, tracks=[lead], lanes=[], vanishing_point=None, horizon_row=240.0,
-                       lead_id=3, fcw_level=0)
+                       lead=lead)
 
 
 def drive(reading) -> tuple[list[int], FakePipe]:

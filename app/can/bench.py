@@ -15,12 +15,14 @@ from types import SimpleNamespace
 
 import can
 
+from app import config as configuration
+from app.fcw_level import FcwLevel
+
 from .bus import CanOutput
 from .config_schema import defaults
+from .messages import ttc_of
 from .session import CanSession
 from .vehicle_input import VehicleInput
-
-CAMERA = {"fx": 700.0, "cx": 320.0}
 
 
 def fake_track(i: int) -> SimpleNamespace:
@@ -32,11 +34,11 @@ def fake_track(i: int) -> SimpleNamespace:
                            in_path=i % 3 == 1)
 
 
-def fake_result(frame: int, n_objects: int, fcw_level: int = 0, lead: int = 1) -> SimpleNamespace:
+def fake_result(frame: int, n_objects: int, lead: int = 1) -> SimpleNamespace:
     """A frame result (attributes as app.core.FrameResult) with ``n_objects`` tracks; track ``lead`` leads."""
     tracks = [fake_track(i) for i in range(n_objects)]
-    return SimpleNamespace(frame=frame, t=frame / 30.0, t_done=frame / 30.0 + 0.02, tracks=tracks,
-                           lead_id=lead if n_objects >= lead else None, fcw_level=fcw_level)
+    return SimpleNamespace(frame=frame, t_s=frame / 30.0, t_done_s=frame / 30.0 + 0.02, tracks=tracks,
+                           lead=tracks[lead - 1] if n_objects >= lead else None)
 
 
 def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
@@ -44,7 +46,7 @@ def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
     busy machine does not inflate it."""
     cfg = defaults()
     cfg["can"].update(max_objects=64)
-    cfg["camera"] = CAMERA
+    cfg["camera"] = configuration.defaults()["camera"]  # the product's camera, for the objects' angles
     with tempfile.TemporaryDirectory() as tmp, can.Bus(interface="virtual", channel="bench") as bus, \
             can.Bus(interface="virtual", channel="bench") as sink:
         output = CanOutput(bus, Path(tmp) / "out.log" if log else None)
@@ -52,9 +54,11 @@ def measure(n_objects: int, log: bool, repeats: int = 300) -> tuple[float, int]:
         times, frames = [], 0
         for k in range(repeats):
             t = k * 0.1  # every group due every call
-            result = fake_result(k, n_objects, fcw_level=k % 3)
+            result = fake_result(k, n_objects)
+            ttc, source = ttc_of(result.lead)
+            fcw = {"level": FcwLevel(k % len(FcwLevel)), "ttc_s": ttc, "ttc_source": source}
             t_start = time.thread_time()
-            frames = len(session.publish(t, result))
+            frames = len(session.publish(t, result, fcw=fcw))
             times.append(time.thread_time() - t_start)
             while sink.recv(timeout=0) is not None:
                 pass

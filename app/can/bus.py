@@ -1,10 +1,19 @@
 """The CAN bus and the output side: opening any python-can interface from the configuration, and
 ``CanOutput``, which sends Headway's frames, counts failures for health, and mirrors every frame
 it sends to a log file (candump .log, .asc or .blf), flushed after every batch so that a stop
-loses nothing already sent."""
+loses nothing already sent.
+
+The service's log is a record across runs (``rotate_log``): at start the previous run's log is never
+overwritten but renamed NAME.1.SUFFIX (older ones shifted to .2, .3, ... and the oldest beyond
+``can.output_log_keep`` removed), and a last line cut by a crash or power cut is trimmed from it, so every
+kept log parses whole. While running, every batch of frames is written whole and flushed to the
+operating system at once (a killed process loses nothing already sent), and forced to the disk
+(fsync, by a thread of its own) at least every ``can.output_log_sync_s``: a power cut loses at most that much."""
 from __future__ import annotations
 
 import math
+import os
+import threading
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional, Union
@@ -69,18 +78,76 @@ class _ASCWriter(can.ASCWriter):
         return super()._format_header_datetime(self._start)
 
 
+LOG_BUFFER_BYTES = 1 << 20  # bytes; a batch of frames is a few kB
+
+
 def open_log_writer(path: Union[str, Path], channel: str = "can0", start_s: float = 0.0) -> can.Listener:
     """A log writer chosen by suffix: .log (candump -L), .asc, .blf."""
     p = Path(path)
     suffix = p.suffix.lower()
     p.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".log":
-        return can.CanutilsLogWriter(str(p), channel=channel)
+        # a buffer larger than any batch: each flush is one write() of whole lines
+        return can.CanutilsLogWriter(open(p, "w", buffering=LOG_BUFFER_BYTES), channel=channel)
     if suffix == ".asc":
         return _ASCWriter(str(p), start_s)
     if suffix == ".blf":
         return can.BLFWriter(str(p), channel=1)
     raise CanBusError(f"{p}: unknown CAN log format {suffix!r}: use .log (candump), .asc or .blf")
+
+
+def _trim_partial_line(path: Path) -> int:
+    """Cuts a text log after its last complete line; returns the bytes removed."""
+    with path.open("rb+") as f:
+        size = f.seek(0, os.SEEK_END)
+        if size == 0:
+            return 0
+        pos = size
+        while pos > 0:
+            step = min(4096, pos)
+            f.seek(pos - step)
+            chunk = f.read(step)
+            nl = chunk.rfind(b"\n")
+            if nl >= 0:
+                end = pos - step + nl + 1
+                break
+            pos -= step
+        else:
+            end = 0
+        if end < size:
+            f.truncate(end)
+        return size - end
+
+
+def rotated_name(path: Path, n: int) -> Path:
+    """out.log -> out.1.log, out.2.log, ... (the suffix kept, so the format is still known)."""
+    return path.with_name(f"{path.stem}.{n}{path.suffix}")
+
+
+def rotate_log(path: Union[str, Path], keep: int) -> Optional[Path]:
+    """Before a run writes ``path``: the previous run's log becomes ``rotated_name(path, 1)`` (trimmed to
+    whole lines for text logs), older ones move up by one, those beyond ``keep`` are removed. Returns the
+    name the previous log was kept under (None if there was none)."""
+    p = Path(path)
+    if not p.exists() or p.stat().st_size == 0:
+        return None
+    if suffix_is_text(p):
+        _trim_partial_line(p)
+    oldest = rotated_name(p, keep)
+    if oldest.exists():
+        oldest.unlink()
+    for n in range(keep - 1, 0, -1):
+        if rotated_name(p, n).exists():
+            os.replace(rotated_name(p, n), rotated_name(p, n + 1))
+    if keep < 1:
+        p.unlink()
+        return None
+    os.replace(p, rotated_name(p, 1))
+    return rotated_name(p, 1)
+
+
+def suffix_is_text(path: Path) -> bool:
+    return path.suffix.lower() in (".log", ".asc")
 
 
 class CanOutput:
@@ -89,15 +156,25 @@ class CanOutput:
     A send that fails is counted (``send_errors``, ``last_error``, ``last_error_s`` on the caller's
     clock) and the frame is not logged; nothing raises. Use as a context manager, or call
     ``close()``: a .log or .asc is complete on disk after every ``send`` (flushed), a .blf only after
-    ``close()`` (its container format is written in blocks).
+    ``close()`` (its container format is written in blocks). ``sync_s``: also fsync at least this often
+    (None = leave it to the operating system). ``keep``: rotate the previous log first (None = overwrite,
+    as a replay's named output does).
     """
 
     def __init__(self, bus: Optional[can.BusABC] = None, log_path: Optional[Union[str, Path]] = None,
-                 channel: str = "can0", start_s: float = 0.0, send_timeout_s: float = 0.01):
+                 channel: str = "can0", start_s: float = 0.0, send_timeout_s: float = 0.01,
+                 sync_s: Optional[float] = None, keep: Optional[int] = None):
         self.bus = bus
         self.channel = channel
         self.log_path = Path(log_path) if log_path else None
+        self.previous_log = rotate_log(self.log_path, keep) if self.log_path and keep is not None else None
         self._log = open_log_writer(self.log_path, channel, start_s) if self.log_path else None
+        self._sync_stop = threading.Event()
+        if self._log is not None and sync_s is not None and suffix_is_text(self.log_path):
+            # fsync off the caller's thread: on a busy disk it can take a second, the frame loop must not wait
+            fd = self._log.file.fileno()
+            threading.Thread(target=self._sync_loop, args=(fd, max(sync_s, 0.01)), name="can-log-sync",
+                             daemon=True).start()
         self._timeout = send_timeout_s
         self.sent = 0
         self.logged = 0
@@ -132,11 +209,19 @@ class CanOutput:
         if f is not None and not isinstance(self._log, can.BLFWriter) and not f.closed:
             f.flush()
 
+    def _sync_loop(self, fd: int, every_s: float) -> None:
+        while not self._sync_stop.wait(every_s):
+            try:
+                os.fsync(fd)
+            except OSError:  # closed meanwhile
+                return
+
     def tx_error(self, now_s: float, hold_s: float) -> bool:
         """True while the last send failure is less than ``hold_s`` old."""
         return now_s - self.last_error_s < hold_s
 
     def close(self) -> None:
+        self._sync_stop.set()
         if self._log is not None:
             self._log.stop()
             self._log = None

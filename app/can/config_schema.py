@@ -97,13 +97,23 @@ CAN_SCHEMA: dict[str, dict[str, dict]] = {
         "tx_error_hold_s": _k(1.0, "s; the can_error fault stays set this long after the last failed send, "
                                    "so a flapping bus is visible in the status frame", min=0.1, max=60.0),
         "output_log": _k("", "path; also write every frame Headway sends to this log (.log candump, .asc, "
-                             ".blf); empty = none"),
+                             ".blf); empty = none. The service never overwrites it: the previous run's log is "
+                             "kept as NAME.1.SUFFIX (older ones .2, .3, ...)"),
+        "output_log_keep": _k(10, "previous runs' output logs kept beside the current one (NAME.1 newest); the "
+                                  "failing run's log is the one an engineer needs after a crash, 10 covers a day "
+                                  "of restarts", min=1, max=1000),
+        "output_log_sync_s": _k(0.5, "s; the output log is forced to the disk (fsync, off the frame loop) at least this often: a power "
+                                     "cut loses at most this much (every batch reaches the OS at once, so a killed "
+                                     "process loses nothing); 0 = after every batch", min=0.0, max=60.0),
     },
     "vehicle": {
         "dbc": _k("", "path; the car's DBC file (opendbc has most cars), used by every input without its "
                       "own *_dbc; empty = no vehicle inputs"),
         "channel": _k("", "only frames from this channel feed the inputs (e.g. can0 in a log that holds "
                           "several buses); empty = any channel"),
+        "log_channels": _k("", "replay: the input log's channels as the bus's: 'any' takes every frame whatever its "
+                               "channel (an .asc or .blf log numbers its channels 0, 1, ... where vehicle.channel "
+                               "says can0), '0=can0,1=can1' maps them; empty = as recorded"),
         "log_offset_s": _k(0.0, "s; replay: the input CAN log's time since its first frame plus this is the "
                                 "frame clock; 0 = the log and the video start together", min=-3600.0, max=3600.0),
     },

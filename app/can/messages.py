@@ -10,15 +10,14 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Mapping, Optional
 
+from app.fcw_level import FcwLevel
+from app.supervisor.faults import FAULT, FAULTS, STATES
+
 from .database import wire_id
 
-FCW_LEVELS = ("none", "prewarning", "warning")
 TTC_SOURCES = ("none", "range", "scale", "range_accel")
-STATES = ("starting", "ok", "degraded", "fault")
-# Faults of severity "fault" in the health registry (app/supervisor/faults.py): Headway cannot warn
-# the driver reliably; any other fault only degrades it. Tests keep the two in step.
-FATAL_FAULTS = frozenset({"camera_lost", "core_stalled", "can_error"})
-LANE_UNKNOWN = -1000  # app.core's lane_index for "unknown"
+# Faults of severity "fault" in the health registry: Headway cannot warn the driver reliably.
+FATAL_FAULTS = frozenset(f.name for f in FAULTS if f.severity == FAULT)
 
 
 def _num(x: Any) -> Optional[float]:
@@ -28,11 +27,11 @@ def _num(x: Any) -> Optional[float]:
     return None if math.isnan(x) else x
 
 
-def fcw_signals(level: int = 0, available: bool = False, ttc_s: Optional[float] = None,
+def fcw_signals(level: int = FcwLevel.NONE, available: bool = False, ttc_s: Optional[float] = None,
                 ttc_source: str = "none", lead: Any = None) -> dict:
-    """HW_FCW. ``level`` is forced to 0 when FCW is not available: no warning without its inputs."""
+    """HW_FCW. ``level`` is forced to none when FCW is not available: no warning without its inputs."""
     if not available:
-        level = 0
+        level = FcwLevel.NONE
     return {"FCW_LEVEL": int(level), "FCW_AVAILABLE": int(bool(available)),
             "TTC_SOURCE": TTC_SOURCES.index(ttc_source) if _num(ttc_s) is not None else 0,
             "TTC_USED_S": _num(ttc_s),
@@ -89,8 +88,8 @@ def object_signals(index: int, track: Any, camera: Optional[Mapping[str, float]]
     page0 = {**common, "OBJECT_PAGE": 0, "RANGE_M": _num(track.range_m), "LATERAL_M": _num(track.lateral_m),
              "RANGE_RATE_MPS": _num(track.range_rate_mps)}
     page1 = {**common, "OBJECT_PAGE": 1, "AZIMUTH_RAD": azimuth, "WIDTH_RAD": width,
-             "LANE": None if lane is None or lane == LANE_UNKNOWN or abs(lane) > 3 else int(lane),
-             "IN_PATH": 3 if in_path is None or in_path == -1 else int(bool(in_path)),
+             "LANE": None if lane is None or abs(lane) > 3 else int(lane),
+             "IN_PATH": 3 if in_path is None else int(bool(in_path)),
              "CONFIDENCE": _num(getattr(track, "confidence", None)),
              "CONFIRMED": int(bool(getattr(track, "confirmed", False)))}
     return page0, page1
@@ -102,17 +101,6 @@ def objects_by_range(tracks: Iterable[Any], max_objects: int) -> list:
         r = _num(t.range_m)
         return (r is None, r if r is not None else 0.0, t.id)
     return sorted(tracks, key=key)[:max_objects]
-
-
-def overall_state(faults: Iterable[str], started: bool) -> str:
-    """The health monitor's rule, for runs without one (replay): fault on a fatal fault, else starting
-    until the first frame, degraded on any other fault, else ok."""
-    faults = set(faults)
-    if faults & FATAL_FAULTS:
-        return "fault"
-    if not started:
-        return "starting"
-    return "degraded" if faults else "ok"
 
 
 def status_signals(state: str, faults: Iterable[str], known_faults: Iterable[str],

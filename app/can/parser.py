@@ -80,6 +80,7 @@ class CanParser:
         self.ignored = 0          # frames of another channel
         self.counter_jumps = 0    # every counter discontinuity, dropped or not
         self.drops: Counter[str] = Counter()
+        self.last_drop: Optional[str] = None  # why the last frame given to update() was not used
 
     @staticmethod
     def _lookup(db: Database, m: Union[str, int]) -> Message:
@@ -91,19 +92,22 @@ class CanParser:
     # ---- receiving ---------------------------------------------------------------------------------
     def update(self, msg: can.Message, t_s: Optional[float] = None) -> Optional[tuple[str, dict]]:
         """Takes one frame; returns (message name, decoded values) if it was accepted, else None."""
+        self.last_drop: Optional[str] = None
         try:
             return self._update(msg, msg.timestamp if t_s is None else t_s)
         except Exception:  # a frame must never take the receiver down
-            self.drops["decode_error"] += 1
-            return None
+            return self._drop("decode_error")
 
     def _drop(self, reason: str) -> None:
+        """Counts a dropped frame; ``last_drop`` tells the caller why the frame just given was not used."""
         self.drops[reason] += 1
+        self.last_drop = reason
 
     def _update(self, msg: can.Message, t: float) -> Optional[tuple[str, dict]]:
         self.received += 1
         if self.channel is not None and msg.channel is not None and str(msg.channel) != self.channel:
             self.ignored += 1
+            self.last_drop = "wrong_channel"
             return None
         if msg.is_error_frame:
             return self._drop("error_frame")

@@ -23,11 +23,14 @@ from typing import Any, Mapping, Optional, Union
 
 import can
 
+from app.fcw_level import FcwLevel
+from app.supervisor.faults import overall_state
+
 from . import messages as hm
 from .bus import CanOutput, bus_from_config
 from .config_schema import with_defaults
 from .database import fault_names, headway_database
-from .log_replay import CanLogReader
+from .log_replay import CanLogReader, channel_map
 from .packer import CanPacker
 from .scheduler import CanScheduler
 from .vehicle_input import VehicleInput, VehicleState
@@ -86,7 +89,8 @@ class CanSession:
         reader = None
         if can_in:
             ids = vehicle.frame_ids() if not via_bus else None  # the reader passes over other ids early
-            reader = CanLogReader(can_in, offset_s=float(veh["log_offset_s"]), ids=ids)
+            reader = CanLogReader(can_in, offset_s=float(veh["log_offset_s"]), ids=ids,
+                                  channels=channel_map(veh.get("log_channels", "")))
         base = (reader.t0 or 0.0) - float(veh["log_offset_s"]) if reader else 0.0
         rx = play = tx = None
         if via_bus:
@@ -103,7 +107,8 @@ class CanSession:
         vehicle = VehicleInput.from_config(veh)
         tx = bus_from_config(c)
         rx = bus_from_config(c, c.get("input_channel") or None) if c.get("input_channel") else tx
-        output = CanOutput(tx, c.get("output_log") or None, channel=c["channel"])
+        output = CanOutput(tx, c.get("output_log") or None, channel=c["channel"],
+                           sync_s=float(c["output_log_sync_s"]), keep=int(c["output_log_keep"]))
         return cls(cfg, output, vehicle, rx_bus=rx)
 
     # ---- inputs ------------------------------------------------------------------------------------
@@ -157,7 +162,7 @@ class CanSession:
         while self._frame_times and now_s - self._frame_times[0] > FRAME_RATE_WINDOW_S:
             self._frame_times.popleft()
         if not self.deterministic:
-            t_done, t = getattr(result, "t_done", None), getattr(result, "t", None)
+            t_done, t = getattr(result, "t_done_s", None), getattr(result, "t_s", None)
             if t_done is not None and t is not None and t_done >= t:
                 self._latency_ms.append((t_done - t) * 1000.0)
 
@@ -190,7 +195,7 @@ class CanSession:
             latency = None if self.deterministic else status.get("latency_p99_ms")
         else:
             faults = self.faults(now_s)
-            state, fps = hm.overall_state(faults, self._started), self._frame_rate()
+            state, fps = overall_state(faults, self._started), self._frame_rate()
             latency = None if self.deterministic else self._latency_p99()
         self.scheduler.update("status", [("HW_STATUS", hm.status_signals(state, faults, self.faults_known, fps,
                                                                         latency))], now_s)
@@ -202,31 +207,31 @@ class CanSession:
 
     def on_result(self, result: Any, *_frame: Any, fcw: Optional[Any] = None,
                   status: Optional[Mapping[str, Any]] = None) -> VehicleState:
-        """One frame result on its own clock (``result.t``): inputs up to then, then publish. Fits the
+        """One frame result on its own clock (``result.t_s``): inputs up to then, then publish. Fits the
         ``on_result`` hook of ``app.replay.replay`` as it is (a scenario's frame, passed second, is
         not needed here)."""
-        state = self.vehicle_state(result.t)
-        self.publish(result.t, result, fcw, status)
+        state = self.vehicle_state(result.t_s)
+        self.publish(result.t_s, result, fcw, status)
         return state
 
     def _update_frame(self, now_s: float, result: Any, fcw: Any) -> None:
         self.frames_published += 1
         tracks = list(getattr(result, "tracks", []) or [])
-        lead = next((t for t in tracks if t.id == result.lead_id), None) if result.lead_id is not None else None
+        lead = getattr(result, "lead", None)
         speed_ok = self._state is not None and self._state.speed_mps is not None
         if fcw is None:
             ttc, src = hm.ttc_of(lead)
-            fcw = {"level": int(getattr(result, "fcw_level", 0) or 0), "ttc_s": ttc, "ttc_source": src}
+            fcw = {"level": FcwLevel.NONE, "ttc_s": ttc, "ttc_source": src}
         get = fcw.get if isinstance(fcw, Mapping) else (lambda k, d=None: getattr(fcw, k, d))
         available = get("available")
         ttc = get("ttc_s")
-        f = hm.fcw_signals(get("level", 0), speed_ok if available is None else available,
+        f = hm.fcw_signals(get("level", FcwLevel.NONE), speed_ok if available is None else available,
                            get("ttc_used_s") if ttc is None else ttc, get("ttc_source") or "none", lead)
         self.scheduler.update("fcw", [("HW_FCW", f)], now_s, key=(f["FCW_LEVEL"], f["FCW_AVAILABLE"]))
         lead_frames = [("HW_LEAD", hm.lead_signals(lead)), ("HW_LEAD_TTC", hm.lead_ttc_signals(lead))]
         self.scheduler.update("lead", lead_frames, now_s)
         chosen = hm.objects_by_range(tracks, self.max_objects)
-        header = hm.object_header_signals(getattr(result, "frame", 0), len(chosen), result.lead_id)
+        header = hm.object_header_signals(getattr(result, "frame", 0), len(chosen), None if lead is None else lead.id)
         objs = [("HW_OBJECT_HEADER", header)]
         for i, t in enumerate(chosen):
             p0, p1 = hm.object_signals(i, t, self.camera)
@@ -243,7 +248,25 @@ class CanSession:
             s["input_log"] = self.input_log.summary()
         if self.vehicle is not None:
             s["vehicle_inputs"] = self.vehicle.stats()
+            s["input"] = self.input_counts()
+            s["never_decoded"] = self.vehicle.never_decoded() if self.input_log is not None else []
         return s
+
+    def input_counts(self) -> dict[str, Any]:
+        """Every vehicle-bus frame read, accounted once: {"read", "used", "dropped": {reason: n}} and, in
+        replay, "not_reached" (frames of the log after the recording's end). read = used + dropped (+ not_reached)."""
+        if self.vehicle is None:
+            return {}
+        v = self.vehicle.counts()
+        dropped = dict(v["dropped"])
+        out: dict[str, Any] = {"read": v["used"] + sum(dropped.values()), "used": v["used"]}
+        if self.input_log is not None and self.play_bus is None:
+            r = self.input_log.counts()
+            for k, n in r["dropped"].items():
+                dropped[k] = dropped.get(k, 0) + n
+            out.update(read=r["read"], not_reached=r["not_reached"])
+        out["dropped"] = dict(sorted(dropped.items()))
+        return out
 
     def close(self) -> None:
         self.output.close()

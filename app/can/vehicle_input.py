@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import difflib
 import math
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional
@@ -25,6 +26,10 @@ from .parser import CanParser
 
 UNIT_TO_SI = {"m/s": 1.0, "mps": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704,
               "rad/s": 1.0, "deg/s": math.pi / 180, "degree/s": math.pi / 180, "°/s": math.pi / 180}
+# parser drop reasons -> the reasons a frame of the vehicle bus is counted under when no input uses it
+REASONS = {"wrong_channel": "wrong_channel", "unknown_id": "unknown_id", "wrong_length": "wrong_length",
+           "decode_error": "undecodable", "bad_checksum": "undecodable", "counter_jump": "undecodable",
+           "error_frame": "error_frame", "remote_frame": "remote_frame"}
 COMBINE = {"mean": lambda v: sum(v) / len(v), "min": min, "max": max, "first": lambda v: v[0]}
 
 
@@ -176,6 +181,11 @@ class VehicleInput:
             self._parsers[dbc] = CanParser(db, sorted(timeouts), timeouts, checksum=None, check_counter=False,
                                            channel=channel or None)
         self.start_s: Optional[float] = None
+        self.channel = channel or None
+        self.used = 0                      # frames at least one input was decoded from
+        self.drops: Counter = Counter()    # every other frame, by reason (REASONS)
+        # for the configured messages' ids: (reason, detail) -> frames, to say why one was never decoded
+        self._why: dict[int, Counter] = {mid: Counter() for mid in self.frame_ids()}
 
     @classmethod
     def from_config(cls, vehicle: Mapping[str, Any]) -> "VehicleInput":
@@ -187,12 +197,63 @@ class VehicleInput:
         """The frame ids the configured inputs are decoded from."""
         return {self._parsers[s.dbc].db.get_message_by_name(s.message).frame_id for s in self.specs.values()}
 
-    def on_message(self, msg: can.Message, t_s: Optional[float] = None) -> None:
+    def on_message(self, msg: can.Message, t_s: Optional[float] = None) -> bool:
+        """Takes one frame of the vehicle bus; True if an input was decoded from it, else it is counted
+        under the reason it was dropped for."""
         t = msg.timestamp if t_s is None else t_s
         if self.start_s is None:
             self.start_s = t
+        reasons = []
         for p in self._parsers.values():
-            p.update(msg, t)
+            if p.update(msg, t) is not None:
+                self.used += 1
+                return True
+            reasons.append(p.last_drop or "unknown_id")
+        # the most telling reason among the DBCs: one that knows the id says more than one that does not
+        reason = REASONS.get(min(reasons, key=lambda r: r == "unknown_id"), "undecodable") if reasons else "unknown_id"
+        self.drops[reason] += 1
+        why = self._why.get(msg.arbitration_id)
+        if why is not None:
+            detail = {"wrong_channel": str(msg.channel), "wrong_length": len(msg.data)}.get(reason, "")
+            why[(reason, detail)] += 1
+        return False
+
+    def counts(self) -> dict[str, Any]:
+        """{"used": frames an input was decoded from, "dropped": {reason: frames}}."""
+        return {"used": self.used, "dropped": dict(sorted(self.drops.items()))}
+
+    def never_decoded(self) -> list[str]:
+        """For every configured input of which no frame was ever decoded: one line naming the message and
+        the likely cause (the frames of its id that were dropped, and why)."""
+        out = []
+        for name, spec in self.specs.items():
+            p = self._parsers[spec.dbc]
+            msg = p.db.get_message_by_name(spec.message)
+            if p.age_s(spec.message) is not None:
+                continue
+            why = self._why.get(msg.frame_id, Counter())
+            head = f"vehicle.{name}: {spec.message} (id 0x{msg.frame_id:X}) was never decoded: "
+            by_reason: Counter = Counter()
+            for (reason, _d), n in why.items():
+                by_reason[reason] += n
+            if not by_reason:
+                out.append(head + f"no frame with id 0x{msg.frame_id:X} was read; check {name}_message and the "
+                                  f"DBC, or that the log is of the right bus")
+                continue
+            reason, n = by_reason.most_common(1)[0]
+            details = sorted({str(d) for (r, d) in why if r == reason})
+            if reason == "wrong_channel":
+                cause = (f"its {n} frames came on channel {', '.join(details)} but vehicle.channel is "
+                         f"{self.channel}: set vehicle.log_channels (e.g. 'any', or '{details[0]}={self.channel}') "
+                         f"or vehicle.channel")
+            elif reason == "wrong_length":
+                cause = (f"its {n} frames are {', '.join(details)} bytes long but the DBC gives {msg.length}: "
+                         f"the DBC does not match this car, or the log lost bytes")
+            else:
+                cause = (f"its {n} frames could not be decoded with the DBC ({reason}): check the signals of "
+                         f"{spec.message} (length, start bit) in {Path(spec.dbc).name}")
+            out.append(head + cause)
+        return out
 
     def _read(self, spec: InputSpec, now: float) -> InputValue:
         p = self._parsers[spec.dbc]

@@ -10,6 +10,7 @@ from typing import Optional
 import can
 
 from app.can import headway_database
+from app.fcw_level import FcwLevel
 from app.replay import replay_scenario
 
 # scenario -> the true TTC (s) by which a warning must have come (NCAP FCW confirmation test);
@@ -25,7 +26,7 @@ NO_WARNING = ("steady_following", "adjacent_passing", "cut_out_stopped_car", "ov
               "empty_road", "cut_in", "lane_change", "overtaking_from_side")
 
 
-def _true_ttc(truth: list[dict]) -> Optional[float]:
+def true_ttc(truth: list[dict]) -> Optional[float]:
     """TTC to the ego front of the most urgent vehicle in the ego lane (None if nobody is closing)."""
     ttcs = [v["ttc_s"] for v in truth if v["lane"] == 0 and v["ttc_s"] is not None]
     return min(ttcs) if ttcs else None
@@ -40,7 +41,7 @@ def warnings_in_can_log(path: str) -> list[tuple[float, int, Optional[float]]]:
     if not frames:
         return []
     t0 = min(m.timestamp for m in frames)
-    out, last = [], 0
+    out, last = [], FcwLevel.NONE
     for m in frames:
         if m.arbitration_id != msg.frame_id:
             continue
@@ -56,15 +57,15 @@ def evaluate(name: str, config_path: Optional[str] = None) -> dict:
     truth_ttc: list[tuple[float, Optional[float]]] = []
 
     def on_result(r, decision, truth):
-        truth_ttc.append((r.t, _true_ttc(truth)))
+        truth_ttc.append((r.t_s, true_ttc(truth)))
 
     with tempfile.TemporaryDirectory() as tmp:
         can_out = str(Path(tmp) / "out.log")
         s = replay_scenario(name, config_path=config_path, can_out=can_out, on_result=on_result, progress=False)
         changes = warnings_in_can_log(can_out)
-    warnings = [(t, ttc) for t, level, ttc in changes if level == 2]
+    warnings = [(t, ttc) for t, level, ttc in changes if level == FcwLevel.WARNING]
     out = {"scenario": name, "frames": s.frames, "warnings": len(warnings),
-           "prewarnings": sum(1 for _, level, _ in changes if level == 1), "first_warning_t_s": None,
+           "prewarnings": sum(1 for _, level, _ in changes if level == FcwLevel.PREWARNING), "first_warning_t_s": None,
            "ttc_used_s": None, "true_ttc_s": None}
     if warnings:
         t, ttc_used = warnings[0]

@@ -11,7 +11,7 @@ import numpy as np
 from app import config as configuration
 from app.core import Pipeline
 from app.eval.tusimple_boxes import TUSIMPLE_LANE_PITCH_DEG, tusimple_config
-from app.eval.tusimple_lanes import evaluate_lanes, lane_threshold, segments_to_tusimple
+from app.eval.tusimple_lanes import evaluate_lanes, lane_threshold, segments_to_tusimple, write_predictions
 
 def boundary_on_gt_lane(lane, label: dict, width: int) -> bool:
     """The boundary lies on one ground-truth lane: over the rows both have, on average within that
@@ -36,11 +36,14 @@ def ego_lane_found(lanes, label: dict, width: int) -> bool:
     return len({l.position for l in ego}) == 2 and all(boundary_on_gt_lane(l, label, width) for l in ego)
 
 
-def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optional[Callable] = None) -> dict:
+def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optional[Callable] = None,
+             predictions_out: Optional[str] = None) -> dict:
+    """Each image alone (the "lanes" stage, no history), scored with the TuSimple metric; the predictions
+    are written in TuSimple's format to `predictions_out` when given."""
     root = Path(sample_dir)
     label_file = next(root.rglob("label_data.json"))
     labels = [json.loads(x) for x in label_file.read_text().splitlines() if x.strip()]
-    preds, ego_hits = {}, 0
+    preds, ego_hits, run_ms = {}, 0, {}
     pipes: dict[tuple[int, int], Pipeline] = {}
     try:
         for lab in labels:
@@ -53,13 +56,16 @@ def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optio
                 cfg["camera"] = configuration.scaled_camera(cfg["camera"], *size)
                 pipes[size] = Pipeline(configuration.core_sections(cfg))
             r = pipes[size].run_stage("lanes", gray)
-            preds[lab["raw_file"]] = r.lanes
+            preds[lab["raw_file"]] = segments_to_tusimple(r.lanes, lab["h_samples"], size[0])
+            run_ms[lab["raw_file"]] = r.stages.get("lanes", r.total_ms)
             ego_hits += ego_lane_found(r.lanes, lab, size[0])
             if on_image:
                 on_image(lab, gray, r)
     finally:
         for p in pipes.values():
             p.close()
+    if predictions_out:
+        write_predictions(predictions_out, labels, preds, run_ms)
     m = evaluate_lanes(preds, label_file)
     return {"images": len(labels), "accuracy": m["accuracy"], "fp": m["fp"], "fn": m["fn"],
             "ego_lane_found": ego_hits}

@@ -20,6 +20,7 @@ from typing import Optional
 import yaml
 
 from app.eval.road_motion import fit_horizon, read_tme, read_video, tme_camera, udacity_camera
+from app.fcw_level import FcwLevel
 from app.replay import replay_recording
 from app.sim.can_log import DBC_PATH, write_ego_speed_log
 from app.sim.world import Motion1D
@@ -56,8 +57,8 @@ def evaluate(data: str, preset: str = "thesis") -> list[dict]:
                                  progress=False)
             out.append({"clip": source.name, "frames": s.frames, "seconds": round(s.frames / fps, 2),
                         "vehicles_confirmed": len(s.confirmed_ids),
-                        "warnings": sum(1 for _, level, _ in s.warnings if level == "warning"),
-                        "prewarnings": sum(1 for _, level, _ in s.warnings if level == "prewarning"),
+                        "warnings": sum(1 for _, level, _ in s.warnings if level == FcwLevel.WARNING.label),
+                        "prewarnings": sum(1 for _, level, _ in s.warnings if level == FcwLevel.PREWARNING.label),
                         "events": [(round(t, 2), level, None if ttc is None else round(ttc, 2))
                                    for t, level, ttc in s.warnings]})
     return out

@@ -54,6 +54,18 @@ def markdown(report: dict) -> str:
                 "| accuracy | false positives | false negatives | ego lane found |", "| ---: | ---: | ---: | ---: |",
                 f"| {_f(ln['accuracy'])} | {_f(ln['fp'])} | {_f(ln['fn'])} | {ln['ego_lane_found']} of {ln['images']} |",
                 ""]
+    lc = report.get("lane_clips")
+    if lc:
+        out += [f"### TuSimple lane clips ({lc['clips']} clips of 20 frames through the whole pipeline, "
+                "scored on frame 20)", "",
+                "| accuracy | false positives | false negatives |", "| ---: | ---: | ---: |",
+                f"| {_f(lc['accuracy'])} | {_f(lc['fp'])} | {_f(lc['fn'])} |", "",
+                "| clip | accuracy | FP | FN | lanes predicted | lanes labelled |",
+                "| --- | ---: | ---: | ---: | ---: | ---: |"]
+        for im in lc["per_image"]:
+            out.append(f"| {Path(im['raw_file']).parent.as_posix().removeprefix('clips/')} | {_f(im['accuracy'])} | "
+                       f"{_f(im['fp'], 2)} | {_f(im['fn'], 2)} | {im['n_pred']} | {im['n_gt']} |")
+        out += ["", "Predictions in TuSimple's format: `lane_clips_pred.json`, `lanes_sample_pred.json`.", ""]
     rc = report.get("range")
     if rc:
         out += [f"### Range on TuSimple train_clip1 (frame {rc['frames']}, range-sensor truth)", "",
@@ -91,7 +103,17 @@ def markdown(report: dict) -> str:
 
 
 def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data", config_path: Optional[str] = None,
-        scenarios: Optional[list[str]] = None, examples: int = 4) -> dict:
+        scenarios: Optional[list[str]] = None, examples: int = 4, workers: Optional[int] = None,
+        scheduler: Optional[str] = None) -> dict:
+    """With `workers` or `scheduler`, the synthetic suite and the FCW scenarios run one task per scenario on
+    the fleet's engine (app/fleet/engine.py); the other parts run here."""
+    mapper = None
+    if workers is not None or scheduler is not None:
+        import functools
+
+        from app.fleet.engine import map_ordered
+
+        mapper = functools.partial(map_ordered, scheduler=scheduler, workers=workers)
     out = Path(out_dir)
     (out / "examples").mkdir(parents=True, exist_ok=True)
     data = Path(data_dir)
@@ -104,7 +126,7 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
         from app.eval import synthetic
 
         report["synthetic"] = synthetic.evaluate_suite(preset, scenarios, config_path,
-                                                       progress=lambda n: say(f"scenario {n}"))
+                                                       progress=lambda n: say(f"scenario {n}"), mapper=mapper)
     if "tusimple" in parts:
         supp = data / "tusimple" / "supp"
         if supp.exists():
@@ -133,9 +155,24 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
                 cv2.imwrite(str(out / "examples" / f"lanes_{name}.jpg"), annotate(gray, r))
 
             say("lane sample")
-            report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=keep_lane)
+            report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=keep_lane,
+                                                    predictions_out=str(out / "lanes_sample_pred.json"))
         else:
             report["skipped"]["lanes"] = f"{sample} not found"
+        clips = data / "tusimple" / "lane_clips"
+        if clips.exists():
+            from app.eval import lane_clips
+
+            def keep_clip(lab, gray, r):
+                name = Path(lab["raw_file"]).parent.name
+                cv2.imwrite(str(out / "examples" / f"lane_clip_{name}.jpg"), annotate(gray, r))
+
+            say("lane clips")
+            report["lane_clips"] = lane_clips.evaluate(str(clips), config_path, preset,
+                                                       predictions_out=str(out / "lane_clips_pred.json"),
+                                                       on_clip=keep_clip)
+        else:
+            report["skipped"]["lane_clips"] = f"{clips} not found"
     if "range" in parts:
         clip = data / "tusimple" / "train_clip1"
         if clip.exists():
@@ -148,10 +185,14 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
     if "fcw" in parts:
         from app.eval import fcw_scenarios
 
-        report["fcw"] = []
-        for name in list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING):
-            say(f"FCW {name}")
-            report["fcw"].append(fcw_scenarios.evaluate(name, config_path))
+        names = list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING)
+        if mapper is not None:
+            report["fcw"] = mapper(fcw_scenarios.evaluate, [(n, config_path) for n in names], names, "FCW")
+        else:
+            report["fcw"] = []
+            for name in names:
+                say(f"FCW {name}")
+                report["fcw"].append(fcw_scenarios.evaluate(name, config_path))
     if "road_motion" in parts:
         from app.eval import road_motion
 
@@ -168,8 +209,10 @@ def main(args) -> int:
     if unknown:
         raise ValueError(f"--parts: unknown part(s) {', '.join(sorted(unknown))}; choose from {', '.join(PARTS)}")
     out = args.out or f"reports/eval-{args.pipeline}"
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers {args.workers}: need at least one worker")
     report = run(args.pipeline, out, parts, args.data, args.config,
-                 args.scenarios.split(",") if args.scenarios else None)
+                 args.scenarios.split(",") if args.scenarios else None, workers=args.workers, scheduler=args.scheduler)
     print(markdown(report))
     print(f"\nreport: {Path(out).resolve()}/report.json, report.md, examples/")
     return 0

@@ -21,7 +21,9 @@ import cv2
 import numpy as np
 
 from app.core import Pipeline
+from app.recording import open_recording
 
+TME_FPS = 20.0  # frames/s of the TME Motorway sequences
 UDACITY_FX_AT_1280 = 1150.0  # px, assumed (typical of the Udacity dash camera at 1280x720)
 # Share of the image height taken by the car's bonnet (parallax.hood_frac), read off the frames.
 HOOD = {"tme08": 0.04, "project_video_cut.mp4": 0.07, "test_small1.mp4": 0.07, "test_small2.mp4": 0.07,
@@ -30,21 +32,13 @@ HOOD = {"tme08": 0.04, "project_video_cut.mp4": 0.07, "test_small1.mp4": 0.07, "
 
 def read_tme(folder: Path) -> tuple[list[np.ndarray], float]:
     """Gray frames of a TME sequence folder and its frame rate (TME Motorway: 20 fps)."""
-    files = sorted(Path(folder).glob("*.jpg"))
-    return [cv2.imread(str(f), cv2.IMREAD_GRAYSCALE) for f in files], 20.0
+    return open_recording(folder, TME_FPS).read_all(), TME_FPS
 
 
 def read_video(path: Path, max_frames: Optional[int] = None) -> tuple[list[np.ndarray], float]:
-    cap = cv2.VideoCapture(str(path))
-    fps = cap.get(cv2.CAP_PROP_FPS) or 25.0
-    frames = []
-    while max_frames is None or len(frames) < max_frames:
-        ok, img = cap.read()
-        if not ok:
-            break
-        frames.append(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY))
-    cap.release()
-    return frames, float(fps)
+    """Gray frames of a video (the first max_frames) and its own frame rate."""
+    rec = open_recording(path)
+    return rec.read_all(max_frames), rec.fps
 
 
 def tme_camera(ini: Path) -> dict:

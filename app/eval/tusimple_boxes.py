@@ -107,14 +107,18 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
     root = Path(supp_dir)
     entries = load_entries(supp_dir, limit)
     cfg = tusimple_config(configuration.load(config_path))
-    cfg["pipeline"]["preset"] = preset
+    # "cascade" (the trained Haar cascade alone) and "fused" (cascade + shadows) are single-image stages,
+    # not tracking presets
+    stage = preset if preset in ("cascade", "fused") else "detect"
+    if stage == "detect":
+        cfg["pipeline"]["preset"] = preset
     scored = []
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for e in entries:
             gray = cv2.imread(str(root / e["file_name"]), cv2.IMREAD_GRAYSCALE)
             if gray is None:
                 raise FileNotFoundError(f"{root / e['file_name']}: cannot be read")
-            r = pipe.run_stage("detect", gray)
+            r = pipe.run_stage(stage, gray)
             scored.append([(*t.box, t.confidence) for t in r.tracks])
             if on_image:
                 on_image(e, gray, r)

@@ -17,8 +17,10 @@ Follows the official benchmark script (TuSimple ``lane/evaluate/lane.py``, ``Lan
 One deliberate difference: a ground-truth lane with no point at all (padding in some converted
 label files) is not a lane and is ignored, instead of being an unmatchable false negative.
 
-Predictions come from Headway's lane model, whose boundaries are straight segments;
-:func:`segments_to_tusimple` samples them at the ``h_samples`` rows within their vertical extent.
+Predictions come from Headway's lane model, whose boundaries bend with the road (image points, straight
+between them; a boundary given only by its bottom and top point is a straight segment);
+:func:`segments_to_tusimple` samples them at the ``h_samples`` rows within their vertical extent and
+:func:`write_predictions` writes them as a TuSimple submission.
 """
 from __future__ import annotations
 
@@ -32,33 +34,41 @@ POINT_THRESH = 0.85          # fraction of rows that must be correct for a lane 
 REFERENCE_WIDTH = 1280
 
 
-def _segment(lane: Any) -> tuple[float, float, float, float]:
-    """(x_bottom, y_bottom, x_top, y_top) of a lane given as an object with those attributes or a mapping."""
-    if isinstance(lane, Mapping):
-        return (float(lane["x_bottom"]), float(lane["y_bottom"]), float(lane["x_top"]), float(lane["y_top"]))
-    return (float(lane.x_bottom), float(lane.y_bottom), float(lane.x_top), float(lane.y_top))
+def _polyline(lane: Any) -> list[tuple[float, float]]:
+    """The lane's image points (x, y), bottom first: its ``points`` when it has two or more (a lane model
+    that bends with the road), else its straight segment (x_bottom, y_bottom) - (x_top, y_top). The lane is
+    an object with those attributes or a mapping with those keys."""
+    get = (lambda k, d=None: lane.get(k, d)) if isinstance(lane, Mapping) else (lambda k, d=None: getattr(lane, k, d))
+    pts = get("points") or []
+    if len(pts) >= 2:
+        return [(float(x), float(y)) for x, y in pts]
+    return [(float(get("x_bottom")), float(get("y_bottom"))), (float(get("x_top")), float(get("y_top")))]
+
+
+def polyline_x(pts: Sequence[tuple[float, float]], y: float) -> float:
+    """x of the polyline at row y (straight between its points), NaN outside its rows."""
+    for (x0, y0), (x1, y1) in zip(pts, pts[1:]):
+        if min(y0, y1) <= y <= max(y0, y1) and y0 != y1:
+            return x0 + (x1 - x0) * (y - y0) / (y1 - y0)
+    return math.nan
 
 
 def segments_to_tusimple(lanes: Iterable[Any], h_samples: Sequence[int], width: int) -> list[list[float]]:
-    """Straight lane segments -> TuSimple x lists.
+    """Lane boundaries (image polylines or straight segments, :func:`_polyline`) -> TuSimple x lists.
 
-    Each segment is sampled at the h_samples rows between its top and bottom point; rows outside
-    that extent, or where the line is outside the image (0 <= x < width), get -2. Segments with no
+    Each boundary is sampled at the h_samples rows between its top and bottom point; rows outside
+    that extent, or where the line is outside the image (0 <= x < width), get -2. Boundaries with no
     point inside the image are dropped (they would only count as false positives).
     """
     out = []
     for lane in lanes:
-        xb, yb, xt, yt = _segment(lane)
-        if not all(map(math.isfinite, (xb, yb, xt, yt))) or yb == yt:
+        pts = _polyline(lane)
+        if not all(math.isfinite(v) for p in pts for v in p) or pts[0][1] == pts[-1][1]:
             continue
-        lo, hi = min(yb, yt), max(yb, yt)
         xs: list[float] = []
         for h in h_samples:
-            if lo <= h <= hi:
-                x = xb + (xt - xb) * (h - yb) / (yt - yb)
-                xs.append(x if 0 <= x < width else -2)
-            else:
-                xs.append(-2)
+            x = polyline_x(pts, h)
+            xs.append(x if math.isfinite(x) and 0 <= x < width else -2)
         if any(x >= 0 for x in xs):
             out.append(xs)
     return out
@@ -180,3 +190,14 @@ def evaluate_lanes(pred_lanes_per_image: Mapping[str, Sequence[Any]], gt_json_pa
 def _is_x_list(lane: Any, h_samples: Sequence[int]) -> bool:
     return (isinstance(lane, Sequence) and not isinstance(lane, (str, bytes, Mapping))
             and len(lane) == len(h_samples) and all(isinstance(v, (int, float)) for v in lane))
+
+
+def write_predictions(path: str | Path, labels: Sequence[Mapping], preds: Mapping[str, Sequence[Sequence[float]]],
+                      run_ms: Mapping[str, float]) -> None:
+    """A TuSimple submission: one JSON line per labelled image, {"raw_file", "lanes" (x lists, -2 = none),
+    "h_samples", "run_time" (ms)}, as the official LaneEval.bench_one_submit reads it."""
+    with open(path, "w") as f:
+        for lab in labels:
+            lanes = [[round(x, 1) if x >= 0 else -2 for x in ln] for ln in preds.get(lab["raw_file"], [])]
+            f.write(json.dumps({"raw_file": lab["raw_file"], "lanes": lanes, "h_samples": lab["h_samples"],
+                                "run_time": round(float(run_ms.get(lab["raw_file"], 0.0)), 3)}) + "\n")

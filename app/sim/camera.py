@@ -17,46 +17,33 @@ from typing import Any, Mapping
 
 import numpy as np
 
-# Default camera of the demo and the default config: VGA, 700 px focal length,
-# mounted 1.3 m above the road looking 1 degree down.
-DEFAULT_CAMERA: dict[str, float] = {
-    "width": 640,
-    "height": 480,
-    "fx": 700.0,
-    "fy": 700.0,
-    "cx": 320.0,
-    "cy": 240.0,
-    "height_m": 1.3,
-    "pitch_deg": 1.0,
-    "yaw_deg": 0.0,
-    "lateral_m": 0.0,
-}
-
-
 @dataclasses.dataclass(frozen=True)
 class Camera:
-    width: int = 640
-    height: int = 480
-    fx: float = 700.0
-    fy: float = 700.0
-    cx: float = 320.0
-    cy: float = 240.0
-    height_m: float = 1.3
-    pitch_deg: float = 1.0
-    yaw_deg: float = 0.0
-    lateral_m: float = 0.0
+    """The keys of the configuration's `camera` section (units and meaning there); ``from_dict`` fills
+    the missing ones with the core's defaults."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    height_m: float
+    pitch_deg: float
+    yaw_deg: float
+    lateral_m: float
 
     @classmethod
     def from_dict(cls, cfg: Mapping[str, Any] | None = None) -> "Camera":
-        """Camera from the documented keys; missing keys take the defaults.
+        """Camera from the documented keys; missing keys take the defaults (``default_camera()``).
 
         When only ``width``/``height`` are given, the principal point defaults to the image centre.
         """
         cfg = dict(cfg or {})
-        unknown = set(cfg) - set(DEFAULT_CAMERA)
+        unknown = set(cfg) - set(CAMERA_KEYS)
         if unknown:
             raise ValueError(f"unknown camera key(s): {', '.join(sorted(unknown))}")
-        merged = dict(DEFAULT_CAMERA)
+        merged = default_camera()
         merged.update(cfg)
         if "cx" not in cfg:
             merged["cx"] = merged["width"] / 2.0
@@ -152,3 +139,20 @@ class Camera:
         # Level coordinates of a road point: (X - lateral, h, Z) = M (X, Z, 1).
         m = np.array([[1.0, 0.0, -self.lateral_m], [0.0, 0.0, self.height_m], [0.0, 1.0, 0.0]])
         return self.K @ self.rotation @ m
+
+
+CAMERA_KEYS = tuple(f.name for f in dataclasses.fields(Camera))
+
+
+def default_camera() -> dict[str, Any]:
+    """The default camera of the product, the demo and every scenario that does not set its own: the
+    core's ``CameraParams`` (csrc/geometry/camera.hpp) as the core describes them (``app.core.core_schema``),
+    so that they are written once. A fresh dict each call."""
+    return dict(_core_camera_defaults())
+
+
+@functools.cache
+def _core_camera_defaults() -> dict[str, Any]:
+    from app.core import core_schema  # on first use, so that `import app.sim` alone does not load the core
+    section = core_schema()["camera"]
+    return {k: section[k]["default"] for k in CAMERA_KEYS}

@@ -103,7 +103,8 @@ class Ground:
         albedo = np.full((height, camera.width), self.light.grass_gray, np.uint8)
         fill(albedo, project_quads(camera, [rect_xz(*self.paved_m, z_near, FAR_M)], r0), self.light.asphalt_gray)
         marking_gray = min(235.0, self.light.asphalt_gray + 105.0)
-        fill(albedo, project_quads(camera, self._markings(odometer_m, z_near), r0), marking_gray)
+        if self.road.markings == "painted":
+            fill(albedo, project_quads(camera, self._markings(odometer_m, z_near), r0), marking_gray)
 
         shadows = [(corners, factor) for corners, factor in shadows if len(corners) >= 3]
         if shadows:

@@ -17,7 +17,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 import yaml
 
-from .camera import DEFAULT_CAMERA
+from .camera import CAMERA_KEYS
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 KMH = 1.0 / 3.6  # m/s per km/h
@@ -99,6 +99,7 @@ class RoadSpec:
     marking_width_m: float = 0.15
     dash_length_m: float = 3.0
     dash_gap_m: float = 9.0
+    markings: str = "painted"  # "none": bare asphalt, no painted lines (worn roads, lead without lanes)
     overpass: OverpassSpec | None = None
 
     @property
@@ -248,7 +249,7 @@ _CAMERA_LIMITS = {
 
 def read_camera(where: str, value: Any, path: str = "camera") -> dict:
     """Validated camera overrides (any subset of the documented camera keys)."""
-    reader = _Reader(where, value if value is not None else {}, path, tuple(DEFAULT_CAMERA))
+    reader = _Reader(where, value if value is not None else {}, path, CAMERA_KEYS)
     out: dict[str, float] = {}
     for name, (lo, hi) in _CAMERA_LIMITS.items():
         if reader.data.get(name) is not None:
@@ -292,7 +293,8 @@ def _read_road(top: _Reader) -> RoadSpec:
         overpass = OverpassSpec(**_numbers(o, OverpassSpec, {
             "z_m": (5.0, 1000.0), "depth_m": (2.0, 60.0), "clearance_m": (4.5, 10.0), "thickness_m": (0.5, 4.0),
             "shadow_offset_m": (-30.0, 30.0)}))
-    return RoadSpec(lanes=lanes, ego_lane=ego_lane, overpass=overpass, **_numbers(r, RoadSpec, {
+    markings = r.string("markings", RoadSpec.markings, ("painted", "none"))
+    return RoadSpec(lanes=lanes, ego_lane=ego_lane, overpass=overpass, markings=markings, **_numbers(r, RoadSpec, {
         "lane_width_m": (2.5, 5.0), "shoulder_m": (0.2, 4.0), "marking_width_m": (0.08, 0.5),
         "dash_length_m": (0.5, 20.0), "dash_gap_m": (0.5, 30.0)}))
 

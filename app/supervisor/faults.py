@@ -2,12 +2,20 @@
 
 Severity "fault" means Headway cannot warn the driver reliably; "degraded" means it still warns but
 something needs attention. The bit numbers are part of the CAN interface: never renumber a bit.
+The overall states and the rule that picks one from the faults are here too, so that the health
+monitor and a replay without one decide alike. headway.dbc's HW_STATUS (its STATE value table, its
+FAULT_* bits and their comments) is checked against this file by tests/test_can_dbc.py and
+tests/test_one_definition.py.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Iterable
 
-FAULT, DEGRADED = "fault", "degraded"
+FAULT, DEGRADED = "fault", "degraded"  # the severities, also the names of the states they lead to
+STARTING, OK = "starting", "ok"
+# The overall states in the order of their codes (HW_STATUS.STATE, the status file).
+STATES = (STARTING, OK, DEGRADED, FAULT)
 
 
 @dataclass(frozen=True)
@@ -46,3 +54,14 @@ def fault_bits(names) -> int:
 
 def fault_names(bits: int) -> list[str]:
     return [f.name for f in FAULTS if bits & (1 << f.bit)]
+
+
+def overall_state(faults: Iterable[str], started: bool) -> str:
+    """The one rule: fault on any fault of severity fault, else starting until the first frame, else
+    degraded on any other fault, else ok. An unknown fault name is a KeyError (a programming error)."""
+    severities = {BY_NAME[f].severity for f in faults}
+    if FAULT in severities:
+        return FAULT
+    if not started:
+        return STARTING
+    return DEGRADED if DEGRADED in severities else OK

@@ -10,11 +10,16 @@ from __future__ import annotations
 
 import os
 import select
+import stat
 import threading
 import time
 from typing import Callable
 
 import numpy as np
+
+
+class FifoError(ValueError):
+    """The FIFO path is taken by something that is not a FIFO."""
 
 
 class FifoReader:
@@ -30,6 +35,9 @@ class FifoReader:
     def start(self) -> "FifoReader":
         if not os.path.exists(self.path):
             os.mkfifo(self.path, 0o660)
+        elif not stat.S_ISFIFO(os.stat(self.path).st_mode):
+            # a regular file would be read again and again at full speed, as if a camera filmed it
+            raise FifoError(f"source.path {self.path}: is not a FIFO; remove it or give the path of a named pipe")
         self._thread.start()
         return self
 

@@ -12,10 +12,7 @@ from typing import Optional
 import numpy as np
 
 from app.schema import key as _key
-from app.supervisor.faults import BY_NAME, DEGRADED, FAULT, fault_bits
-
-STARTING, OK, DEGRADED_STATE, FAULT_STATE = "starting", "ok", "degraded", "fault"
-STATE_CODES = {STARTING: 0, OK: 1, DEGRADED_STATE: 2, FAULT_STATE: 3}
+from app.supervisor.faults import fault_bits, overall_state
 
 
 # The configuration section `health`.
@@ -39,14 +36,16 @@ HEALTH_SCHEMA = {
 
 @dataclass
 class HealthParams:
-    camera_timeout_s: float = 0.5
-    stall_timeout_s: float = 2.0
-    blinded_stddev: float = 3.0
-    blinded_frames: int = 15
-    frozen_change: float = 0.05
-    frozen_frames: int = 30
-    latency_budget_ms: float = 50.0
-    window_frames: int = 300
+    """The section `health`; units, meaning and defaults are HEALTH_SCHEMA's."""
+
+    camera_timeout_s: float = HEALTH_SCHEMA["camera_timeout_s"]["default"]
+    stall_timeout_s: float = HEALTH_SCHEMA["stall_timeout_s"]["default"]
+    blinded_stddev: float = HEALTH_SCHEMA["blinded_stddev"]["default"]
+    blinded_frames: int = HEALTH_SCHEMA["blinded_frames"]["default"]
+    frozen_change: float = HEALTH_SCHEMA["frozen_change"]["default"]
+    frozen_frames: int = HEALTH_SCHEMA["frozen_frames"]["default"]
+    latency_budget_ms: float = HEALTH_SCHEMA["latency_budget_ms"]["default"]
+    window_frames: int = HEALTH_SCHEMA["window_frames"]["default"]
 
     @classmethod
     def from_config(cls, section: dict) -> "HealthParams":
@@ -146,14 +145,7 @@ class HealthMonitor:
         fps = None
         if len(self._frame_times) >= 2 and self._frame_times[-1] > self._frame_times[0]:
             fps = (len(self._frame_times) - 1) / (self._frame_times[-1] - self._frame_times[0])
-        if self.frames == 0 and not any(BY_NAME[f].severity == FAULT for f in faults):
-            state = STARTING
-        elif any(BY_NAME[f].severity == FAULT for f in faults):
-            state = FAULT_STATE
-        elif any(BY_NAME[f].severity == DEGRADED for f in faults):
-            state = DEGRADED_STATE
-        else:
-            state = OK
-        return HealthReport(state=state, faults=faults, bits=fault_bits(faults), fps=fps,
+        return HealthReport(state=overall_state(faults, started=self.frames > 0), faults=faults,
+                            bits=fault_bits(faults), fps=fps,
                             latency_median_ms=median, latency_p99_ms=p99, frames=self.frames,
                             queue_drops=queue_drops, camera=camera)

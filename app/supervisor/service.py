@@ -4,7 +4,12 @@ A thin loop: pop results from the core, hand each to the stack (vehicle inputs -
 and several times a second evaluate health, refresh the status file and the status CAN frame, and
 talk to systemd: READY=1 once the camera delivers and the bus is open, WATCHDOG=1 only while the
 core's real-time loop goes round, STATUS= with a one-line summary. SIGTERM or SIGINT stop everything
-within a second, flushing the logs; exit 0.
+within a second, flushing the logs; exit 0. SIGHUP runs the same stop path, then exits RESTART_EXIT
+(75) so that systemd (Restart=on-failure) starts the service again with its configuration file read
+anew: a reload that never runs half-reconfigured (check the file first: `headway config check`).
+
+Before anything starts, the configuration and what it points to are checked (``app.config_check``, the
+same as `headway config check` without opening the bus): a problem is exit 2 with the key named.
 """
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ from typing import Optional
 
 from app import config as configuration
 from app.core import Pipeline, SourceError
+from app.supervisor.faults import DEGRADED, FAULT
 from app.supervisor.health import HealthMonitor, HealthParams
 from app.supervisor.notify import Notifier
 from app.supervisor.stack import Stack
@@ -26,6 +32,8 @@ from app.supervisor.status_file import write_status
 log = logging.getLogger("headway")
 
 LIVE_KINDS = ("v4l2", "firewire", "fifo")
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)  # each runs the same stop path
+RESTART_EXIT = 75  # EX_TEMPFAIL: after SIGHUP, so that systemd's Restart=on-failure starts it again
 TICK_S = 0.05  # loop period when no frame arrives: health is evaluated at least this often
 
 
@@ -56,6 +64,8 @@ class Service:
         self.ready_sent = False
         self.report = None
         self._status_warned = False
+        self.can_session = None
+        self._calibration = None  # the last frame's self-calibration estimate, for the status file
 
     def _open_mcu(self, stack: ExitStack):
         port = self.cfg["mcu"]["port"]
@@ -81,7 +91,9 @@ class Service:
                 from app.can import CanBusError, CanSession
 
                 try:
-                    can_session = stack.enter_context(CanSession.for_live(cfg))
+                    can_session = self.can_session = stack.enter_context(CanSession.for_live(cfg))
+                    if can_session.output.previous_log is not None:
+                        log.info("CAN output log: the previous run's is kept as %s", can_session.output.previous_log)
                 except CanBusError as exc:
                     log.error("CAN: %s", exc)
                     return 1
@@ -126,10 +138,11 @@ class Service:
             r = pipe.pop(timeout_s=TICK_S)
             now = time.monotonic()
             if r is not None:
-                latency_ms = (now - r.t) * 1000.0 if live else r.total_ms
+                latency_ms = (now - r.t_s) * 1000.0 if live else r.total_ms
                 self.health.on_result(now, latency_ms, r.image_stddev, r.image_change)
                 status = self.report.as_dict() if self.report else None
                 decision = sup.step(r, time.time(), pipe, status=status)
+                self._calibration = r.calibration
                 if tracks:
                     tracks.write(r, decision.level)
             if now >= next_status or r is None:
@@ -138,7 +151,7 @@ class Service:
                 mcu_up = None
                 if mcu is not None:
                     mcu_up = mcu.health().get("state") == "up"
-                    mcu.set_system_ok(self.report is None or self.report.state != "fault")
+                    mcu.set_system_ok(self.report is None or self.report.state != FAULT)
                 self.report = self.health.evaluate(now, h["last_alive_s"], h["running"], h["results_dropped"],
                                                    mcu_up=mcu_up, **inputs)
                 if r is None and can_session is not None:
@@ -147,7 +160,7 @@ class Service:
                     next_status = now + status_every
                     self._publish_status(h)
                 if self.report.state != last_state:
-                    level = logging.WARNING if self.report.state in ("degraded", "fault") else logging.INFO
+                    level = logging.WARNING if self.report.state in (DEGRADED, FAULT) else logging.INFO
                     log.log(level, "%s", self.report.summary())
                     last_state = self.report.state
                 if not self.ready_sent and self.health.frames > 0:
@@ -167,6 +180,10 @@ class Service:
         st = rep.as_dict()
         st.update(camera=rep.camera, source_state=core_health["source_state"],
                   frames_captured=core_health["frames_captured"], fcw=None)
+        if self.can_session is not None:
+            st["can_input"] = self.can_session.input_counts()  # vehicle-bus frames read, used, dropped by reason
+        if self._calibration is not None:
+            st["calibration"] = self._calibration
         try:
             write_status(self.cfg["service"]["status_file"], st)
         except OSError as exc:
@@ -179,7 +196,25 @@ def main(args) -> int:
     setup_logging()
     overrides = {"service": {"tracks_file": args.tracks}} if getattr(args, "tracks", None) else None
     cfg = configuration.load(args.config, overrides)  # a bad file raises before anything starts (exit 2)
+    from app.config_check import problems
+
+    found = problems(cfg, open_bus=False)  # the bus is opened (and its failure reported) by run()
+    for line in found:
+        log.error("configuration error: %s: %s", args.config, line)
+    if found:
+        return 2
     service = Service(cfg)
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: service.stop.set())
-    return service.run()
+    received: list[int] = []
+
+    def on_signal(signum, _frame):
+        received.append(signum)
+        service.stop.set()
+
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, on_signal)
+    rc = service.run()
+    if rc == 0 and received and received[0] == signal.SIGHUP:
+        log.info("SIGHUP: stopped; exit %d so that systemd starts the service again with the configuration "
+                 "read anew", RESTART_EXIT)
+        return RESTART_EXIT
+    return rc

@@ -25,9 +25,7 @@ def ego_from(can_state: Any, mcu_signals: Any) -> EgoState:
 
 
 def lead_of(r: FrameResult) -> Optional[Lead]:
-    if r.lead_id is None:
-        return None
-    t = next((t for t in r.tracks if t.id == r.lead_id), None)
+    t = r.lead
     if t is None:
         return None
     return Lead(id=t.id, range_m=t.range_m, range_rate_mps=t.range_rate_mps, ttc_s=t.ttc_s,
@@ -52,9 +50,9 @@ class Stack:
         ego = ego_from(state, self.bridge.vehicle_signals() if self.bridge is not None else None)
         if pipe is not None:  # for the ego path when the lanes are missing (next frame on)
             pipe.set_ego_motion(ego.speed_mps, getattr(state, "yaw_rate_rps", None))
-        decision = self.fcw.step(r.t, lead_of(r), ego)
+        decision = self.fcw.step(r.t_s, lead_of(r), ego)
         if decision.changed:
-            self.decisions.append((r.t, decision))
+            self.decisions.append((r.t_s, decision))
         if self.can is not None:
             self.can.publish(now_s, r, fcw=decision, status=status)
         if self.bridge is not None:

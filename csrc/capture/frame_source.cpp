@@ -3,8 +3,8 @@
 #include "capture/image_folder_source.hpp"
 #include "capture/push_source.hpp"
 #include "capture/video_capture_source.hpp"
-#include "core/errors.hpp"
-#include "core/params.hpp"
+#include "base/errors.hpp"
+#include "base/params.hpp"
 
 #include <opencv2/imgproc.hpp>
 

@@ -5,7 +5,7 @@
 // health event, and a live source that is lost is reopened by the loop with back-off.
 #pragma once
 
-#include "core/types.hpp"
+#include "base/types.hpp"
 
 #include <memory>
 #include <string>

@@ -1,6 +1,6 @@
 #include "capture/image_folder_source.hpp"
 
-#include "core/errors.hpp"
+#include "base/errors.hpp"
 
 #include <opencv2/imgcodecs.hpp>
 

@@ -1,7 +1,7 @@
 #include "capture/video_capture_source.hpp"
 
-#include "core/errors.hpp"
-#include "core/stopwatch.hpp"
+#include "base/errors.hpp"
+#include "base/stopwatch.hpp"
 
 #include <filesystem>
 

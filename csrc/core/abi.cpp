@@ -4,10 +4,10 @@
 
 #include "capture/push_source.hpp"
 #include "core/config.hpp"
-#include "core/errors.hpp"
+#include "base/errors.hpp"
 #include "core/pipeline.hpp"
 #include "core/realtime_loop.hpp"
-#include "core/stopwatch.hpp"
+#include "base/stopwatch.hpp"
 #include "geometry/flat_road.hpp"
 #include "track/gmphd.hpp"
 #include "track/ukf.hpp"
@@ -67,6 +67,39 @@ void require(const void *p, const char *what) {
     if (!p) throw std::invalid_argument(std::string(what) + " is NULL");
 }
 
+static_assert(HW_EVENT_DECODE_ERROR == hw::kEventDecodeError && HW_EVENT_SOURCE_LOST == hw::kEventSourceLost &&
+                  HW_EVENT_RECONNECTED == hw::kEventReconnected && HW_EVENT_SIZE_CHANGED == hw::kEventSizeChanged,
+              "hw::FrameEvent bits must equal the ABI's HW_EVENT_* (events are copied as they are)");
+
+int source_state_code(hw::SourceState s) {
+    switch (s) {
+    case hw::SourceState::kIdle: return HW_SOURCE_IDLE;
+    case hw::SourceState::kRunning: return HW_SOURCE_RUNNING;
+    case hw::SourceState::kReconnecting: return HW_SOURCE_RECONNECTING;
+    case hw::SourceState::kEnded: return HW_SOURCE_ENDED;
+    case hw::SourceState::kFailed: return HW_SOURCE_FAILED;
+    }
+    return HW_SOURCE_FAILED;
+}
+
+void fill_health(const hw::LoopHealth &l, hw_health &h) {
+    h.running = l.running ? 1 : 0;
+    h.source_state = source_state_code(l.source_state);
+    h.frames_captured = l.frames_captured;
+    h.frames_processed = l.frames_processed;
+    h.results_dropped = l.results_dropped;
+    h.frames_pushed_dropped = l.frames_pushed_dropped;
+    h.decode_errors = l.decode_errors;
+    h.source_losses = l.source_losses;
+    h.reconnects = l.reconnects;
+    h.last_frame_t_s = l.last_frame_t_s;
+    h.last_progress_s = l.last_progress_s;
+    h.last_alive_s = l.last_alive_s;
+    h.last_total_ms = l.last_total_ms;
+    h.queue_depth = l.queue_depth;
+    h.queue_capacity = l.queue_capacity;
+}
+
 void copy_name(char (&dst)[HW_STAGE_NAME_LEN], const std::string &src) {
     std::strncpy(dst, src.c_str(), HW_STAGE_NAME_LEN - 1);
     dst[HW_STAGE_NAME_LEN - 1] = '\0';
@@ -108,7 +141,10 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     int n = 0;
     auto add_lane = [&](const hw::LaneBoundary &b, int position) {
         if (!b.valid || n >= HW_MAX_LANES) return;
-        r->lanes[n++] = hw_lane{b.bottom.x, b.bottom.y, b.top.x, b.top.y, position, b.observed ? 1 : 0};
+        hw_lane &l = r->lanes[n++];
+        l = hw_lane{b.bottom.x, b.bottom.y, b.top.x, b.top.y, position, b.observed ? 1 : 0, 0, {}, {}};
+        hw::sample_boundary(b, o.lanes.far_row, HW_LANE_POINTS, l.px, l.py);
+        l.n_points = HW_LANE_POINTS;
     };
     add_lane(o.lanes.adj_left, -2);
     add_lane(o.lanes.ego_left, -1);
@@ -117,9 +153,10 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->n_lanes = n;
     r->vanishing_x = o.lanes.vanishing_point.x;
     r->vanishing_y = o.lanes.vanishing_point.y;
+    r->lane_width_m = o.lanes.width_m;
+    r->lane_offset_m = o.lanes.offset_m;
     r->horizon_row = o.horizon_row;
     r->lead_id = o.lead_id;
-    r->fcw_level = o.fcw_level;
     r->n_stages = int32_t(std::min<size_t>(o.times.items.size(), HW_MAX_STAGES));
     for (int i = 0; i < r->n_stages; ++i) {
         copy_name(r->stages[i].name, o.times.items[i].first);
@@ -135,6 +172,14 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->road_coast_frames = o.road.coast_frames;
     for (int i = 0; i < 9; ++i)
         r->road_homography[i] = r->road_motion == HW_ROAD_NONE ? NAN : float(o.road.H.val[i]);
+    r->calib_pitch_deg = o.calib_pitch_deg;
+    r->calib_yaw_deg = o.calib_yaw_deg;
+    r->calib_height_m = o.calib_height_m;
+    r->calib_pitch_sigma_deg = o.calib_pitch_sigma_deg;
+    r->calib_yaw_sigma_deg = o.calib_yaw_sigma_deg;
+    r->calib_height_sigma_m = o.calib_height_sigma_m;
+    r->calib_updates = o.calib_updates;
+    r->calib_active = o.calib_active ? 1 : 0;
 }
 
 cv::Mat wrap_gray(const uint8_t *gray, int32_t width, int32_t height, int32_t stride) {
@@ -341,14 +386,14 @@ int hw_pipeline_health(hw_pipeline *p, hw_health *out) {
         out->last_alive_s = NAN;
         out->last_total_ms = NAN;
         out->queue_capacity = p->results->capacity();
-        if (p->loop) p->loop->fill_health(*out);
+        if (p->loop) fill_health(p->loop->health(), *out);
         return HW_OK;
     });
 }
 
 } // extern "C"
 
-// ---- BEGIN paper 004 units, reachable alone for tests (ABI 3) ------------------------------------------
+// ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) ------------------------------------------
 
 namespace {
 

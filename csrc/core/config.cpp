@@ -1,5 +1,7 @@
 #include "core/config.hpp"
 
+#include <algorithm>
+
 namespace hw {
 
 using nlohmann::json;
@@ -15,12 +17,15 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("verify", c.verify);
     fn("kalman", c.kalman);
     fn("horizon", c.horizon);
+    fn("self_calibration", c.self_calibration);
     fn("kinematics", c.kinematics);
     fn("lead", c.lead);
     fn("road_features", c.road_features);
     fn("homography", c.homography);
     fn("parallax", c.parallax);
     fn("particles", c.particles);
+    fn("cascade", c.cascade);
+    fn("fuse", c.fuse);
     fn("phd", c.phd);
     fn("gmphd", c.phd.phd);
     fn("phd_features", c.phd.features);
@@ -48,6 +53,7 @@ Config Config::from_json(const std::string &text) {
             throw ConfigError(it.key() + ": unknown section of the core configuration");
     if (c.pipeline.reconnect_max_s < c.pipeline.reconnect_initial_s)
         throw ConfigError("pipeline.reconnect_max_s: must be >= pipeline.reconnect_initial_s");
+    composition_of(c.pipeline);  // the parts exist and fit together
     return c;
 }
 

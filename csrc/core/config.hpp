@@ -1,16 +1,23 @@
 // config.hpp - the core's configuration: one parameter struct per unit, read from JSON.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
+#include "core/parts.hpp"
+#include "detect/cascade_detector.hpp"
+#include "detect/detector_parallax.hpp"
+#include "detect/fuse_detections.hpp"
+#include "detect/lane_features.hpp"
 #include "detect/verify.hpp"
 #include "fcw/lead_selection.hpp"
-#include "geometry/horizon.hpp"
-#include "geometry/track_kinematics.hpp"
 #include "geometry/camera.hpp"
+#include "geometry/horizon.hpp"
+#include "geometry/self_calibration.hpp"
+#include "geometry/track_kinematics.hpp"
 #include "lanes/lane_tracker.hpp"
-#include "track/parallax_tracker.hpp"
-#include "track/phd_tracker.hpp"
-#include "track/thesis_tracker.hpp"
+#include "road/road_motion_stage.hpp"
+#include "track/particle_filter.hpp"
+#include "track/tracker_kalman.hpp"
+#include "track/tracker_phd.hpp"
 
 #include <string>
 
@@ -18,7 +25,9 @@ namespace hw {
 
 // How the pipeline runs, independent of the method.
 struct PipelineParams {
-    std::string preset = "thesis";  // which detector + tracker
+    std::string preset = "thesis";  // named composition of detector and tracker parts (core/parts.cpp)
+    std::vector<std::string> detectors;  // detector parts replacing the preset's (empty: the preset's)
+    std::string tracker;            // tracker part replacing the preset's (empty: the preset's)
     int queue_capacity = 8;         // results held for the caller before the oldest is dropped
     int push_queue_capacity = 4;    // pushed frames held before the oldest is dropped
     double reconnect_initial_s = 0.25;  // first back-off after a live source is lost
@@ -27,10 +36,17 @@ struct PipelineParams {
     double debug_stall_after_s = 0.0;   // >0: the loop stops making progress after this many seconds (watchdog tests)
 
     void bind(ParamMap &m) {
-        m.add("preset", preset, "thesis|parallax|phd|none",
-              "which detector + tracker runs: thesis (shadow + vertical edges + Kalman), parallax (road homography + "
-              "aligned-difference detector + joint particle filter, paper 000), phd (shadow + vertical edges to find vehicles, "
-              "their feature points by a GM-PHD filter and a UKF per vehicle, paper 004), none (lanes only)");
+        m.add("preset", preset, preset_choices(),
+              "named composition of detector and tracker parts: thesis (detector shadow: shadow hypotheses + vertical "
+              "edges; tracker kalman: Kalman box tracker with ROI search), parallax (detector parallax: road homography "
+              "+ aligned difference; tracker particles: joint particle filter, paper 000), phd (detector shadow; tracker "
+              "phd: feature points by a GM-PHD filter and a UKF per vehicle, paper 004), the crossed parallax_kalman "
+              "and shadow_particles, none (lanes only)");
+        m.add("detectors", detectors, detector_choices(),
+              "detector parts that replace the preset's: a list, or names separated by commas, e.g. [shadow, parallax]; "
+              "empty: the preset's. A part that needs the road's motion (parallax) makes the road-motion stage run");
+        m.add("tracker", tracker, tracker_choices(),
+              "tracker part that replaces the preset's (kalman, particles, phd, none); empty: the preset's");
         m.add("queue_capacity", queue_capacity, 1, 1024,
               "results; queue to the supervisor; small so a slow consumer sees fresh results, the oldest is dropped and counted");
         m.add("push_queue_capacity", push_queue_capacity, 1, 1024,
@@ -53,13 +69,16 @@ struct Config {
     VerifyParams verify;
     KalmanBoxParams kalman;
     HorizonParams horizon;
+    SelfCalibrationParams self_calibration;
     KinematicsParams kinematics;
     LeadParams lead;
-    LaneFeatureParams road_features;  // parallax preset: lane-marking features
+    LaneFeatureParams road_features;  // road-motion stage: lane-marking features
     HomographyParams homography;      //   road homography (DLT + Kalman)
-    ParallaxTrackerParams parallax;   //   aligned-difference detector
+    ParallaxSection parallax;         //   aligned-difference detector and its road band
     ParticleParams particles;         //   joint particle filter
-    PhdTrackerParams phd;             // phd preset (paper 004): the tracker; its parts in the next three sections
+    CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
+    FuseParams fuse;                  // fused stage: cascade + shadow detections merged
+    PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
 
     // Parses the JSON text; throws ConfigError naming the key on any problem.
     static Config from_json(const std::string &text);

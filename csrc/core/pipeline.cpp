@@ -1,33 +1,17 @@
 #include "core/pipeline.hpp"
 
-#include "core/stopwatch.hpp"
+#include "base/stopwatch.hpp"
+#include "core/parallax_stage.hpp"
+#include "detect/fuse_detections.hpp"
 #include "detect/shadow.hpp"
-#include "detect/verify.hpp"
-#include "track/parallax_stage.hpp"
-#include "track/parallax_tracker.hpp"
-#include "track/phd_tracker.hpp"
-#include "track/thesis_tracker.hpp"
 
 #include <stdexcept>
 
 namespace hw {
 
-namespace {
-
-std::unique_ptr<VehicleTracker> make_tracker(const Config &c) {
-    if (c.pipeline.preset == "thesis") return std::make_unique<ThesisTracker>(c.shadow, c.verify, c.kalman);
-    if (c.pipeline.preset == "parallax")
-        return std::make_unique<ParallaxTracker>(c.road_features, c.homography, c.parallax, c.particles, c.camera);
-    if (c.pipeline.preset == "phd")
-        return std::make_unique<PhdTracker>(c.shadow, c.verify, c.horizon, c.phd, c.camera);
-    if (c.pipeline.preset == "none") return nullptr;
-    throw ConfigError("pipeline.preset: unknown preset '" + c.pipeline.preset + "'");
-}
-
-} // namespace
-
 Pipeline::Pipeline(const Config &cfg)
-    : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), tracker_(make_tracker(cfg)), horizon_(cfg.horizon, cfg.camera),
+    : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), parts_(make_parts(cfg)), calib_(cfg.self_calibration, cfg.camera),
+      horizon_(cfg.horizon, cfg.camera),
       kinematics_(cfg.kinematics, cfg.camera), lead_(cfg.lead, cfg.camera) {}
 
 void Pipeline::check_frame(const cv::Mat &gray) const {
@@ -62,11 +46,42 @@ FrameOutput Pipeline::process(const Frame &frame) {
         lanes_.update(frame.gray, out.lanes);
         out.times.add("lanes", sw.ms());
     }
-    if (tracker_) {
-        FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera,
-                         EgoMotion{ego_speed_mps_, ego_yaw_rate_rps_}};
-        tracker_->step(ctx, out.tracks, out.times, out.full_detection);
-        out.road = tracker_->road_motion();
+    if (parts_.tracker) {
+        const EgoMotion ego{ego_speed_mps_, ego_yaw_rate_rps_};
+        const RoadMotionFrame *motion = nullptr;
+        if (parts_.road) {
+            motion = &parts_.road->update(frame.gray, frame.t_s, out.lanes, ego, last_tracks_, out.times);
+            out.road = motion->motion;
+        }
+        const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera, ego, motion};
+        parts_.tracker->step(ctx, parts_.detectors, out.tracks, out.times, out.full_detection);
+        for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
+        if (parts_.road) last_tracks_ = out.tracks;
+    }
+    // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset)
+    EgoMotion ego{ego_speed_mps_, ego_yaw_rate_rps_};
+    if (!std::isfinite(ego.yaw_rate_rps) && out.road.state == RoadMotion::State::kAccepted)
+        ego.yaw_rate_rps = yaw_rate_of_road_motion(out.road.H, cfg_.camera, frame.t_s - prev_t_s_);
+    prev_t_s_ = frame.t_s;
+    {
+        Stopwatch sw;
+        calib_.update(out.lanes, ego.yaw_rate_rps, frame.t_s);
+        const CalibrationEstimate e = calib_.estimate();
+        if (e.active) {
+            const CameraParams cam = calib_.camera();
+            horizon_.set_camera(cam);
+            kinematics_.set_camera(cam);
+            lead_.set_camera(cam);
+        }
+        out.calib_active = e.active;
+        out.calib_pitch_deg = float(e.pitch_deg);
+        out.calib_yaw_deg = float(e.yaw_deg);
+        out.calib_height_m = float(e.height_m);
+        out.calib_pitch_sigma_deg = float(e.pitch_sigma_deg);
+        out.calib_yaw_sigma_deg = float(e.yaw_sigma_deg);
+        out.calib_height_sigma_m = float(e.height_sigma_m);
+        out.calib_updates = e.updates;
+        out.times.add("calibration", sw.ms());
     }
     {
         Stopwatch sw;
@@ -76,7 +91,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
     }
     {
         Stopwatch sw;
-        out.lead_id = lead_.update(out.tracks, out.lanes, EgoMotion{ego_speed_mps_, ego_yaw_rate_rps_});
+        out.lead_id = lead_.update(out.tracks, out.lanes, ego, out.horizon_row);
         out.times.add("lead", sw.ms());
     }
     out.total_ms = total.ms();
@@ -85,43 +100,72 @@ FrameOutput Pipeline::process(const Frame &frame) {
 }
 
 FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
-    // Two-frame units (frames stacked vertically): see track/parallax_stage.hpp.
+    // Two-frame units (frames stacked vertically): see core/parallax_stage.hpp.
     if (is_parallax_stage(stage)) return run_parallax_stage(stage, gray, cfg_);
     check_frame(gray);
     Stopwatch total;
     FrameOutput out;
     out.width = gray.cols;
     out.height = gray.rows;
-    if (stage != "lanes" && stage != "hypotheses" && stage != "detect")
-        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, homography, parallax");
+    if (stage != "lanes" && stage != "hypotheses" && stage != "detect" && stage != "cascade" && stage != "fused")
+        throw std::invalid_argument("unknown stage '" + stage +
+                                    "': one of lanes, hypotheses, detect, cascade, fused, homography, parallax");
     {
         Stopwatch sw;
         out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
         out.times.add("lanes", sw.ms());
     }
     out.horizon_row = float(cfg_.camera.horizon_row());
-    if (stage != "lanes") {
+    if (stage == "hypotheses") {
         Stopwatch sw;
-        const auto hyps = shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow);
+        for (const auto &h : shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow)) {
+            TrackState t;
+            t.box = h.box;
+            t.confidence = h.strength;
+            out.tracks.push_back(t);
+        }
         out.times.add("hypotheses", sw.ms());
-        if (stage == "hypotheses") {
-            for (const auto &h : hyps) {
-                TrackState t;
-                t.box = h.box;
-                t.confidence = h.strength;
-                out.tracks.push_back(t);
-            }
+    } else if (stage == "detect") {
+        // The composition's single-image detectors (those that need no road motion), each alone.
+        std::vector<Hypothesis> hyps;
+        const RoadContext ctx{gray, 0.0, out.lanes, cfg_.camera, nullptr};
+        int ran = 0;
+        for (auto &d : parts_.detectors.parts)
+            if (!d->needs_road_motion()) ran += d->detect(ctx, hyps, out.times) ? 1 : 0;
+        if (ran == 0)
+            throw std::invalid_argument("stage 'detect' runs the detectors of pipeline.detectors that work on one image, "
+                                        "and this composition has none (the parallax detector needs two frames: stage "
+                                        "'parallax')");
+        for (const auto &h : hyps) {
+            TrackState t;
+            t.box = h.box;
+            t.confidence = h.score;
+            out.tracks.push_back(t);
+        }
+    } else if (stage == "cascade" || stage == "fused") {
+        // The trained Haar cascade (detect/cascade_detector.hpp), alone or merged with the verified shadow
+        // detections (detect/fuse_detections.hpp). Loaded on first use: most compositions never need it.
+        Stopwatch sw;
+        if (!cascade_) cascade_ = std::make_unique<CascadeDetector>(cfg_.cascade);
+        const auto cdets = cascade_->detect(gray, out.lanes, cfg_.camera);
+        out.times.add("cascade", sw.ms());
+        auto add = [&](const cv::Rect2f &box, float confidence) {
+            TrackState t;
+            t.box = box;
+            t.confidence = confidence;
+            out.tracks.push_back(t);
+        };
+        if (stage == "cascade") {
+            for (const auto &d : cdets) add(d.box, d.confidence);
         } else {
             Stopwatch sv;
+            const auto hyps = shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow);
             const auto dets = verify_hypotheses(gray, hyps, out.lanes, cfg_.camera, cfg_.verify);
             out.times.add("verify", sv.ms());
-            for (const auto &d : dets) {
-                TrackState t;
-                t.box = d.box;
-                t.confidence = d.score;
-                out.tracks.push_back(t);
-            }
+            for (const auto &d : fuse_detections(cdets, dets, cfg_.fuse)) add(d.box, d.score);
         }
+    }
+    if (stage != "lanes") {
         out.full_detection = true;
         // single-image range from the calibrated horizon (no history: no range rate or TTC)
         TrackKinematics(cfg_.kinematics, cfg_.camera).update(out.tracks, out.horizon_row, 0.0);
@@ -133,9 +177,17 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
 
 void Pipeline::reset() {
     lanes_.reset();
-    if (tracker_) tracker_->reset();
+    if (parts_.tracker) parts_.tracker->reset();
+    for (auto &d : parts_.detectors.parts) d->reset();
+    if (parts_.road) parts_.road->reset();
+    last_tracks_.clear();
     image_stats_.reset();
+    calib_.reset();
+    horizon_.set_camera(cfg_.camera);
     horizon_.reset();
+    kinematics_.set_camera(cfg_.camera);
+    lead_.set_camera(cfg_.camera);
+    prev_t_s_ = NAN;
     kinematics_.reset();
     lead_.reset();
     last_t_s_ = -1e300;

@@ -1,7 +1,7 @@
 #include "core/realtime_loop.hpp"
 
 #include "capture/push_source.hpp"
-#include "core/stopwatch.hpp"
+#include "base/stopwatch.hpp"
 
 #include <algorithm>
 
@@ -17,7 +17,7 @@ void RealtimeLoop::start() {
     stop_ = false;
     running_ = true;
     results_.reopen();
-    source_state_ = HW_SOURCE_RUNNING;
+    source_state_ = SourceState::kRunning;
     thread_ = std::thread([this] { run(); });
 }
 
@@ -44,7 +44,7 @@ void RealtimeLoop::run() {
         // Nothing may escape a thread; the caller sees the loop ended and the message.
         std::lock_guard<std::mutex> lock(failure_mu_);
         failure_ = e.what();
-        source_state_ = HW_SOURCE_FAILED;
+        source_state_ = SourceState::kFailed;
     }
     running_ = false;  // before close(): whoever sees the end also sees the loop stopped
     results_.close();
@@ -84,8 +84,8 @@ void RealtimeLoop::run_frames() {
             lost = false;
             backoff_s = params_.reconnect_initial_s;
             ++reconnects_;
-            pending_events |= HW_EVENT_RECONNECTED;
-            source_state_ = HW_SOURCE_RUNNING;
+            pending_events |= kEventReconnected;
+            source_state_ = SourceState::kRunning;
             continue;
         }
         const ReadStatus st = source_->read(frame);
@@ -94,23 +94,23 @@ void RealtimeLoop::run_frames() {
         case ReadStatus::DecodeError:
         case ReadStatus::SizeChanged:
             ++decode_errors_;
-            pending_events |= st == ReadStatus::DecodeError ? HW_EVENT_DECODE_ERROR : HW_EVENT_SIZE_CHANGED;
+            pending_events |= st == ReadStatus::DecodeError ? kEventDecodeError : kEventSizeChanged;
             if (++consecutive_errors >= params_.max_decode_errors) {
-                source_state_ = HW_SOURCE_FAILED;
+                source_state_ = SourceState::kFailed;
                 return;
             }
             continue;
         case ReadStatus::Lost:
             if (!source_->live()) {
-                source_state_ = HW_SOURCE_FAILED;
+                source_state_ = SourceState::kFailed;
                 return;
             }
             ++losses_;
             lost = true;
-            pending_events |= HW_EVENT_SOURCE_LOST;
-            source_state_ = HW_SOURCE_RECONNECTING;
+            pending_events |= kEventSourceLost;
+            source_state_ = SourceState::kReconnecting;
             continue;
-        case ReadStatus::End: source_state_ = HW_SOURCE_ENDED; return;
+        case ReadStatus::End: source_state_ = SourceState::kEnded; return;
         case ReadStatus::Ok: break;
         }
         consecutive_errors = 0;
@@ -130,8 +130,9 @@ void RealtimeLoop::run_frames() {
     }
 }
 
-void RealtimeLoop::fill_health(hw_health &h) const {
-    h.running = running_ ? 1 : 0;
+LoopHealth RealtimeLoop::health() const {
+    LoopHealth h;
+    h.running = running_;
     h.source_state = source_state_;
     h.frames_captured = captured_;
     h.frames_processed = processed_;
@@ -147,6 +148,7 @@ void RealtimeLoop::fill_health(hw_health &h) const {
     h.last_total_ms = last_total_ms_;
     h.queue_depth = results_.depth();
     h.queue_capacity = results_.capacity();
+    return h;
 }
 
 } // namespace hw

@@ -30,8 +30,8 @@
 //    marking or were hidden.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 #include <opencv2/core.hpp>

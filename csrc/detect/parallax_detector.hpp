@@ -28,8 +28,8 @@
 // quarter of the pixels to warp, and a low-pass that removes most of the sensor noise.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "detect/photometric.hpp"
 #include "geometry/camera.hpp"
 

@@ -11,8 +11,8 @@
 // The horizon row y_h is the lanes' vanishing point when valid, else cy - fy * tan(pitch).
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 #include <vector>

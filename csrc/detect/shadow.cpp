@@ -229,7 +229,7 @@ ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p) {
     return {int(std::ceil(4.0 * step)), int(std::floor(p.dark_rel * road_gray))};
 }
 
-std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &lanes,
+std::vector<ShadowHypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &lanes,
                                           const CameraParams &cam, const ShadowParams &p) {
     CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
     const RoadPrior road = make_road_prior(gray.size(), lanes, cam, p.road);
@@ -278,9 +278,9 @@ std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &
 
     const std::vector<Edge> bottoms = one_per_vehicle(kept, road, p);
 
-    std::vector<Hypothesis> out;
+    std::vector<ShadowHypothesis> out;
     for (const Edge &e : bottoms) {
-        Hypothesis h;
+        ShadowHypothesis h;
         const float bottom = e.bottom, w = float(e.width()), height = 0.5f * w;
         h.box = cv::Rect2f(float(e.x1), bottom - height, w, height);
         h.strength = std::min(1.f, e.step_sum / float(std::max(1, e.n)));
@@ -289,7 +289,7 @@ std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &
         out.push_back(h);
     }
     std::stable_sort(out.begin(), out.end(),
-                     [](const Hypothesis &a, const Hypothesis &b) { return a.strength > b.strength; });
+                     [](const ShadowHypothesis &a, const ShadowHypothesis &b) { return a.strength > b.strength; });
     if (int(out.size()) > p.max_hypotheses) out.resize(size_t(p.max_hypotheses));
     return out;
 }

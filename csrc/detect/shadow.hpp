@@ -15,8 +15,8 @@
 // vehicle's sides inside it.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "detect/road_prior.hpp"
 #include "geometry/camera.hpp"
 
@@ -88,7 +88,7 @@ struct ShadowParams {
 
 // One hypothesis: the bottom edge of a vehicle (shadow line), as a box whose bottom is the edge and
 // whose height is the thesis's ROI side, half the edge length.
-struct Hypothesis {
+struct ShadowHypothesis {
     cv::Rect2f box;
     float strength = 0.f;            // mean bright-to-dark step of the edge / road level, 0..1
     float expected_width_px = kNaN;  // vehicle width expected at the bottom row
@@ -103,7 +103,7 @@ struct ShadowThresholds {
 };
 ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p);
 
-std::vector<Hypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &lanes,
+std::vector<ShadowHypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &lanes,
                                           const CameraParams &cam, const ShadowParams &p);
 
 } // namespace hw

@@ -1,6 +1,6 @@
 #include "detect/vehicle_top.hpp"
 
-#include "core/types.hpp"
+#include "base/types.hpp"
 
 #include <algorithm>
 #include <cmath>

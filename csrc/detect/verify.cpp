@@ -31,7 +31,7 @@ float texture_below(const cv::Mat &gray, float left, float right, float bottom) 
 }
 
 // Verifies one hypothesis; false if it is not a vehicle.
-bool verify_one(const cv::Mat &gray, const Hypothesis &h, const VerifyParams &p, Detection &out) {
+bool verify_one(const cv::Mat &gray, const ShadowHypothesis &h, const VerifyParams &p, Detection &out) {
     const float w_exp = h.expected_width_px;
     const float w_shadow = h.box.width;
     const float bottom = h.box.y + h.box.height;
@@ -88,12 +88,12 @@ float side_threshold(float road_gray, const VerifyParams &p) {
     return float(std::max(p.side_min_gray, p.side_rel * road_gray));
 }
 
-std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<Hypothesis> &hyps,
+std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<ShadowHypothesis> &hyps,
                                          const LaneModel &, const CameraParams &,
                                          const VerifyParams &p) {
     CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
     std::vector<Detection> found;
-    for (const Hypothesis &h : hyps) {
+    for (const ShadowHypothesis &h : hyps) {
         Detection d;
         if (verify_one(gray, h, p, d)) found.push_back(d);
     }

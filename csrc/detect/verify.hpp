@@ -83,7 +83,7 @@ struct Detection {
 };
 
 // Verifies hypotheses; detections are returned strongest first, overlaps suppressed.
-std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<Hypothesis> &hyps,
+std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<ShadowHypothesis> &hyps,
                                          const LaneModel &lanes, const CameraParams &cam,
                                          const VerifyParams &p);
 

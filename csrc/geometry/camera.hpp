@@ -4,7 +4,8 @@
 // road is above the principal point: v_h = cy - fy * tan(pitch). Same convention as app/sim/camera.py.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 
 #include <cmath>
 
@@ -21,6 +22,8 @@ struct CameraParams {
     double pitch_deg = 1.0;   // deg, positive looking down
     double yaw_deg = 0.0;     // deg, positive looking right
     double lateral_m = 0.0;   // m, camera offset right of the ego-lane centre line of the car
+    double k1 = 0.0, k2 = 0.0, k3 = 0.0;  // radial lens distortion (OpenCV model, geometry/lens.hpp)
+    double p1 = 0.0, p2 = 0.0;            // tangential lens distortion
 
     void bind(ParamMap &m) {
         m.add("width", width, 16, 8192, "px; frame width the intrinsics refer to; frames of another size are rejected");
@@ -33,10 +36,25 @@ struct CameraParams {
         m.add("pitch_deg", pitch_deg, -30.0, 30.0, "deg; static pitch, positive looking down; the horizon row follows from it until lanes refine it");
         m.add("yaw_deg", yaw_deg, -30.0, 30.0, "deg; static yaw, positive looking right");
         m.add("lateral_m", lateral_m, -3.0, 3.0, "m; camera offset right of the car's centre line");
+        m.add("k1", k1, -10.0, 10.0, "radial distortion r^2 coefficient (OpenCV model; `headway calibrate` measures it); "
+              "image points are undistorted where they are mapped to the road");
+        m.add("k2", k2, -100.0, 100.0, "radial distortion r^4 coefficient");
+        m.add("p1", p1, -1.0, 1.0, "tangential distortion coefficient p1");
+        m.add("p2", p2, -1.0, 1.0, "tangential distortion coefficient p2");
+        m.add("k3", k3, -1000.0, 1000.0, "radial distortion r^6 coefficient");
     }
+
+    bool has_distortion() const { return k1 != 0.0 || k2 != 0.0 || k3 != 0.0 || p1 != 0.0 || p2 != 0.0; }
 
     // Horizon row of a level road for the configured pitch.
     double horizon_row() const { return cy - fy * std::tan(pitch_deg * M_PI / 180.0); }
 };
+
+// The road's vanishing point for the road-motion parts: the lane model's, else the camera's horizon and yaw.
+inline cv::Point2f road_vanishing_point(const LaneModel &lanes, const CameraParams &cam) {
+    const cv::Point2f vp = lanes.vanishing_point;
+    if (std::isfinite(vp.x) && std::isfinite(vp.y)) return vp;
+    return {float(cam.cx - cam.fx * std::tan(cam.yaw_deg * M_PI / 180.0)), float(cam.horizon_row())};
+}
 
 } // namespace hw

@@ -12,6 +12,7 @@
 #pragma once
 
 #include "geometry/camera.hpp"
+#include "geometry/lens.hpp"
 
 #include <opencv2/core/types.hpp>
 
@@ -30,11 +31,13 @@ inline double pitch_of_horizon(const CameraParams &cam, double horizon_row) {
     return std::atan((cam.cy - horizon_row) / cam.fy);
 }
 
-// Road point seen at pixel (u, v) with the camera pitched so that the horizon is at `horizon_row`.
+// Road point seen at pixel (u, v) of the (distorted) image with the camera pitched so that the horizon
+// is at `horizon_row` (a row of the undistorted image; the same row near the image centre).
 inline RoadPoint road_point(const CameraParams &cam, double u, double v, double horizon_row) {
     const double th = pitch_of_horizon(cam, horizon_row);
     const double psi = cam.yaw_deg * M_PI / 180.0;
-    const double xn = (u - cam.cx) / cam.fx, yn = (v - cam.cy) / cam.fy;
+    const ImagePoint p = undistort_pixel(cam, u, v);  // identity without distortion keys
+    const double xn = (p.u - cam.cx) / cam.fx, yn = (p.v - cam.cy) / cam.fy;
     const double den = yn * std::cos(th) + std::sin(th);
     if (den <= 1e-9) return {};  // at or above the horizon: the ray never meets the road
     const double s = cam.height_m / den;

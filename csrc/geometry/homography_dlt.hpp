@@ -16,7 +16,7 @@
 // (OpenCV's, minimal DLT samples) take the place of the prediction gate.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 
 #include <opencv2/core.hpp>
 

@@ -27,7 +27,7 @@
 // static mounting R_c (pitch, yaw), n = (0, 1, 0), t = (0, 0, s) in level-camera axes.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 #include "geometry/camera.hpp"
 
 #include <opencv2/core.hpp>

@@ -7,8 +7,8 @@
 // the calibrated horizon while no vanishing point is measured.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 namespace hw {
@@ -39,6 +39,11 @@ public:
     // The horizon row for this frame.
     double update(const LaneModel &lanes);
     void reset() { row_ = cam_.horizon_row(); }
+    // The calibrated camera changed (self-calibration): the horizon keeps its offset from the calibrated row.
+    void set_camera(const CameraParams &cam) {
+        row_ += cam.horizon_row() - cam_.horizon_row();
+        cam_ = cam;
+    }
 
 private:
     HorizonParams p_;

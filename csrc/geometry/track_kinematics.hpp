@@ -14,8 +14,8 @@
 // set: its range, lateral and rate are kept and only the two TTCs are added here.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 #include <Eigen/Dense>
@@ -64,6 +64,7 @@ public:
     // Fills range_m, range_sigma_m, lateral_m, range_rate_mps, ttc_s, ttc_scale_s of every track.
     void update(std::vector<TrackState> &tracks, double horizon_row, double t_s);
     void reset() { state_.clear(); }
+    void set_camera(const CameraParams &cam) { cam_ = cam; }  // self-calibration's estimate
 
 private:
     struct State {

@@ -23,10 +23,11 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 3
+#define HW_ABI_VERSION 6
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
+#define HW_LANE_POINTS 12
 #define HW_MAX_STAGES 12
 #define HW_STAGE_NAME_LEN 16
 
@@ -49,7 +50,8 @@ typedef enum {
     HW_ROAD_PREDICTED = 2  /* no acceptable measurement: the filter's prediction carries on (coasting) */
 } hw_road_motion;
 
-/* FCW levels. */
+/* FCW levels (the warning state machine runs in the supervisor, which has the ego speed, brake and turn
+ * signals; the core reports no level). */
 typedef enum { HW_FCW_NONE = 0, HW_FCW_PREWARNING = 1, HW_FCW_WARNING = 2 } hw_fcw_level;
 
 /* State of the frame source feeding a running loop. */
@@ -91,6 +93,11 @@ typedef struct {
     float x_bottom, y_bottom, x_top, y_top;
     int32_t position;      /* -2 left of left boundary, -1 ego left, +1 ego right, +2 right of it */
     int32_t observed;      /* 1 measured in this frame, 0 carried over by lane tracking */
+    /* the boundary as it bends with the road: n_points image points from the bottom point up to
+     * lanes.curve_far_range_m (beyond the top point the fitted curve is extrapolated), spaced evenly in
+     * log range (denser far away, where the bend is); straight lines between them */
+    int32_t n_points;
+    float px[HW_LANE_POINTS], py[HW_LANE_POINTS];
 } hw_lane;
 
 typedef struct {
@@ -110,10 +117,10 @@ typedef struct {
     int32_t n_lanes;
     hw_lane lanes[HW_MAX_LANES];
     float vanishing_x, vanishing_y; /* NaN if no lane model yet */
+    float lane_width_m;    /* ego-lane width at the bottom row, m; NaN unless both ego boundaries are known */
+    float lane_offset_m;   /* the car's centre right of the ego lane's centre, m; NaN unless both are known */
     float horizon_row;     /* horizon row used for range, NaN if n/a */
     int32_t lead_id;       /* -1 if no lead */
-    int32_t fcw_level;     /* hw_fcw_level; always HW_FCW_NONE from the core: the warning state machine
-                              runs in the supervisor, which has the ego speed, brake and turn signals */
     int32_t n_stages;
     hw_stage_time stages[HW_MAX_STAGES];
     float total_ms;
@@ -126,6 +133,13 @@ typedef struct {
     int32_t road_motion;
     int32_t road_coast_frames;
     float road_homography[9];
+    /* the camera as self-calibration has it (the configured one when self_calibration.enabled is false):
+     * pitch (deg, down positive), yaw (deg, right positive), height (m) and their 1-sigma uncertainties,
+     * the frames whose lane measurement was used, 1 when self-calibration runs */
+    float calib_pitch_deg, calib_yaw_deg, calib_height_m;
+    float calib_pitch_sigma_deg, calib_yaw_sigma_deg, calib_height_sigma_m;
+    int32_t calib_updates;
+    int32_t calib_active;
 } hw_frame_result;
 
 typedef struct {
@@ -195,7 +209,7 @@ int hw_pipeline_push(hw_pipeline *p, const uint8_t *data, int32_t width, int32_t
 int hw_pipeline_push_end(hw_pipeline *p);
 int hw_pipeline_health(hw_pipeline *p, hw_health *out);
 
-/* ---- BEGIN paper 004 units, reachable alone for tests (ABI 3) --------------------------------------
+/* ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) --------------------------------------
  * The GM-PHD filter on 2-D points (csrc/track/gmphd.hpp) step by step, and the UKF on a sequence of
  * observations (csrc/track/ukf.hpp). Not used by the pipeline, which runs them inside the phd tracker. */
 typedef struct hw_gmphd hw_gmphd;

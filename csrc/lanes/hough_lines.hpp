@@ -21,7 +21,7 @@
 //    bunched in a few rows (one vehicle), are rejected.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/marking_filter.hpp"
 #include "lanes/road_geometry.hpp"

@@ -174,6 +174,17 @@ void build_lane_model(const std::vector<LaneCandidate> &c, const LaneAssignment 
     out.road_polygon = road_polygon(out, a.width_k, size, cam, hp, p);
 }
 
+void ego_lane_metrics(const CameraParams &cam, LaneModel &m) {
+    m.width_m = m.offset_m = kNaN;
+    const cv::Point2f vp = m.vanishing_point;
+    if (!m.valid || !std::isfinite(vp.x) || !std::isfinite(vp.y)) return;
+    const float y = m.ego_left.bottom.y, ppm = px_per_m(cam, vp.y, y);
+    if (ppm <= 0.f) return;
+    const float xl = (m.ego_left.curve_x(y) - vp.x) / ppm, xr = (m.ego_right.curve_x(y) - vp.x) / ppm;
+    m.width_m = xr - xl;
+    m.offset_m = -float(cam.lateral_m) - 0.5f * (xl + xr);
+}
+
 std::vector<cv::Point> road_polygon(const LaneModel &m, float width_k, cv::Size size, const CameraParams &cam,
                                     const HorizonPrior &hp, const LaneAssemblyParams &p) {
     const float y_b = float(size.height - 1);

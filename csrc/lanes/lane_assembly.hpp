@@ -11,8 +11,8 @@
 // edge) lose against the real boundary. Adjacent boundaries are the lines one lane further out.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/road_geometry.hpp"
 
@@ -88,6 +88,11 @@ LaneAssignment assign_lanes(const std::vector<LaneCandidate> &c, const CameraPar
 void build_lane_model(const std::vector<LaneCandidate> &c, const LaneAssignment &a, cv::Point2f vp,
                       cv::Size size, const CameraParams &cam, const HorizonPrior &hp,
                       const LaneAssemblyParams &p, LaneModel &out);
+
+// Ego-lane width and the car's lateral offset in it (width_m, offset_m of `m`), from the ego boundaries
+// at the bottom row: a column x there is X = (x - x_vp) / px_per_m metres right of the camera, the
+// car's centre is -cam.lateral_m; offset = -lateral_m - (X_left + X_right) / 2. NaN unless both known.
+void ego_lane_metrics(const CameraParams &cam, LaneModel &m);
 
 // A convex quadrilateral clipped to the image; integer vertices.
 std::vector<cv::Point> clip_to_image(const std::vector<cv::Point2f> &quad, cv::Size size);

@@ -53,7 +53,7 @@ LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, con
     LaneMeasurement m;
     const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
     if (band.rows() < 2) return m;
-    std::vector<MarkingPoint> pts;
+    std::vector<MarkingPoint> &pts = m.points;
     find_marking_points(gray, band, cam, hp, p.filter, pts);
 
     // Narrow search around vp: the lines through it, with the vanishing point refined by them.
@@ -88,6 +88,10 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     LaneModel out;
     build_lane_model(m.lines, a, m.vp, gray.size(), cam, hp, p.assembly, out);
     out.frames_since_observed = out.valid ? 0 : 1;
+    LaneCurveState curve;  // one image: no curvature history
+    fit_lane_curves(m.points, std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row, cam,
+                    float(p.assembly.lane_width_m), p.curve, curve, out);
+    ego_lane_metrics(cam, out);
     return out;
 }
 

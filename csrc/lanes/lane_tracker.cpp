@@ -23,6 +23,7 @@ void LaneTracker::reset() {
     width_age_ = 0;
     vp_ = {kNaN, kNaN};
     frames_since_observed_ = 0;
+    curve_ = LaneCurveState();
 }
 
 ImageLine LaneTracker::line_of(const Track &t) const {
@@ -216,6 +217,9 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
     out = LaneModel();
     build_lane_model(cands, a, vp_, gray.size(), cam_, hp, p_.assembly, out);
     out.frames_since_observed = frames_since_observed_;
+    const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
+    fit_lane_curves(m.points, y_h, cam_, float(p_.assembly.lane_width_m), p_.curve, curve_, out);
+    ego_lane_metrics(cam_, out);
 }
 
 } // namespace hw

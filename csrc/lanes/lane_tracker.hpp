@@ -13,11 +13,12 @@
 // turns from right to left (or back) and the model follows.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/hough_lines.hpp"
 #include "lanes/lane_assembly.hpp"
+#include "lanes/lane_curve.hpp"
 #include "lanes/marking_filter.hpp"
 
 #include <vector>
@@ -28,6 +29,7 @@ struct LaneParams {
     MarkingFilterParams filter;
     HoughLinesParams hough;
     LaneAssemblyParams assembly;
+    LaneCurveParams curve;
     int max_missing_frames = 15;         // frames a boundary is carried after it was last measured
     double marking_sigma_px = 1.0;       // px; noise of one marking point (measurement model)
     double process_accel_frac = 0.0015;  // fraction of width per frame^2; how fast a boundary may move
@@ -39,6 +41,7 @@ struct LaneParams {
         filter.bind(m);
         hough.bind(m);
         assembly.bind(m);
+        curve.bind(m);
         m.add("max_missing_frames", max_missing_frames, 0, 1000,
               "frames; how long a boundary that is no longer measured is kept by lane tracking; 15 "
               "(0.5 s at 30 fps) bridges dash gaps, worn paint and a vehicle passing over the marking");
@@ -62,6 +65,7 @@ struct LaneParams {
 struct LaneMeasurement {
     std::vector<LaneCandidate> lines;  // weight = supporting rows, observed = true
     cv::Point2f vp{kNaN, kNaN};        // consensus vanishing point, NaN if no two lines agree
+    std::vector<MarkingPoint> points;  // the frame's marking centres (the curve fit uses them)
 };
 
 // One frame's lines (lane_detection.cpp): the wide search and consensus find the vanishing point,
@@ -112,6 +116,7 @@ private:
     int width_age_ = 0;     // frames since the width was last measured
     cv::Point2f vp_{kNaN, kNaN};
     int frames_since_observed_ = 0;
+    LaneCurveState curve_;
 };
 
 } // namespace hw

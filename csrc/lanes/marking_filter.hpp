@@ -9,7 +9,7 @@
 // tar seams and vehicle outlines (single steps or wide bright areas) give no point at all.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 #include "geometry/camera.hpp"
 #include "lanes/road_geometry.hpp"
 

@@ -8,7 +8,7 @@
 // shared by every vehicle.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 
 #include <opencv2/core.hpp>
 

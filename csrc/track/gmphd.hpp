@@ -21,7 +21,7 @@
 //   A vehicle is gone (eq. 12) when the weight summed inside its box falls under a threshold.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 
 #include <opencv2/core.hpp>
 

@@ -63,8 +63,8 @@
 // max_vehicles and max_measurements.
 #pragma once
 
-#include "core/params.hpp"
-#include "core/types.hpp"
+#include "base/params.hpp"
+#include "base/types.hpp"
 #include "geometry/camera.hpp"
 
 #include <opencv2/core.hpp>

@@ -1,14 +1,16 @@
-// tracker.hpp - what every vehicle tracker offers the pipeline.
+// tracker.hpp - what every tracker part offers the pipeline.
 //
-// A tracker owns its detector(s): the thesis tracker decides itself when a full detection runs and
-// when it only searches around its predictions; the particle and PHD trackers will do likewise.
+// A tracker takes the frame and the hypotheses of the composition's detector parts, and reports
+// tracks. It decides itself when a full detection runs and asks the detectors then (the Kalman tracker
+// every detect_every_n frames, searching around its predictions between; the particle tracker every
+// frame). To add a tracker: write track/tracker_<name>.{hpp,cpp} with a class derived from Tracker, and
+// add one line to the tracker registry in core/parts.cpp (docs/ARCHITECTURE.md, "Adding a part").
 #pragma once
 
-#include "core/types.hpp"
-#include "fcw/lead_selection.hpp"
+#include "base/types.hpp"
+#include "detect/detector.hpp"
 #include "geometry/camera.hpp"
 
-#include <memory>
 #include <vector>
 
 namespace hw {
@@ -20,18 +22,20 @@ struct FrameContext {
     const LaneModel &lanes;       // this frame's lane model (may be invalid)
     const CameraParams &camera;
     EgoMotion ego;                // the car's own motion from CAN (NaN fields = unknown)
+    const RoadMotionFrame *motion = nullptr;  // the road-motion stage's output; null when it does not run
+
+    RoadContext road() const { return {gray, t_s, lanes, camera, motion}; }
 };
 
-class VehicleTracker {
+class Tracker {
 public:
-    virtual ~VehicleTracker() = default;
-    // Advance one frame. Writes every live track (confirmed or not) into `tracks`, adds the wall time
-    // of its sub-stages to `times`, and sets `full_detection` if a full detection ran this frame.
-    virtual void step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
-                      bool &full_detection) = 0;
+    virtual ~Tracker() = default;
+    // Advance one frame. Asks `detectors` for a full detection when it needs one, writes every live
+    // track (confirmed or not) into `tracks`, adds the wall time of its sub-stages to `times`, and sets
+    // `full_detection` if a full detection ran this frame.
+    virtual void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+                      StageTimes &times, bool &full_detection) = 0;
     virtual void reset() = 0;
-    // The road plane's motion of the last step, for trackers that estimate it (none by default).
-    virtual RoadMotion road_motion() const { return {}; }
 };
 
 } // namespace hw

@@ -11,7 +11,7 @@
 // x += K (z - z^), P -= K S K^T. With a linear f and h this is exactly the Kalman filter.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 
 #include <Eigen/Dense>
 

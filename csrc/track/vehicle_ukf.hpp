@@ -9,7 +9,7 @@
 // (dv/dZ = -fy h / Z^2) over the range uncertainty instead of linearising it.
 #pragma once
 
-#include "core/params.hpp"
+#include "base/params.hpp"
 #include "geometry/camera.hpp"
 #include "track/ukf.hpp"
 

@@ -1,6 +1,6 @@
-#include "track/thesis_tracker.hpp"
+#include "track/tracker_kalman.hpp"
 
-#include "core/stopwatch.hpp"
+#include "base/stopwatch.hpp"
 #include "detect/road_prior.hpp"
 
 #include <algorithm>
@@ -77,10 +77,10 @@ void KalmanBoxParams::bind(ParamMap &m) {
           "s; a gap between frames longer than this drops all tracks (the predictions are void)");
 }
 
-ThesisTracker::ThesisTracker(const ShadowParams &s, const VerifyParams &v, const KalmanBoxParams &k)
+KalmanTracker::KalmanTracker(const ShadowParams &s, const VerifyParams &v, const KalmanBoxParams &k)
     : shadow_(s), verify_(v), kalman_(k) {}
 
-void ThesisTracker::reset() {
+void KalmanTracker::reset() {
     tracks_.clear();
     next_id_ = 1;
     frames_since_detection_ = 0;
@@ -100,30 +100,30 @@ float side_quality(float side_excess) { return 1.f - 0.5f / std::sqrt(std::max(1
 
 } // namespace
 
-cv::Rect2f ThesisTracker::box_of(const KalmanBox::Vec3 &z, float aspect) const {
+cv::Rect2f KalmanTracker::box_of(const KalmanBox::Vec3 &z, float aspect) const {
     const float w = float(z[2] - z[0]), h = aspect * w;
     return {float(z[0]), float(z[1]) - h, w, h};
 }
 
 // The height is not tracked by the filter: each detection of the vehicle refines its aspect ratio.
-void ThesisTracker::take_aspect(Track &t, const Detection &d) const {
+void KalmanTracker::take_aspect(Track &t, const Hypothesis &d) const {
     if (d.box.width > 0.f) t.aspect = 0.6f * t.aspect + 0.4f * d.box.height / d.box.width;
 }
 
-KalmanBox::Vec3 ThesisTracker::sigma_of(const Track &t) const {
+KalmanBox::Vec3 KalmanTracker::sigma_of(const Track &t) const {
     const KalmanBox::Vec3 z = t.kf.measurement();
     const double s = std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * (z[2] - z[0]));
     return {s, s, s};
 }
 
-double ThesisTracker::accel_bound(const Track &t) const {
+double KalmanTracker::accel_bound(const Track &t) const {
     // A vehicle of width W m at range Z spans w = fx W / Z px: a lateral acceleration a shows as
     // fx a / Z = a w / W px/s^2.
     const KalmanBox::Vec3 z = t.kf.measurement();
     return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / shadow_.road.vehicle_width_m + kalman_.ego_accel_px_s2;
 }
 
-void ThesisTracker::predict_all(double dt, const cv::Point2f &vp) {
+void KalmanTracker::predict_all(double dt, const cv::Point2f &vp) {
     for (Track &t : tracks_) {
         const double a = accel_bound(t);
         t.kf.predict(dt, a, a, kalman_.p_max, kalman_.p_zero, perspective_accel(t, vp));
@@ -138,7 +138,7 @@ void ThesisTracker::predict_all(double dt, const cv::Point2f &vp) {
 //     d^2/dt^2 (x - x_vp) = 2 (x - x_vp) s^2,   d^2/dt^2 (y - y_h) = 2 (y - y_h) s^2.
 // Negligible far away; near a closing vehicle it dominates (0.5 s before contact at 20 m/s closing,
 // a few thousand px/s^2), and the constant-velocity prediction would lag out of its own gate.
-KalmanBox::Vec3 ThesisTracker::perspective_accel(const Track &t, const cv::Point2f &vp) const {
+KalmanBox::Vec3 KalmanTracker::perspective_accel(const Track &t, const cv::Point2f &vp) const {
     const KalmanBox::Vec6 &x = t.kf.state();
     const double w = x[2] - x[0];
     // Only from a scale rate that measurements keep honest: a coasting track would drift on it.
@@ -148,13 +148,13 @@ KalmanBox::Vec3 ThesisTracker::perspective_accel(const Track &t, const cv::Point
     return 2.0 * s * s * KalmanBox::Vec3(x[0] - vp.x, x[1] - vp.y, x[2] - vp.x);
 }
 
-void ThesisTracker::apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality) {
+void KalmanTracker::apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality) {
     const KalmanBox::Vec3 s = sigma_of(t);
     t.kf.update(z, s[0] * sigma_scale, s[1] * sigma_scale);
     t.confidence = 0.7f * t.confidence + 0.3f * quality;
 }
 
-bool ThesisTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
+bool KalmanTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
     const KalmanBox::Vec3 z = t.kf.measurement(), s = sigma_of(t);
     const KalmanBox::Mat3 S = t.kf.innovation_cov(s[0], s[1]);
     RoiPrediction pred;
@@ -171,7 +171,7 @@ bool ThesisTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
     return true;
 }
 
-bool ThesisTracker::measure_by_detection(Track &t, std::vector<Detection> &dets, std::vector<bool> &used) {
+bool KalmanTracker::measure_by_detection(Track &t, std::vector<Hypothesis> &dets, std::vector<bool> &used) {
     const cv::Rect2f pred = box_of(t);
     int best = -1;
     float best_iou = float(kalman_.match_iou);
@@ -187,7 +187,7 @@ bool ThesisTracker::measure_by_detection(Track &t, std::vector<Detection> &dets,
     return true;
 }
 
-bool ThesisTracker::measure_by_template(const cv::Mat &gray, Track &t) {
+bool KalmanTracker::measure_by_template(const cv::Mat &gray, Track &t) {
     if (!t.appearance.usable()) return false;
     // Move the template's box with the predicted motion of the bottom-left corner since it was cut.
     const KalmanBox::Vec3 z = t.kf.measurement();
@@ -204,7 +204,7 @@ bool ThesisTracker::measure_by_template(const cv::Mat &gray, Track &t) {
 
 // Hidden behind a nearer vehicle (a track standing lower in the image, measured this frame) that
 // covers most of its box: its template would be compared with the occluder, so it is not used.
-bool ThesisTracker::occluded(const Track &t) const {
+bool KalmanTracker::occluded(const Track &t) const {
     const cv::Rect2f b = box_of(t);
     for (const Track &o : tracks_) {
         if (&o == &t || !o.updated) continue;
@@ -214,7 +214,7 @@ bool ThesisTracker::occluded(const Track &t) const {
     return false;
 }
 
-void ThesisTracker::start_tracks(const cv::Mat &gray, const std::vector<Detection> &dets,
+void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothesis> &dets,
                                  const std::vector<bool> &used) {
     for (size_t i = 0; i < dets.size(); ++i) {
         if (used[i]) continue;
@@ -242,7 +242,7 @@ void ThesisTracker::start_tracks(const cv::Mat &gray, const std::vector<Detectio
     }
 }
 
-void ThesisTracker::prune(const FrameContext &ctx) {
+void KalmanTracker::prune(const FrameContext &ctx) {
     const cv::Mat &gray = ctx.gray;
     const float horizon = horizon_row(gray.size(), ctx.lanes, ctx.camera);
     // Same vehicle twice (two tracks converged): keep the one with more measurements.
@@ -267,7 +267,7 @@ void ThesisTracker::prune(const FrameContext &ctx) {
     tracks_.erase(std::remove_if(tracks_.begin(), tracks_.end(), gone), tracks_.end());
 }
 
-TrackState ThesisTracker::report(const Track &t) const {
+TrackState KalmanTracker::report(const Track &t) const {
     TrackState s;
     const KalmanBox::Vec6 &x = t.kf.state();
     s.id = t.id;
@@ -280,8 +280,8 @@ TrackState ThesisTracker::report(const Track &t) const {
     return s;
 }
 
-void ThesisTracker::step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
-                         bool &full_detection) {
+void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+                        StageTimes &times, bool &full_detection) {
     CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
     Stopwatch track_time;
     float detect_ms = 0.f;
@@ -299,19 +299,14 @@ void ThesisTracker::step(const FrameContext &ctx, std::vector<TrackState> &track
     for (Track &t : tracks_) t.updated = measure_by_roi(ctx.gray, t);
 
     // Every n-th frame: the full detector, for vehicles the ROI search lost and for new ones.
-    full_detection = frames_since_detection_ % kalman_.detect_every_n == 0;
-    std::vector<Detection> dets;
+    const bool detect_now = frames_since_detection_ % kalman_.detect_every_n == 0;
+    std::vector<Hypothesis> dets;
     std::vector<bool> used;
-    if (full_detection) {
-        Stopwatch sh;
-        const auto hyps = shadow_hypotheses(ctx.gray, ctx.lanes, ctx.camera, shadow_);
-        const float hyp_ms = sh.ms();
-        Stopwatch sv;
-        dets = verify_hypotheses(ctx.gray, hyps, ctx.lanes, ctx.camera, verify_);
-        const float verify_ms = sv.ms();
-        times.add("hypotheses", hyp_ms);
-        times.add("verify", verify_ms);
-        detect_ms = hyp_ms + verify_ms;
+    full_detection = false;
+    if (detect_now) {
+        Stopwatch sd;
+        full_detection = detectors.detect(ctx.road(), dets, times);
+        detect_ms = sd.ms();
         used.assign(dets.size(), false);
         for (Track &t : tracks_) {
             if (!t.updated) {
@@ -326,7 +321,7 @@ void ThesisTracker::step(const FrameContext &ctx, std::vector<TrackState> &track
                 }
         }
     }
-    frames_since_detection_ = full_detection ? 1 : frames_since_detection_ + 1;
+    frames_since_detection_ = detect_now ? 1 : frames_since_detection_ + 1;
 
     // Bookkeeping: hits and misses; the correlation check before a confirmed vehicle is missed.
     for (Track &t : tracks_) {

@@ -2,8 +2,8 @@
 // Pipeline::run_stage (and so through hw_pipeline_run_stage), without touching tracking state.
 //
 // The image passed is K >= 2 frames of the camera's size stacked vertically, oldest on top; a fresh
-// lane tracker and a fresh parallax tracker run over them (nominal 30 fps, no ego speed), and the
-// result describes the last pair:
+// lane tracker, road-motion stage, parallax detector and particle tracker run over them (nominal 30 fps,
+// no ego speed), and the result describes the last pair:
 //   "homography"  full_detection = the last pair's homography measurement was accepted by the gate;
 //                 image_change   = the alignment residual: mean |I_K - warp(I_{K-1}, H) - o| over the ego
 //                                  lane up to 40 m (the road area without a lane model), outside the
@@ -17,8 +17,8 @@
 // With K > 2 the homography filter has K - 2 frames to settle before the last pair is judged.
 #pragma once
 
+#include "base/types.hpp"
 #include "core/config.hpp"
-#include "core/types.hpp"
 
 #include <string>
 

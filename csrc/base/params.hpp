@@ -37,6 +37,10 @@ public:
     void add(const char *key, std::string &v, const char *choices, const char *doc) {
         entries_.push_back({key, &v, 0, 0, doc, choices});
     }
+    // A list of names, each one of `choices` (separated by '|').
+    void add(const char *key, std::vector<std::string> &v, const char *choices, const char *doc) {
+        entries_.push_back({key, &v, 0, 0, doc, choices});
+    }
 
     // Reads the keys present in `obj` (a JSON object); keys not present keep their defaults.
     void read(const nlohmann::json &obj) const;
@@ -48,7 +52,7 @@ public:
 private:
     struct Entry {
         const char *key;
-        std::variant<double *, int *, bool *, std::string *> field;
+        std::variant<double *, int *, bool *, std::string *, std::vector<std::string> *> field;
         double min = 0, max = 0;
         const char *doc = "";
         const char *choices = nullptr;

@@ -1,8 +1,8 @@
-// thesis_tracker.hpp - the thesis pipeline's tracker: shadow hypotheses + vertical-edge verification
-// every N frames, one Kalman filter per vehicle on its bottom corners, ROI search in between.
+// tracker_kalman.hpp - tracker part "kalman" (the thesis's box tracker): the detector parts every N
+// frames, one Kalman filter per vehicle on its bottom corners, ROI search in between.
 //
 // Per frame (thesis 3.6): predict every vehicle; search the ROI around each prediction for its
-// bottom edge and sides; every detect_every_n frames run the full detector over the road area, let
+// bottom edge and sides; every detect_every_n frames ask the detector parts for a full detection over the road area, let
 // a vehicle that its ROI search missed take the detection that overlaps its prediction, and start a
 // tentative track on every detection that no track explains. A confirmed vehicle found by neither is
 // checked by normalised correlation of its last box before it counts as missed. Tracks are confirmed
@@ -59,10 +59,12 @@ struct KalmanBoxParams {
     void bind(ParamMap &m);
 };
 
-class ThesisTracker final : public VehicleTracker {
+class KalmanTracker final : public Tracker {
 public:
-    ThesisTracker(const ShadowParams &shadow, const VerifyParams &verify, const KalmanBoxParams &kalman);
-    void step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
+    // shadow, verify: the ROI search around each prediction looks for the bottom edge and sides as
+    // the shadow detector and its verification do (and the expected vehicle width at a row).
+    KalmanTracker(const ShadowParams &shadow, const VerifyParams &verify, const KalmanBoxParams &kalman);
+    void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
 
@@ -85,17 +87,17 @@ private:
     void predict_all(double dt, const cv::Point2f &vp);
     KalmanBox::Vec3 perspective_accel(const Track &t, const cv::Point2f &vp) const;
     bool measure_by_roi(const cv::Mat &gray, Track &t);
-    bool measure_by_detection(Track &t, std::vector<Detection> &dets, std::vector<bool> &used);
+    bool measure_by_detection(Track &t, std::vector<Hypothesis> &dets, std::vector<bool> &used);
     bool measure_by_template(const cv::Mat &gray, Track &t);
     bool occluded(const Track &t) const;
-    void start_tracks(const cv::Mat &gray, const std::vector<Detection> &dets, const std::vector<bool> &used);
+    void start_tracks(const cv::Mat &gray, const std::vector<Hypothesis> &dets, const std::vector<bool> &used);
     void prune(const FrameContext &ctx);
     TrackState report(const Track &t) const;
 
     void apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality);
     cv::Rect2f box_of(const KalmanBox::Vec3 &z, float aspect) const;
     cv::Rect2f box_of(const Track &t) const { return box_of(t.kf.measurement(), t.aspect); }
-    void take_aspect(Track &t, const Detection &d) const;
+    void take_aspect(Track &t, const Hypothesis &d) const;
     KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
     double accel_bound(const Track &t) const;
 

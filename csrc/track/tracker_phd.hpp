@@ -1,4 +1,4 @@
-// phd_tracker.hpp - paper 004's tracker: the feature points inside each vehicle followed by a GM-PHD
+// tracker_phd.hpp - tracker part "phd" (paper 004): the feature points inside each vehicle followed by a GM-PHD
 // filter, the vehicle's position from its stable features (eq. 13-15), and its range and velocity
 // from a UKF through the pinhole observation (eq. 16-21).
 //
@@ -15,7 +15,8 @@
 //      thus points at a contact point m - tag w; the estimator fuses them: by weight (eq. 13), by inverse
 //      covariance determinant (eq. 14) or the heaviest one (eq. 15).
 //   4. The UKF (vehicle_ukf.hpp) predicts with constant velocity and updates with that contact point.
-//   5. Every detect_every_n frames the detector runs: a detection overlapping a vehicle re-measures its
+//   5. Every detect_every_n frames it asks the detector parts (the phd preset: shadow) for a full
+//      detection; any detector composes (shadow, parallax, both). A detection overlapping a vehicle re-measures its
 //      contact point (UKF update), pulls its width and features' offsets towards the detected box, and
 //      counts as a hit (confirmation); an unexplained detection starts a vehicle.
 //   6. A vehicle ends when the PHD weight inside its box falls under end_weight (eq. 12), when the
@@ -23,7 +24,6 @@
 // Range, lateral offset and range rate are the UKF's; the geometry stage adds the TTCs.
 #pragma once
 
-#include "detect/verify.hpp"
 #include "geometry/horizon.hpp"
 #include "track/box_features.hpp"
 #include "track/gmphd.hpp"
@@ -57,11 +57,10 @@ struct PhdTrackerParams {
     void bind(ParamMap &m);
 };
 
-class PhdTracker final : public VehicleTracker {
+class PhdTracker final : public Tracker {
 public:
-    PhdTracker(const ShadowParams &shadow, const VerifyParams &verify, const HorizonParams &horizon,
-               const PhdTrackerParams &p, const CameraParams &camera);
-    void step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
+    PhdTracker(const HorizonParams &horizon, const PhdTrackerParams &p, const CameraParams &camera);
+    void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
 
@@ -87,13 +86,11 @@ private:
     void measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const std::vector<cv::Point2f> &cur,
                  const std::vector<uchar> &ok, const cv::Mat &gray, double horizon);
     bool contact_from_features(const Vehicle &v, cv::Point2d &c) const;
-    void use_detections(const FrameContext &ctx, std::vector<Detection> &dets, double horizon);
-    void start_vehicle(const cv::Mat &gray, const Detection &d, double horizon);
+    void use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon);
+    void start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);
     void prune(const FrameContext &ctx, double horizon);
     TrackState report(const Vehicle &v) const;
 
-    ShadowParams shadow_;
-    VerifyParams verify_;
     PhdTrackerParams p_;
     CameraParams cam_;
     HorizonTracker horizon_;

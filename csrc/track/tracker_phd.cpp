@@ -1,7 +1,6 @@
-#include "track/phd_tracker.hpp"
+#include "track/tracker_phd.hpp"
 
-#include "core/stopwatch.hpp"
-#include "detect/road_prior.hpp"
+#include "base/stopwatch.hpp"
 #include "geometry/flat_road.hpp"
 
 #include <algorithm>
@@ -44,9 +43,8 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("max_dt_s", max_dt_s, 0.01, 100.0, "s; a longer gap between frames drops all vehicles");
 }
 
-PhdTracker::PhdTracker(const ShadowParams &s, const VerifyParams &v, const HorizonParams &h, const PhdTrackerParams &p,
-                       const CameraParams &cam)
-    : shadow_(s), verify_(v), p_(p), cam_(cam), horizon_(h, cam), flow_(p.features) {}
+PhdTracker::PhdTracker(const HorizonParams &h, const PhdTrackerParams &p, const CameraParams &cam)
+    : p_(p), cam_(cam), horizon_(h, cam), flow_(p.features) {}
 
 void PhdTracker::reset() {
     vehicles_.clear();
@@ -183,7 +181,7 @@ void PhdTracker::follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, 
     }
 }
 
-void PhdTracker::start_vehicle(const cv::Mat &gray, const Detection &d, double horizon) {
+void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon) {
     const cv::Point2d contact(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
     if (!road_point(cam_, contact.x, contact.y, horizon).valid()) return;
     Vehicle v(next_id_, GmPhd(p_.phd, uint32_t(next_id_)));
@@ -202,7 +200,7 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Detection &d, double h
     vehicles_.push_back(std::move(v));
 }
 
-void PhdTracker::use_detections(const FrameContext &ctx, std::vector<Detection> &dets, double horizon) {
+void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon) {
     std::vector<bool> used(dets.size(), false);
     for (Vehicle &v : vehicles_) {
         const cv::Rect2f vb = v.box();
@@ -218,7 +216,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, std::vector<Detection> 
             continue;
         }
         used[size_t(best)] = true;
-        const Detection &d = dets[size_t(best)];
+        const Hypothesis &d = dets[size_t(best)];
         const cv::Point2d dc(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
         v.ukf->update(dc, p_.detection_sigma_px, horizon);
         // Re-anchor: the box and each feature's offset move towards the detected box.
@@ -280,8 +278,8 @@ TrackState PhdTracker::report(const Vehicle &v) const {
     return s;
 }
 
-void PhdTracker::step(const FrameContext &ctx, std::vector<TrackState> &tracks, StageTimes &times,
-                      bool &full_detection) {
+void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+                      StageTimes &times, bool &full_detection) {
     CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
     Stopwatch track_time;
     float detect_ms = 0.f;
@@ -302,18 +300,15 @@ void PhdTracker::step(const FrameContext &ctx, std::vector<TrackState> &tracks, 
     }
     follow_features(vehicles_, ctx.gray, horizon);
 
-    full_detection = frame_ % p_.detect_every_n == 0;
-    if (full_detection) {
-        Stopwatch sh;
-        const auto hyps = shadow_hypotheses(ctx.gray, ctx.lanes, ctx.camera, shadow_);
-        const float hyp_ms = sh.ms();
-        Stopwatch sv;
-        std::vector<Detection> dets = verify_hypotheses(ctx.gray, hyps, ctx.lanes, ctx.camera, verify_);
-        const float verify_ms = sv.ms();
-        times.add("hypotheses", hyp_ms);
-        times.add("verify", verify_ms);
-        detect_ms = hyp_ms + verify_ms;
-        use_detections(ctx, dets, horizon);
+    // Every n-th frame the detector parts: new vehicles, and re-anchoring of the tracked ones. A part
+    // that could not run (no road motion yet) counts as no detection: nothing is missed for it.
+    full_detection = false;
+    if (frame_ % p_.detect_every_n == 0) {
+        Stopwatch sd;
+        std::vector<Hypothesis> dets;
+        full_detection = detectors.detect(ctx.road(), dets, times);
+        detect_ms = sd.ms();
+        if (full_detection) use_detections(ctx, dets, horizon);
     }
     ++frame_;
     prune(ctx, horizon);

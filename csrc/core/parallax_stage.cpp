@@ -1,8 +1,10 @@
-#include "track/parallax_stage.hpp"
+#include "core/parallax_stage.hpp"
 
-#include "core/stopwatch.hpp"
+#include "base/stopwatch.hpp"
+#include "detect/detector_parallax.hpp"
 #include "lanes/lane_tracker.hpp"
-#include "track/parallax_tracker.hpp"
+#include "road/road_motion_stage.hpp"
+#include "track/tracker_particles.hpp"
 
 #include <algorithm>
 #include <stdexcept>
@@ -21,7 +23,11 @@ FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked,
                                     "x" + std::to_string(stacked.rows));
     Stopwatch total;
     LaneTracker lanes(cfg.lanes, cfg.camera);
-    ParallaxTracker tracker(cfg.road_features, cfg.homography, cfg.parallax, cfg.particles, cfg.camera);
+    RoadMotionStage road(cfg.road_features, cfg.homography, cfg.parallax, cfg.camera);
+    auto *detector = new ParallaxDifferenceDetector(cfg.parallax, cfg.camera);
+    DetectorSet detectors;
+    detectors.parts.emplace_back(detector);
+    ParticleTracker tracker(cfg.particles, cfg.parallax.max_dt_s, cfg.camera);
     FrameOutput out;
     out.width = W;
     out.height = H;
@@ -32,20 +38,24 @@ FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked,
         out.lanes = LaneModel{};
         lanes.update(frame, out.lanes);
         out.times = StageTimes{};
+        const RoadMotionFrame &motion = road.update(frame, k / 30.0, out.lanes, EgoMotion{}, tracks, out.times);
         tracks.clear();
-        FrameContext ctx{frame, k / 30.0, k, out.lanes, cfg.camera};
-        tracker.step(ctx, tracks, out.times, out.full_detection);
+        const FrameContext ctx{frame, k / 30.0, k, out.lanes, cfg.camera, EgoMotion{}, &motion};
+        tracker.step(ctx, detectors, tracks, out.times, out.full_detection);
+        detector->end_frame(ctx.road());
     }
     const float vp_y = std::isfinite(out.lanes.vanishing_point.y) ? out.lanes.vanishing_point.y
                                                                    : float(cfg.camera.horizon_row());
     out.horizon_row = vp_y;
-    out.full_detection = tracker.homography().status == HomographyKalman::Status::kAccepted;
-    const auto res = tracker.road_residual(out.lanes);
+    out.full_detection = road.homography().status == HomographyKalman::Status::kAccepted;
+    std::vector<cv::Rect2f> boxes;
+    for (const auto &m : detector->last().measurements) boxes.push_back(m.box);
+    const auto res = road.road_residual(out.lanes, boxes);
     out.image_change = res.aligned;
     out.image_mean = res.unaligned;
     out.image_stddev = res.aligned_raw;
     if (stage == "parallax")
-        for (const auto &m : tracker.detection().measurements) {
+        for (const auto &m : detector->last().measurements) {
             TrackState t;
             t.box = m.box;
             t.confidence = std::min(1.f, m.sad / 64.f);

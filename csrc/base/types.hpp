@@ -18,7 +18,22 @@ struct Frame {
     cv::Mat gray;        // CV_8UC1, owned
     double t_s = 0.0;    // capture timestamp: monotonic clock for live sources, media time for files
     int64_t number = 0;  // 0-based frame number from the source
-    int events = 0;      // HW_EVENT_* bits that happened just before this frame
+    int events = 0;      // FrameEvent bits that happened just before this frame
+};
+
+// Health events of the frame source, as bits of Frame::events and FrameOutput::events (the ABI's
+// HW_EVENT_* carry the same values; abi.cpp checks that at compile time).
+enum FrameEvent : int {
+    kEventDecodeError = 1,   // a frame could not be decoded and was skipped
+    kEventSourceLost = 2,    // a live device stopped delivering
+    kEventReconnected = 4,   // a live device came back
+    kEventSizeChanged = 16,  // a frame of another size than the first one was skipped
+};
+
+// The car's own motion from the vehicle bus.
+struct EgoMotion {
+    double speed_mps = NAN;      // NaN = not available
+    double yaw_rate_rps = NAN;   // positive turning left; NaN = not available
 };
 
 // A lane boundary as an image line through two points (bottom of the road area and towards the VP).
@@ -27,11 +42,26 @@ struct LaneBoundary {
     bool observed = false;  // measured in this frame
     cv::Point2f bottom{kNaN, kNaN};
     cv::Point2f top{kNaN, kNaN};
+    // Bend (lanes/lane_curve.hpp): the boundary is x = a + b d + bend d^2 + curve / d, d = y - curve_row,
+    // through bottom and top; curve (road curvature) and bend (image second order) 0 = straight.
+    float curve = 0.f;        // px^2
+    float bend = 0.f;         // 1/px
+    float curve_row = kNaN;   // px; horizon row of the curve term
 
-    // x of the line at image row y (NaN when not valid or horizontal).
+    // x of the chord from bottom to top at image row y (NaN when not valid or horizontal).
     float x_at(float y) const {
         if (!valid || top.y == bottom.y) return kNaN;
         return bottom.x + (top.x - bottom.x) * (y - bottom.y) / (top.y - bottom.y);
+    }
+    // x of the curved boundary at row y (also beyond top, extrapolated): the chord plus curve times
+    // (1/d minus its chord) plus bend times (d^2 minus its chord).
+    float curve_x(float y) const {
+        const float x = x_at(y);
+        if ((curve == 0.f && bend == 0.f) || !std::isfinite(curve_row) || y <= curve_row) return x;
+        const float db = bottom.y - curve_row, dt = top.y - curve_row, d = y - curve_row;
+        const float s = (y - bottom.y) / (top.y - bottom.y);
+        return x + curve * (1.f / d - (1.f / db + (1.f / dt - 1.f / db) * s)) +
+               bend * (d * d - (db * db + (dt * dt - db * db) * s));
     }
 };
 
@@ -42,6 +72,9 @@ struct LaneModel {
     LaneBoundary adj_left, adj_right;  // outer boundaries of the adjacent lanes, where visible
     cv::Point2f vanishing_point{kNaN, kNaN};
     int frames_since_observed = 0;     // frames since both ego boundaries were last measured
+    float far_row = kNaN;   // px; row the reported boundaries reach (curve extrapolated), NaN = their top
+    float width_m = kNaN;   // ego-lane width at the bottom row (flat road), NaN unless both ego boundaries
+    float offset_m = kNaN;  // the car's centre right of the ego lane's centre, m, NaN unless both
     std::vector<cv::Point> road_polygon;  // area the detectors scan; empty = none known
 
     // Ego lane width in pixels at row y, NaN when unknown.
@@ -75,12 +108,25 @@ struct StageTimes {
     }
 };
 
-// The road plane's motion from the previous frame to this one, as a tracker that estimates it reports it.
+// The road plane's motion from the previous frame to this one, as the road-motion stage reports it.
 struct RoadMotion {
     enum class State { kNone, kAccepted, kPredicted };
     State state = State::kNone;
     int coast_frames = 0;
     cv::Matx33d H = cv::Matx33d::eye();  // pixels, previous -> current
+};
+
+// What the road-motion stage (road/road_motion_stage.hpp) hands the parts that need it in one frame:
+// the filtered homography and the road band it aligned, at the pyramid level the parallax detector uses.
+struct RoadMotionFrame {
+    RoadMotion motion;          // state kNone: no estimate this frame
+    cv::Point2f vp{kNaN, kNaN}; // the road's vanishing point: the lane model's, else the camera's horizon and yaw
+    int band_top = 0;           // px; first image row of the road band
+    int level = 0;              // pyramid level of the bands below (0 = full resolution)
+    cv::Mat band;               // this frame's road band (rows band_top .. height-1) at that level
+    cv::Mat prev_band;          // the previous frame's, same size; empty when there is none
+    int hood_row = 0;           // px; first image row of the car's bonnet (height: none)
+    bool valid() const { return motion.state != RoadMotion::State::kNone; }
 };
 
 // Everything one frame produced.
@@ -94,11 +140,15 @@ struct FrameOutput {
     LaneModel lanes;
     float horizon_row = kNaN;
     int lead_id = -1;
-    int fcw_level = 0;
     StageTimes times;
     float total_ms = 0.f;
     float image_mean = kNaN, image_stddev = kNaN, image_change = kNaN;  // see capture/image_stats.hpp
     RoadMotion road;
+    // the camera's pitch, yaw and height as self-calibration has them, 1-sigma (geometry/self_calibration.hpp)
+    float calib_pitch_deg = kNaN, calib_yaw_deg = kNaN, calib_height_m = kNaN;
+    float calib_pitch_sigma_deg = kNaN, calib_yaw_sigma_deg = kNaN, calib_height_sigma_m = kNaN;
+    int calib_updates = 0;
+    bool calib_active = false;
 };
 
 } // namespace hw

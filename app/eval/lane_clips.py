@@ -1,0 +1,88 @@
+"""Lanes on TuSimple's 20-frame clips: each clip through the whole pipeline, scored on its frame 20.
+
+The folder holds ``label.json`` (TuSimple's format, one JSON object per line; ``raw_file`` is frame 20
+of a clip, relative to the folder) and the clips' frames ``1.jpg`` .. ``20.jpg`` beside it. Every clip
+starts from a fresh pipeline (no lane history) and runs its 20 frames at 20 fps through
+``Pipeline.process`` (lane tracking, detection, tracking: what a user gets); the lanes reported for
+frame 20 are scored with the TuSimple metric (:mod:`app.eval.tusimple_lanes`) and written as
+TuSimple predictions (``{"raw_file", "lanes", "h_samples", "run_time"}`` per line).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Callable, Optional
+
+import cv2
+
+from app import config as configuration
+from app.core import Pipeline
+from app.eval.tusimple_boxes import TUSIMPLE_LANE_PITCH_DEG, tusimple_config
+from app.eval.tusimple_lanes import evaluate_lanes, segments_to_tusimple, write_predictions
+
+FPS = 20.0           # TuSimple clips: 20 frames in one second
+FRAMES_PER_CLIP = 20
+
+
+def load_labels(label_file: Path) -> list[dict]:
+    labels = [json.loads(x) for x in label_file.read_text().splitlines() if x.strip()]
+    if not labels:
+        raise ValueError(f"{label_file}: no labels")
+    return labels
+
+
+def clip_frames(labelled: Path) -> list[Path]:
+    """Frames 1..20 of the clip whose frame 20 is `labelled`, in order."""
+    frames = [labelled.parent / f"{i}.jpg" for i in range(1, FRAMES_PER_CLIP + 1)]
+    missing = [f for f in frames if not f.exists()]
+    if missing:
+        raise FileNotFoundError(f"{missing[0]}: frame of the clip missing (expected 1.jpg .. 20.jpg beside "
+                                f"{labelled.name})")
+    return frames
+
+
+def lane_config(config_path: Optional[str], preset: str, width: int, height: int) -> dict:
+    """The core configuration for TuSimple's lane camera at width x height (the camera config must match the
+    frame size: TuSimple's 1280x720 camera scaled)."""
+    cfg = tusimple_config(configuration.load(config_path), TUSIMPLE_LANE_PITCH_DEG)
+    cfg["camera"] = configuration.scaled_camera(cfg["camera"], width, height)
+    cfg["pipeline"]["preset"] = preset
+    return configuration.core_sections(cfg)
+
+
+def evaluate(clips_dir: str, config_path: Optional[str] = None, preset: str = "thesis",
+             predictions_out: Optional[str] = None, on_clip: Optional[Callable] = None) -> dict:
+    """TuSimple accuracy / FP / FN of frame 20 of every clip of `clips_dir` (per clip in ``per_image``).
+
+    on_clip(label, gray_frame20, result20) is called for each clip (annotated examples)."""
+    root = Path(clips_dir)
+    label_file = root / "label.json"
+    if not label_file.exists():
+        raise FileNotFoundError(f"{label_file}: not found (expected TuSimple's label.json in the clips folder)")
+    labels = load_labels(label_file)
+    preds: dict[str, list] = {}
+    run_ms: dict[str, float] = {}
+    width = None
+    for lab in labels:
+        frames = clip_frames(root / lab["raw_file"])
+        first = cv2.imread(str(frames[0]), cv2.IMREAD_GRAYSCALE)
+        if first is None:
+            raise FileNotFoundError(f"{frames[0]}: cannot be read")
+        h, w = first.shape
+        width = w
+        with Pipeline(lane_config(config_path, preset, w, h)) as pipe:
+            r = gray = None
+            for i, f in enumerate(frames):
+                gray = first if i == 0 else cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+                if gray is None:
+                    raise FileNotFoundError(f"{f}: cannot be read")
+                r = pipe.process(gray, i / FPS)
+        preds[lab["raw_file"]] = segments_to_tusimple(r.lanes, lab["h_samples"], w)
+        run_ms[lab["raw_file"]] = r.stages.get("lanes", r.total_ms)
+        if on_clip:
+            on_clip(lab, gray, r)
+    if predictions_out:
+        write_predictions(predictions_out, labels, preds, run_ms)
+    m = evaluate_lanes(preds, label_file, image_width=width)
+    return {"clips": len(labels), "accuracy": m["accuracy"], "fp": m["fp"], "fn": m["fn"],
+            "per_image": m["per_image"]}

@@ -1,0 +1,120 @@
+"""A soak run of the service on a real clip: `python -m app.soak CLIP --minutes 15 --out soak.json`.
+
+The service (`headway service`, a subprocess, exactly as systemd starts it) reads the clip's frames
+through its FIFO source at the clip's own frame rate, looping, for the given time, with CAN on the
+virtual bus and its output log on. Every ``--every-s`` the soak samples the service's resident memory
+(VmRSS from /proc) and the processing latency and state from its status file. At the end it stops the
+service with SIGTERM and checks that the CAN output log parses whole. The figures go to docs/RELIABILITY.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from app.recording import open_recording
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def rss_kb(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    return 0
+
+
+def _feed(fifo: Path, frames: list[bytes], fps: float, stop: threading.Event) -> None:
+    while not fifo.exists() and not stop.is_set():
+        time.sleep(0.01)
+    fd = os.open(fifo, os.O_WRONLY)
+    period, next_t, i = 1.0 / fps, time.monotonic(), 0
+    try:
+        while not stop.is_set():
+            try:
+                os.write(fd, frames[i % len(frames)])
+            except BrokenPipeError:
+                return
+            i += 1
+            next_t += period
+            time.sleep(max(0.0, next_t - time.monotonic()))
+    finally:
+        os.close(fd)
+
+
+def soak(clip: str, minutes: float, every_s: float, workdir: Path) -> dict:
+    rec = open_recording(clip)
+    frames = [g.tobytes() for g in rec.read_all()]
+    w, h = rec.size
+    cfg = workdir / "config.yaml"
+    cfg.write_text(f"camera: {{width: {w}, height: {h}, fx: {0.9 * w:.1f}, fy: {0.9 * w:.1f}, cx: {w / 2}, "
+                   f"cy: {h / 2}}}\n"
+                   f"source: {{kind: fifo, path: {workdir / 'frames.fifo'}}}\n"
+                   f"can: {{interface: virtual, channel: soak-{os.getpid()}, output_log: {workdir / 'out.log'}}}\n"
+                   f"service: {{status_file: {workdir / 'status.json'}}}\n")
+    p = subprocess.Popen([sys.executable, "-m", "app.cli", "service", "--config", str(cfg)], cwd=REPO,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    stop = threading.Event()
+    feeder = threading.Thread(target=_feed, args=(workdir / "frames.fifo", frames, rec.fps, stop), daemon=True)
+    feeder.start()
+    samples = []
+    t_start = time.monotonic()
+    try:
+        while time.monotonic() - t_start < minutes * 60:
+            time.sleep(every_s)
+            if p.poll() is not None:
+                break
+            try:
+                st = json.loads((workdir / "status.json").read_text())
+            except (OSError, ValueError):
+                st = {}
+            samples.append({"t_s": round(time.monotonic() - t_start, 1), "rss_kb": rss_kb(p.pid),
+                            "state": st.get("state"), "fps": st.get("fps"),
+                            "latency_median_ms": st.get("latency_median_ms"),
+                            "latency_p99_ms": st.get("latency_p99_ms")})
+    finally:
+        p.send_signal(signal.SIGTERM)
+        rc = p.wait(timeout=30)
+        stop.set()
+        err = p.stderr.read()
+    import can
+
+    lines = (workdir / "out.log").read_text().splitlines()
+    parsed = sum(1 for _ in can.LogReader(str(workdir / "out.log")))
+    after = [s for s in samples if s["t_s"] >= 60.0] or samples  # after a minute of warm-up
+    med = [s["latency_median_ms"] for s in samples if s["latency_median_ms"] is not None]
+    p99 = [s["latency_p99_ms"] for s in samples if s["latency_p99_ms"] is not None]
+    return {"clip": clip, "frames_in_clip": len(frames), "size": f"{w}x{h}", "fps": rec.fps, "minutes": minutes,
+            "exit_code": rc, "traceback": "Traceback" in err,
+            "rss_kb_at_1min": after[0]["rss_kb"], "rss_kb_end": samples[-1]["rss_kb"],
+            "rss_kb_max": max(s["rss_kb"] for s in samples),
+            "latency_median_ms_median": statistics.median(med) if med else None,
+            "latency_p99_ms_max": max(p99) if p99 else None,
+            "states": sorted({str(s["state"]) for s in samples}),
+            "can_log_lines": len(lines), "can_log_parsed": parsed, "samples": samples}
+
+
+def main(argv=None) -> int:
+    a = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    a.add_argument("clip")
+    a.add_argument("--minutes", type=float, default=15.0)
+    a.add_argument("--every-s", type=float, default=10.0)
+    a.add_argument("--out", default="soak.json")
+    args = a.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="headway-soak-") as tmp:
+        rep = soak(args.clip, args.minutes, args.every_s, Path(tmp))
+    Path(args.out).write_text(json.dumps(rep, indent=1))
+    print(json.dumps({k: v for k, v in rep.items() if k != "samples"}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

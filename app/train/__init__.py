@@ -1,0 +1,1 @@
+"""Training of Headway's learned models (`headway train ...`)."""

@@ -1,0 +1,113 @@
+#include "core/parts.hpp"
+
+#include "core/config.hpp"
+#include "detect/detector_parallax.hpp"
+#include "detect/detector_shadow.hpp"
+#include "track/tracker_kalman.hpp"
+#include "track/tracker_particles.hpp"
+#include "track/tracker_phd.hpp"
+
+#include <functional>
+#include <map>
+#include <set>
+
+namespace hw {
+
+namespace {
+
+template <class Part> using Factory = std::function<std::unique_ptr<Part>(const Config &)>;
+
+// The detector registry: name -> how it is built from the configuration.
+const std::map<std::string, Factory<Detector>> &detectors() {
+    static const std::map<std::string, Factory<Detector>> r{
+        {"shadow", [](const Config &c) { return std::make_unique<ShadowDetector>(c.shadow, c.verify); }},
+        {"parallax", [](const Config &c) { return std::make_unique<ParallaxDifferenceDetector>(c.parallax, c.camera); }},
+    };
+    return r;
+}
+
+// The tracker registry.
+const std::map<std::string, Factory<Tracker>> &trackers() {
+    static const std::map<std::string, Factory<Tracker>> r{
+        {"kalman", [](const Config &c) { return std::make_unique<KalmanTracker>(c.shadow, c.verify, c.kalman); }},
+        {"particles", [](const Config &c) { return std::make_unique<ParticleTracker>(c.particles, c.parallax.max_dt_s, c.camera); }},
+        {"phd", [](const Config &c) { return std::make_unique<PhdTracker>(c.horizon, c.phd, c.camera); }},
+    };
+    return r;
+}
+
+// The named compositions.
+const std::map<std::string, Composition> &presets() {
+    static const std::map<std::string, Composition> r{
+        {"thesis", {{"shadow"}, "kalman"}},
+        {"parallax", {{"parallax"}, "particles"}},
+        {"parallax_kalman", {{"parallax"}, "kalman"}},
+        {"shadow_particles", {{"shadow"}, "particles"}},
+        {"phd", {{"shadow"}, "phd"}},
+        {"none", {{}, ""}},
+    };
+    return r;
+}
+
+template <class Map> std::string joined(const Map &m, const std::string &first = "") {
+    std::string s = first;
+    for (const auto &kv : m) s += (s.empty() ? "" : "|") + kv.first;
+    return s;
+}
+
+} // namespace
+
+const char *detector_choices() {
+    static const std::string s = joined(detectors());
+    return s.c_str();
+}
+
+const char *tracker_choices() {
+    // The empty name keeps the preset's tracker; "none" runs no tracker.
+    static const std::string s = "|" + joined(trackers()) + "|none";
+    return s.c_str();
+}
+
+const char *preset_choices() {
+    static const std::string s = joined(presets());
+    return s.c_str();
+}
+
+Composition composition_of(const PipelineParams &p) {
+    const auto preset = presets().find(p.preset);
+    if (preset == presets().end())
+        throw ConfigError("pipeline.preset: unknown preset '" + p.preset + "' (one of " + preset_choices() + ")");
+    Composition c = preset->second;
+    if (!p.detectors.empty()) c.detectors = p.detectors;
+    if (!p.tracker.empty()) c.tracker = p.tracker == "none" ? "" : p.tracker;
+    std::set<std::string> seen;
+    for (const auto &d : c.detectors) {
+        if (!detectors().count(d))
+            throw ConfigError("pipeline.detectors: unknown detector '" + d + "' (one of " + detector_choices() + ")");
+        if (!seen.insert(d).second) throw ConfigError("pipeline.detectors: '" + d + "' is listed twice");
+    }
+    if (!c.tracker.empty() && !trackers().count(c.tracker))
+        throw ConfigError("pipeline.tracker: unknown tracker '" + c.tracker + "' (one of " + tracker_choices() + ")");
+    if (!c.tracker.empty() && c.detectors.empty())
+        throw ConfigError("pipeline.tracker: tracker '" + c.tracker + "' has no detector to ask: set pipeline.detectors "
+                          "(one or more of " + std::string(detector_choices()) + ") or a preset that has one");
+    if (c.tracker.empty() && !c.detectors.empty())
+        throw ConfigError("pipeline.detectors: detectors need a tracker: set pipeline.tracker (one of " +
+                          joined(trackers()) + ") or a preset that has one");
+    return c;
+}
+
+Parts make_parts(const Config &cfg) {
+    const Composition comp = composition_of(cfg.pipeline);
+    Parts parts;
+    bool road = false;
+    for (const auto &d : comp.detectors) {
+        parts.detectors.parts.push_back(detectors().at(d)(cfg));
+        road = road || parts.detectors.parts.back()->needs_road_motion();
+    }
+    if (!comp.tracker.empty()) parts.tracker = trackers().at(comp.tracker)(cfg);
+    if (road) parts.road = std::make_unique<RoadMotionStage>(cfg.road_features, cfg.homography, cfg.parallax, cfg.camera);
+    return parts;
+}
+
+} // namespace hw

@@ -1,0 +1,44 @@
+// parts.hpp - the registries of detector and tracker parts, and the named compositions (presets).
+//
+// A pipeline is composed of detector parts (detect/detector.hpp) and one tracker part
+// (track/tracker.hpp); the road-motion stage (road/road_motion_stage.hpp) runs when one of the parts
+// needs it. The configuration names the parts: pipeline.preset picks a named composition,
+// pipeline.detectors and pipeline.tracker, when set, replace the preset's detectors or tracker.
+// One registry per role, in parts.cpp: adding a part is one file and one line there.
+#pragma once
+
+#include "detect/detector.hpp"
+#include "road/road_motion_stage.hpp"
+#include "track/tracker.hpp"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace hw {
+
+struct Config;
+struct PipelineParams;
+
+// The registered names, separated by '|' (for the configuration's choices).
+const char *detector_choices();
+const char *tracker_choices();
+const char *preset_choices();
+
+// Which parts run: the preset's, with pipeline.detectors / pipeline.tracker replacing its own when
+// set. Throws ConfigError naming the key for a composition that cannot run.
+struct Composition {
+    std::vector<std::string> detectors;
+    std::string tracker;  // empty: no tracker (lanes only)
+};
+Composition composition_of(const PipelineParams &p);
+
+// The parts of a configuration, built.
+struct Parts {
+    DetectorSet detectors;
+    std::unique_ptr<Tracker> tracker;      // null: lanes only
+    std::unique_ptr<RoadMotionStage> road; // null unless a part needs the road's motion
+};
+Parts make_parts(const Config &c);
+
+} // namespace hw

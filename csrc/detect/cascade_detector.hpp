@@ -1,0 +1,98 @@
+// cascade_detector.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/cascade.md).
+//
+// cv::CascadeClassifier runs the shipped OpenCV cascade XML (trained by `headway train cascade`) only
+// where a vehicle can stand. The cascade's window W x H (30 x 20) was trained on windows of the
+// annotated box's height, so a window of height h_s is a vehicle whose box is h_s pixels high. On a
+// flat road a vehicle of height H_v (m) whose bottom is at row y_b has
+//     h_s = H_v * (y_b - y_h) / h_cam        (pinhole: h_s = fy H_v / Z, Z = fy h_cam / (y_b - y_h))
+// so each window size is scanned only in the band of rows where its bottom row lies in
+//     [y_h + h_s h_cam / H_max, y_h + h_s h_cam / H_min]   (H_min: a low car, H_max: a truck),
+// and only across the road area (lane model widened to `adjacent_lanes` each side, or the camera
+// fallback) plus half a window each side. Every window size is scanned on the band resized by
+// 1/scale (a near car filling a third of the image is a small image to scan); window sizes grow by
+// `scale_factor` from the model's own up to `max_window_frac` of the image height.
+// Raw windows accepted by every stage are grouped (IoU >= group_iou with the group's strongest
+// window, box = mean of the group); a group of n windows gets confidence n / (n + neighbors_half),
+// and groups of fewer than min_neighbors windows are dropped. With a verifier (vehicle_verifier.hpp)
+// the confidence is instead its probability that the group's box holds a vehicle.
+#pragma once
+
+#include "base/params.hpp"
+#include "base/types.hpp"
+#include "detect/road_prior.hpp"
+#include "geometry/camera.hpp"
+
+#include <opencv2/core.hpp>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace cv { class CascadeClassifier; }
+
+namespace hw {
+
+struct CascadeParams {
+    std::string model;                  // path of the cascade XML; "" = the shipped model (filled in by Python)
+    std::string verifier = "off";       // path of the verifier model; "" = the shipped one (Python), "off" = none
+    RoadPriorParams road;               // scan area (keys in this section)
+    double min_vehicle_height_m = 1.0;  // m; lowest vehicle box (a low car, partly hidden)
+    double max_vehicle_height_m = 4.5;  // m; highest vehicle box (a truck)
+    double scale_factor = 1.12;         // ratio of successive window sizes
+    double max_window_frac = 0.6;       // largest window height as a fraction of the image height
+    int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
+    double group_iou = 0.45;            // raw windows overlapping the group's strongest this much join it
+    int min_neighbors = 2;              // groups of fewer raw windows are dropped
+    double neighbors_half = 6.0;        // a group of this many windows gets confidence 0.5
+
+    void bind(ParamMap &m) {
+        m.add("model", model, nullptr,
+              "path of the OpenCV cascade XML; empty = the model shipped with Headway "
+              "(app/models/vehicle_cascade.xml, recipe in docs/cascade.md)");
+        m.add("verifier", verifier, nullptr,
+              "path of the HOG + logistic-regression verifier judging every cascade detection; empty = the "
+              "model shipped with Headway (app/models/vehicle_verifier.yml); off (default) = the cascade's "
+              "neighbour count alone, which measured better on the TuSimple validation split (docs/cascade.md)");
+        road.bind(m);
+        m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
+              "m; lowest vehicle box on a flat road; with the camera height it bounds how far below the "
+              "horizon a window of each size is scanned; 1.0 m: a low car");
+        m.add("max_vehicle_height_m", max_vehicle_height_m, 0.5, 10.0,
+              "m; highest vehicle box; 4.5 m: a truck");
+        m.add("scale_factor", scale_factor, 1.01, 2.0,
+              "ratio between successive window sizes; smaller finds more sizes at more cost");
+        m.add("max_window_frac", max_window_frac, 0.05, 1.0,
+              "fraction of the image height; largest window scanned (a car at 5 m is about a third of the image wide)");
+        m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
+        m.add("group_iou", group_iou, 0.05, 0.95,
+              "IoU; raw windows overlapping a group's strongest window at least this much belong to it");
+        m.add("min_neighbors", min_neighbors, 1, 100, "raw windows; groups with fewer are dropped");
+        m.add("neighbors_half", neighbors_half, 0.5, 100.0,
+              "raw windows; a group of n windows has confidence n / (n + neighbors_half)");
+    }
+};
+
+struct CascadeDetection {
+    cv::Rect2f box;     // px, whole vehicle as annotated
+    int neighbors = 0;  // raw windows grouped
+    float stage_sum = 0.f;  // the strongest window's last-stage sum
+    float confidence = 0.f; // 0..1: the verifier's probability, or from neighbors without one
+};
+
+class VehicleVerifier;
+
+class CascadeDetector {
+public:
+    explicit CascadeDetector(const CascadeParams &p);
+    ~CascadeDetector();
+    // Vehicles in a gray image; the camera is scaled to the image size.
+    std::vector<CascadeDetection> detect(const cv::Mat &gray, const LaneModel &lanes, const CameraParams &cam) const;
+
+private:
+    CascadeParams p_;
+    std::unique_ptr<cv::CascadeClassifier> cc_;
+    std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
+    cv::Size win_;
+};
+
+} // namespace hw

@@ -1,0 +1,28 @@
+#include "detect/detector_shadow.hpp"
+
+#include "base/stopwatch.hpp"
+
+namespace hw {
+
+bool ShadowDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+    Stopwatch sh;
+    const auto hyps = shadow_hypotheses(ctx.gray, ctx.lanes, ctx.camera, shadow_);
+    const float hyp_ms = sh.ms();
+    Stopwatch sv;
+    const auto dets = verify_hypotheses(ctx.gray, hyps, ctx.lanes, ctx.camera, verify_);
+    const float verify_ms = sv.ms();
+    times.add("hypotheses", hyp_ms);
+    times.add("verify", verify_ms);
+    for (const Detection &d : dets) {
+        Hypothesis h;
+        h.box = d.box;
+        h.foot = {d.box.x + 0.5f * d.box.width, d.box.y + d.box.height};
+        h.score = d.score;
+        h.strength = d.score;
+        h.source = "shadow";
+        out.push_back(h);
+    }
+    return true;
+}
+
+} // namespace hw

@@ -1,0 +1,140 @@
+#include "geometry/self_calibration.hpp"
+
+#include <algorithm>
+
+namespace hw {
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+}
+
+void SelfCalibrationParams::bind(ParamMap &m) {
+    m.add("enabled", enabled, "estimate the camera's pitch, yaw and height from the lanes while driving; "
+                              "false = the camera section is used as configured");
+    m.add("prior_sigma_deg", prior_sigma_deg, 0.01, 30.0,
+          "deg; 1-sigma trust in the configured pitch and yaw (the prior); a surveyed mounting can say 0.2");
+    m.add("prior_sigma_height", prior_sigma_height, 0.001, 1.0,
+          "relative; 1-sigma trust in the configured camera height");
+    m.add("angle_noise_deg", angle_noise_deg, 0.01, 10.0,
+          "deg; 1-sigma of one frame's vanishing-point angle (marking edges, camera shake ~0.15 deg)");
+    m.add("height_noise", height_noise, 0.001, 1.0,
+          "relative; 1-sigma of one frame's height from the lane width (dashes, line-fit noise)");
+    m.add("angle_drift_deg_s", angle_drift_deg_s, 0.0, 10.0,
+          "deg/sqrt(s); random walk of the true angles (load, tyre pressure); bounds how long the estimate remembers");
+    m.add("height_drift_s", height_drift_s, 0.0, 1.0, "relative/sqrt(s); random walk of the true height");
+    m.add("max_pitch_dev_deg", max_pitch_dev_deg, 0.0, 20.0,
+          "deg; the pitch estimate stays within the configured pitch +- this (a wrong marking cannot drag it further)");
+    m.add("max_yaw_dev_deg", max_yaw_dev_deg, 0.0, 20.0, "deg; the yaw estimate stays within the configured yaw +- this");
+    m.add("max_height_dev", max_height_dev, 0.0, 0.9,
+          "relative; the height estimate stays within the configured height * (1 +- this)");
+    m.add("lane_width_m", lane_width_m, 2.5, 5.0,
+          "m; ego-lane width assumed for the height (3.6 m motorway; 3.25-3.75 m elsewhere: a few per cent of bias)");
+    m.add("max_lateral_rate_mps", max_lateral_rate_mps, 0.0, 5.0,
+          "m/s; faster lateral motion within the lane is a lane change (~1 m/s), when the car is turned against "
+          "the lane: no measurement");
+    m.add("max_yaw_rate_rps", max_yaw_rate_rps, 0.0, 1.0,
+          "rad/s; turning faster (CAN or road motion) is a curve, where the boundaries' tangents miss the road "
+          "direction: no measurement");
+    m.add("gate_sigma", gate_sigma, 1.0, 100.0,
+          "sigma; a measurement farther from the estimate than this (estimate and measurement sigma together) is "
+          "an outlier (a crest, a wrong marking)");
+}
+
+double yaw_rate_of_road_motion(const cv::Matx33d &H, const CameraParams &cam, double dt_s) {
+    if (!(dt_s > 0)) return NAN;
+    const cv::Vec3d p(cam.cx, cam.horizon_row(), 1.0);
+    const cv::Vec3d q = H * p;
+    if (std::abs(q[2]) < 1e-12) return NAN;
+    return std::atan((q[0] / q[2] - p[0]) / cam.fx) / dt_s;
+}
+
+bool SelfCalibration::Scalar::update(double z, double r, double gate_sigma) {
+    const double s = var + r;  // innovation variance
+    const double innov = z - x;
+    if (innov * innov > gate_sigma * gate_sigma * s) return false;
+    const double k = var / s;  // x += K (z - x), P = (1 - K) P
+    x += k * innov;
+    var *= 1.0 - k;
+    return true;
+}
+
+SelfCalibration::SelfCalibration(const SelfCalibrationParams &p, const CameraParams &configured)
+    : p_(p), cfg_(configured) {
+    reset();
+}
+
+void SelfCalibration::reset() {
+    pitch_ = {cfg_.pitch_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
+    yaw_ = {cfg_.yaw_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
+    height_ = {1.0, p_.prior_sigma_height * p_.prior_sigma_height};
+    last_t_ = last_offset_m_ = NAN;
+    updates_ = 0;
+}
+
+void SelfCalibration::update(const LaneModel &lanes, double yaw_rate_rps, double t_s) {
+    if (!p_.enabled) return;
+    const double dt = std::isfinite(last_t_) ? std::max(0.0, t_s - last_t_) : 0.0;
+    last_t_ = t_s;
+    pitch_.predict(p_.angle_drift_deg_s * p_.angle_drift_deg_s * dt);
+    yaw_.predict(p_.angle_drift_deg_s * p_.angle_drift_deg_s * dt);
+    height_.predict(p_.height_drift_s * p_.height_drift_s * dt);
+
+    const bool measured = lanes.valid && lanes.ego_left.observed && lanes.ego_right.observed &&
+                          std::isfinite(lanes.vanishing_point.x) && std::isfinite(lanes.vanishing_point.y);
+    if (!measured) {
+        last_offset_m_ = NAN;
+        return;
+    }
+    const double vh = lanes.vanishing_point.y, uvp = lanes.vanishing_point.x;
+    // two rows of the boundaries below the horizon: the lines' lower ends and halfway up to the horizon
+    const double v1 = std::max(lanes.ego_left.bottom.y, lanes.ego_right.bottom.y);
+    const double v2 = 0.5 * (v1 + vh);
+    const double w1 = lanes.lane_width_px(float(v1)), w2 = lanes.lane_width_px(float(v2));
+    if (!(v1 - vh > 20.0) || !(w1 > w2) || !(w2 > 0)) return;
+    // lateral offset of the lane centre from the image axis, in metres at row v1 (scale W / w1)
+    const double centre = 0.5 * (lanes.ego_left.x_at(float(v1)) + lanes.ego_right.x_at(float(v1)));
+    const double offset_m = (centre - cfg_.cx) * p_.lane_width_m / w1;
+    const bool steady_lane = std::isfinite(last_offset_m_) && dt > 0 &&
+                             std::abs(offset_m - last_offset_m_) / dt <= p_.max_lateral_rate_mps;
+    last_offset_m_ = offset_m;
+    const bool straight = !std::isfinite(yaw_rate_rps) || std::abs(yaw_rate_rps) <= p_.max_yaw_rate_rps;
+    if (!steady_lane || !straight) return;
+
+    const double pitch = std::atan((cfg_.cy - vh) / cfg_.fy) / kDeg;
+    const double yaw = std::atan((cfg_.cx - uvp) / cfg_.fx) / kDeg;
+    const double a = (w1 - w2) / (v1 - v2);  // px of lane width per row
+    const double h = cfg_.fx * p_.lane_width_m * std::cos(pitch * kDeg) / (cfg_.fy * a);
+    const double r_ang = p_.angle_noise_deg * p_.angle_noise_deg;
+    bool used = pitch_.update(pitch, r_ang, p_.gate_sigma);
+    used |= yaw_.update(yaw, r_ang, p_.gate_sigma);
+    used |= height_.update(h / cfg_.height_m, p_.height_noise * p_.height_noise, p_.gate_sigma);
+    pitch_.x = std::clamp(pitch_.x, cfg_.pitch_deg - p_.max_pitch_dev_deg, cfg_.pitch_deg + p_.max_pitch_dev_deg);
+    yaw_.x = std::clamp(yaw_.x, cfg_.yaw_deg - p_.max_yaw_dev_deg, cfg_.yaw_deg + p_.max_yaw_dev_deg);
+    height_.x = std::clamp(height_.x, 1.0 - p_.max_height_dev, 1.0 + p_.max_height_dev);
+    updates_ += used ? 1 : 0;
+}
+
+CameraParams SelfCalibration::camera() const {
+    CameraParams c = cfg_;
+    if (!p_.enabled) return c;
+    c.pitch_deg = pitch_.x;
+    c.yaw_deg = yaw_.x;
+    c.height_m = cfg_.height_m * height_.x;
+    return c;
+}
+
+CalibrationEstimate SelfCalibration::estimate() const {
+    CalibrationEstimate e;
+    const CameraParams c = camera();
+    e.active = p_.enabled;
+    e.pitch_deg = c.pitch_deg;
+    e.yaw_deg = c.yaw_deg;
+    e.height_m = c.height_m;
+    e.pitch_sigma_deg = p_.enabled ? std::sqrt(pitch_.var) : 0.0;
+    e.yaw_sigma_deg = p_.enabled ? std::sqrt(yaw_.var) : 0.0;
+    e.height_sigma_m = p_.enabled ? cfg_.height_m * std::sqrt(height_.var) : 0.0;
+    e.updates = updates_;
+    return e;
+}
+
+} // namespace hw

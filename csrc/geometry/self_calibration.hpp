@@ -1,0 +1,95 @@
+// self_calibration.hpp - the camera's pitch, yaw and height above the road, estimated while driving.
+//
+// The configured camera (camera: section) is the prior; every frame where both ego lane boundaries
+// are measured and the car drives straight along its lane gives one measurement of each angle and
+// of the height:
+//   pitch  from the lanes' vanishing row v_h:    theta = atan((cy - v_h) / fy)
+//   yaw    from the vanishing column u_vp:       psi   = atan((cx - u_vp) / fx)
+//          (a camera turned right sees the road direction left of its axis; camera.hpp's convention)
+//   height from the lane width: on a flat road the ego lane's image width grows linearly below the
+//          horizon, w(v) = a (v - v_h) with a = fx W cos(theta) / (fy h) for a lane W metres wide, so
+//          h = fx W cos(theta) / (fy a), a = (w(v1) - w(v2)) / (v1 - v2) from the two boundary lines.
+// Why the lane width and not the ego speed against the road's image motion: lanes are measured by
+// every preset (the road-motion fit runs only in the parallax preset) and need no vehicle bus; the
+// price is the assumed lane width (road.lane_width_m of the lead section: 3.6 m; real lanes are
+// 3.25-3.75 m, so a few per cent of bias on a road with another standard), which the limits bound.
+//
+// Each parameter is a scalar Kalman filter: random walk (process noise for slow load changes),
+// initialised at the configured value with the prior's sigma; a measurement is used only when
+//   - both ego boundaries were measured this frame (not carried over),
+//   - the car is not changing lanes: the lateral offset in the lane moves slower than
+//     max_lateral_rate_mps (a lane change crosses at ~1 m/s and turns the car against the lane,
+//     which moves the vanishing column by fx * heading),
+//   - the car is not turning: |yaw rate| (CAN or road motion, when known) below max_yaw_rate_rps
+//     (on a curve the boundaries' tangents meet off the road's direction),
+//   - the measurement is within gate_sigma of the estimate (innovation gate: a hill's crest or a
+//     wrong marking is an outlier against a converged estimate),
+// and the estimate is clamped to the configured value +- the limits. Off (enabled: false), the
+// configured camera is used unchanged.
+#pragma once
+
+#include "base/params.hpp"
+#include "base/types.hpp"
+#include "geometry/camera.hpp"
+
+#include <cmath>
+
+namespace hw {
+
+struct SelfCalibrationParams {
+    bool enabled = true;               // estimate pitch, yaw and height while driving
+    double prior_sigma_deg = 2.0;      // 1-sigma trust in the configured pitch and yaw
+    double prior_sigma_height = 0.15;  // 1-sigma trust in the configured height, relative
+    double angle_noise_deg = 0.5;      // 1-sigma of one frame's vanishing-point angle
+    double height_noise = 0.06;        // 1-sigma of one frame's lane-width height, relative
+    double angle_drift_deg_s = 0.01;   // random walk of the true angles (load, tyre pressure)
+    double height_drift_s = 0.001;     // random walk of the true height, relative per sqrt(s)
+    double max_pitch_dev_deg = 3.0;    // the estimate stays within the configured pitch +- this
+    double max_yaw_dev_deg = 3.0;      // the estimate stays within the configured yaw +- this
+    double max_height_dev = 0.25;      // the estimate stays within the configured height * (1 +- this)
+    double lane_width_m = 3.6;         // assumed ego-lane width for the height
+    double max_lateral_rate_mps = 0.3; // faster lateral motion in the lane is a lane change: no update
+    double max_yaw_rate_rps = 0.02;    // faster turning is a curve: no update
+    double gate_sigma = 4.0;           // innovations beyond this many sigma are outliers
+
+    void bind(ParamMap &m);
+};
+
+// The car's yaw rate (rad/s, left positive) from the road plane's image motion H (pixels, previous ->
+// current) over dt seconds: points of the road's vanishing line (the horizon) move by the camera's
+// rotation alone, u' = u + fx tan(d_psi) for a turn d_psi to the left (the scene shifts right).
+// NaN when dt is not positive.
+double yaw_rate_of_road_motion(const cv::Matx33d &H, const CameraParams &cam, double dt_s);
+
+// One frame's view of the calibration, with 1-sigma uncertainties.
+struct CalibrationEstimate {
+    double pitch_deg = NAN, yaw_deg = NAN, height_m = NAN;
+    double pitch_sigma_deg = NAN, yaw_sigma_deg = NAN, height_sigma_m = NAN;
+    int updates = 0;   // frames whose measurement was used
+    bool active = false;  // self-calibration on
+};
+
+class SelfCalibration {
+public:
+    SelfCalibration(const SelfCalibrationParams &p, const CameraParams &configured);
+    // One frame: lanes as measured, yaw rate (rad/s, NaN unknown), frame time (s).
+    void update(const LaneModel &lanes, double yaw_rate_rps, double t_s);
+    // The configured camera with the estimated pitch, yaw and height.
+    CameraParams camera() const;
+    CalibrationEstimate estimate() const;
+    void reset();
+
+private:
+    struct Scalar {  // 1-D Kalman filter on a random walk
+        double x = 0, var = 0;
+        void predict(double q) { var += q; }
+        bool update(double z, double r, double gate_sigma);
+    };
+    SelfCalibrationParams p_;
+    CameraParams cfg_;
+    Scalar pitch_, yaw_, height_;  // deg, deg, relative to the configured height (1 = as configured)
+    double last_t_ = NAN, last_offset_m_ = NAN;
+    int updates_ = 0;
+};
+
+} // namespace hw

@@ -1,0 +1,96 @@
+// lane_curve.hpp - the tracked straight boundaries bent to the road's curvature (flat-road model).
+//
+// A marking at lateral offset X0 on a road of curvature C (1/m) and heading psi relative to the
+// camera lies at X(Z) = X0 + psi Z + C Z^2 / 2. With x = x_c + fx X / Z and Z = fy h / d, d = y - y_h
+// (rows below the horizon), its image is
+//     x(d) = a + b d + c / d,   a = x_c + fx psi,  b = fx X0 / (fy h),  c = fx fy h C / 2
+// (road_geometry.hpp's straight line is c = 0). Every boundary of one road shares a and c; b is its
+// own lateral offset. Near the car (large d) c / d vanishes and the boundaries are the straight
+// lines the Hough stage and the tracker find; far away c / d bends them.
+// The joint least-squares fit over the marking points near all boundaries gives a and c (a dashed
+// marking takes its bend from a solid one); c is smoothed over frames (a pseudo-measurement of last
+// frame's value), bounded by the tightest curve radius. Points are taken in two passes: near rows
+// around the tracked lines first, then every scanned row around the first fit, so the bend does not
+// pull in points of another marking. Boundaries without enough points of their own are bent by the
+// shared c around their tracked line (unchanged at the bottom row, slope included).
+#pragma once
+
+#include "base/params.hpp"
+#include "base/types.hpp"
+#include "geometry/camera.hpp"
+#include "lanes/marking_filter.hpp"
+
+#include <vector>
+
+namespace hw {
+
+struct LaneCurveParams {
+    bool enabled = true;               // bend the boundaries (false: straight lines as before)
+    double near_range_m = 25.0;        // m; first pass uses rows nearer than this (curve small there)
+    double corridor_lanes = 0.12;      // lane widths; a point farther than this from a boundary is not its
+    double min_corridor_px = 3.0;      // px; corridor never narrower (far rows, marking noise)
+    int min_points = 12;               // points; fewest on a boundary for it to enter the fit
+    double min_radius_m = 150.0;       // m; tightest curve represented (bounds c)
+    double prior_points = 40.0;        // points; weight of last frame's c in this frame's fit
+    double residual_sigma_px = 2.0;    // px; residuals beyond 3 sigma are dropped in the refit
+    double prior_e_points = 20.0;      // points; weight keeping the image second-order term at 0
+    double far_range_m = 100.0;        // m; the reported boundaries reach this range (extrapolated)
+
+    void bind(ParamMap &m) {
+        m.add("curve_enabled", enabled,
+              "bend the lane boundaries to the road's curvature (x = a + b d + c / d below the horizon); "
+              "false keeps straight lines");
+        m.add("curve_near_range_m", near_range_m, 5.0, 200.0,
+              "m; the first pass of the curve fit takes the marking points nearer than this around the "
+              "tracked straight lines; 25 m, where a 250 m radius bends a marking by a quarter lane");
+        m.add("curve_corridor_lanes", corridor_lanes, 0.01, 0.5,
+              "lane widths; a marking point belongs to a boundary within this distance of it (first pass: of "
+              "the tracked line, then of the first fit); 0.12: of 0.04-0.12 the one that improves both TuSimple's "
+              "lane clips and the lane sample over straight lines (0.06 is a little better on the clips, worse "
+              "on the sample)");
+        m.add("curve_min_corridor_px", min_corridor_px, 0.5, 50.0,
+              "px; narrowest corridor (far rows, where a lane is a few px wide)");
+        m.add("curve_min_points", min_points, 3, 1000,
+              "points; a boundary takes part in the curve fit with at least this many points");
+        m.add("curve_min_radius_m", min_radius_m, 10.0, 100000.0,
+              "m; tightest curve radius represented; 150 m bounds highway and main-road bends and keeps a "
+              "bad fit from folding a boundary across the image");
+        m.add("curve_prior_points", prior_points, 0.0, 10000.0,
+              "points; weight of last frame's curvature in this frame's fit (smoothing over frames: a "
+              "frame with few far points hardly moves it); 0 fits each frame alone");
+        m.add("curve_residual_sigma_px", residual_sigma_px, 0.1, 50.0,
+              "px; noise of a marking point about the curve; the refit drops points beyond 3 sigma");
+        m.add("curve_prior_e_points", prior_e_points, 0.0, 1e6,
+              "points; each boundary also has an image second-order term e d^2 (lens distortion bends the "
+              "markings near the image's bottom corners); a bend of 1 px at the bottom row costs as much as "
+              "this many points' squared pixel error, so a few points cannot bend a boundary");
+        m.add("curve_far_range_m", far_range_m, 10.0, 10000.0,
+              "m; the boundaries reported (ABI points, tracks file, TuSimple predictions) reach this range, "
+              "the fitted curve extrapolated beyond the scanned band (markings meet at the horizon); the "
+              "lane model itself ends at road_range_m; 100 measured best on TuSimple's lane clips among "
+              "80-200 (farther, the c / d term of a tight bend hooks)");
+    }
+};
+
+// Curvature state carried over frames by the tracker.
+struct LaneCurveState {
+    float c = 0.f;        // px^2; shared curvature term of the last frame (x = a + b d + c / d)
+    bool known = false;   // a fit has been made
+};
+
+// Bends the valid boundaries of `m` (straight lines from bottom to top) to the road's curvature,
+// measured on `pts`, with the horizon at row y_h. Writes curve / curve_row of each boundary and the
+// boundaries' top points (now on the curve). Updates `state`.
+void fit_lane_curves(const std::vector<MarkingPoint> &pts, float y_h, const CameraParams &cam, float lane_width_m,
+                     const LaneCurveParams &p, LaneCurveState &state, LaneModel &m);
+
+// Row of the far end of the reported boundaries: far_range_m on a horizon at y_h (NaN if unknown).
+float far_row(const CameraParams &cam, float y_h, const LaneCurveParams &p);
+
+// n >= 2 points of boundary b from its bottom point up to row y_far (beyond its top point: the curve
+// extrapolated; its top point when y_far is NaN, below the top or the boundary has no horizon row),
+// rows evenly spaced in log(y - curve_row), i.e. in log range, so a polyline through them follows the
+// c / d bend to a fraction of a pixel; evenly in y when the boundary has no horizon row.
+void sample_boundary(const LaneBoundary &b, float y_far, int n, float *xs, float *ys);
+
+} // namespace hw

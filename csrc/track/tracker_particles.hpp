@@ -1,0 +1,29 @@
+// tracker_particles.hpp - tracker part "particles" (paper 000, section III): the joint SIR particle
+// filter of particle_filter.hpp, with entries confirmed through its transitory period and exits
+// managed by the filter. It asks the detector parts every frame; each hypothesis is a measurement at
+// its foot point (the mid-lower point of a parallax region, the bottom centre of a shadow box).
+#pragma once
+
+#include "track/particle_filter.hpp"
+#include "track/tracker.hpp"
+
+namespace hw {
+
+class ParticleTracker final : public Tracker {
+public:
+    // max_dt_s: a longer gap between frames (or time going back) starts the filter again.
+    ParticleTracker(const ParticleParams &p, double max_dt_s, const CameraParams &cam)
+        : pf_(p, cam), cam_(cam), max_dt_s_(max_dt_s) {}
+    void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
+              bool &full_detection) override;
+    void reset() override;
+
+private:
+    JointParticleFilter pf_;
+    CameraParams cam_;
+    double max_dt_s_;
+    double last_t_s_ = 0.0;
+    bool started_ = false;
+};
+
+} // namespace hw

@@ -1,0 +1,86 @@
+"""The shipped vehicle cascade (app/models/vehicle_cascade.xml, trained by `headway train cascade`,
+recipe in docs/cascade.md) run by the core's "cascade" stage: it loads in OpenCV, scans only where a
+vehicle can stand, and is measured on the real TuSimple validation images (0001-0600) by the project's
+one scoring code (app/eval/tusimple_boxes.py: IoU >= 0.5, boxes >= 40 px)."""
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from app import config as configuration
+from app.core import Pipeline
+from tests.conftest import data_path
+
+# Measured on the 600 validation images with the shipped model and defaults (docs/cascade.md): every
+# detection kept, boxes >= 40 px: recall 0.738, precision 0.062. Floors that catch a regression; the issue's
+# bar is tested separately.
+CASCADE_FLOOR_40 = {"recall": 0.70, "precision": 0.05}
+
+
+def test_shipped_cascade_loads_in_opencv():
+    cc = cv2.CascadeClassifier(str(configuration.SHIPPED_CASCADE))
+    assert not cc.empty()
+    assert tuple(cc.getOriginalWindowSize()) == (30, 20)
+
+
+def test_cascade_stage_reports_boxes_with_scores_below_the_horizon_only():
+    """On a textured frame without lanes, every box the cascade reports stands below the camera's
+    horizon with a confidence in [0, 1]: the scan covers only rows where a vehicle can stand."""
+    cfg = configuration.load(None)
+    rng = np.random.default_rng(0)
+    gray = cv2.GaussianBlur(rng.normal(110, 30, (480, 640)).clip(0, 255).astype(np.uint8), (0, 0), 1.0)
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        r = pipe.run_stage("cascade", gray)
+        horizon = r.horizon_row
+        for t in r.tracks:
+            assert 0.0 <= t.confidence <= 1.0
+            assert t.box[3] > horizon  # the box stands below the horizon
+        assert "cascade" in r.stages
+
+
+@pytest.fixture(scope="module")
+def cascade_scores():
+    from app.eval.tusimple_boxes import evaluate
+
+    r = evaluate(str(data_path("tusimple", "supp")), preset="cascade")
+    print("TuSimple supp, cascade:", json.dumps(r["bands"], indent=1), json.dumps(r["best_at_precision_0.8"]))
+    return r
+
+
+def test_cascade_validation_floor(cascade_scores):
+    b = cascade_scores["bands"][">=40"]
+    assert b["recall"] >= CASCADE_FLOOR_40["recall"] and b["precision"] >= CASCADE_FLOOR_40["precision"]
+    assert all(cascade_scores["bands"][b]["gt"] > 0 for b in ("0-20", "20-40", "40-80", ">=80"))
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "not reached by the shipped 8-stage cascade (33 min of training): no score threshold reaches precision "
+    "0.8 for boxes >= 40 px; the best is 0.62 at recall 0.31 (groups of >= 114 windows), 0.26 at 0.57, and "
+    "0.062 at 0.74 with every detection kept; with the HOG verifier's probability as score 0.47 at 0.31. Its "
+    "per-window false-alarm rate is still ~1e-2 (docs/cascade.md)"))
+def test_cascade_meets_the_issue_bar(cascade_scores):
+    best = cascade_scores["best_at_precision_0.8"]
+    assert best is not None and best["recall"] >= 0.60
+
+
+def test_core_confidence_is_the_verifier_probability_the_trainer_computes():
+    """The core's verifier (C++, cv::HOGDescriptor + the shipped weights) gives each cascade detection the
+    probability the training code (app/train/verifier.py) computes for the same box."""
+    from app.eval.tusimple_boxes import tusimple_config
+    from app.train.verifier import box_features, hog
+
+    supp = data_path("tusimple", "supp")
+    entry = json.loads((supp / "annotation.json").read_text())[0]
+    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    fs = cv2.FileStorage(str(configuration.SHIPPED_VERIFIER), cv2.FILE_STORAGE_READ)
+    w, b = fs.getNode("weights").mat().ravel(), fs.getNode("bias").real()
+    cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": ""}}))  # "": the shipped verifier
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        tracks = pipe.run_stage("cascade", gray).tracks
+    assert tracks
+    x = box_features(hog(), gray, [t.box for t in tracks])
+    p = 1 / (1 + np.exp(-(x @ w + b)))
+    assert np.abs(p - np.array([t.confidence for t in tracks])).max() < 0.02

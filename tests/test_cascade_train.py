@@ -1,0 +1,127 @@
+"""The cascade trainer (app/train/cascade): a tiny cascade trained in seconds on tiny synthetic data
+loads in OpenCV's CascadeClassifier, and OpenCV accepts exactly the windows the trainer's own
+evaluator accepts (scanned as OpenCV scans: every second pixel, skipping the window after one that
+the first stage rejects), with the same last-stage sums (the trainer reproduces OpenCV's variance
+normalisation and single-precision arithmetic)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from app.train.cascade import FeatureSet, TrainParams, train
+from app.train.cascade.haar import integrals, responses, variance_norm
+
+W, H = 12, 8
+
+
+def _scene(rng, size=(160, 120)):
+    """Textured background with 1-3 'vehicles': a body, a dark band at the bottom, two bright lights."""
+    img = rng.normal(120, 25, (size[1], size[0])).clip(0, 255)
+    img = cv2.GaussianBlur(img, (0, 0), 1.5)
+    boxes = []
+    for _ in range(rng.integers(1, 4)):
+        h = int(rng.integers(12, 36))
+        w = int(1.5 * h)
+        x, y = int(rng.integers(0, size[0] - w)), int(rng.integers(0, size[1] - h))
+        img[y:y + h, x:x + w] = 170
+        img[y + int(0.75 * h):y + h, x:x + w] = 30
+        img[y + h // 3:y + h // 2, x + w // 8:x + w // 4] = 250
+        img[y + h // 3:y + h // 2, x + 3 * w // 4:x + 7 * w // 8] = 250
+        boxes.append({"left": x, "top": y, "right": x + w, "bottom": y + h})
+    return img.astype(np.uint8), boxes
+
+
+def _dataset(folder, n, seed):
+    rng = np.random.default_rng(seed)
+    (folder / "images").mkdir(parents=True)
+    ann = []
+    for i in range(n):
+        img, boxes = _scene(rng)
+        cv2.imwrite(str(folder / "images" / f"{i:04d}.png"), img)
+        ann.append({"file_name": f"images/{i:04d}.png", "bbox": boxes})
+    (folder / "annotation.json").write_text(json.dumps(ann))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def tiny_cascade(tmp_path_factory):
+    folder = _dataset(tmp_path_factory.mktemp("tiny") / "data", 40, 1)
+    out = tmp_path_factory.mktemp("model") / "tiny.xml"
+    p = TrainParams(width=W, height=H, stages=3, num_pos=200, num_neg=200, features=400, min_box_height=10,
+                    max_weak=20, seed=0)
+    lines = []
+    cascade = train([str(folder)], str(out), p, log=lines.append)
+    return cascade, out, lines
+
+
+def test_tiny_cascade_trains_with_a_log_line_per_stage(tiny_cascade):
+    cascade, out, lines = tiny_cascade
+    assert len(cascade.stages) >= 2
+    stage_lines = [ln for ln in lines if ln.startswith("stage")]
+    assert len(stage_lines) == len(cascade.stages)
+    for ln in stage_lines:
+        assert "stumps" in ln and "hit rate" in ln and "false alarm" in ln and "negatives" in ln
+
+
+def test_opencv_accepts_exactly_the_windows_the_trainer_accepts(tiny_cascade):
+    cascade, out, _ = tiny_cascade
+    cc = cv2.CascadeClassifier(str(out))
+    assert not cc.empty() and tuple(cc.getOriginalWindowSize()) == (W, H)
+    fs = FeatureSet(W, H)
+    rng = np.random.default_rng(7)
+    n_acc = n_rej = 0
+    for _ in range(3):
+        img, _ = _scene(rng)
+        # one scale (window = the model's), every second pixel as OpenCV scans at scale 1
+        rects, _, weights = cc.detectMultiScale3(img, scaleFactor=1.5, minNeighbors=0, minSize=(W, H),
+                                                 maxSize=(W, H), outputRejectLevels=True)
+        ocv = {(int(x), int(y)): float(w) for (x, y, _, _), w in zip(np.asarray(rects).reshape(-1, 4),
+                                                                       np.ravel(weights))}
+        grid = [(x, y) for y in range(0, img.shape[0] - H + 1, 2) for x in range(0, img.shape[1] - W + 1, 2)]
+        patches = np.array([img[y:y + H, x:x + W] for x, y in grid])
+        passed, depth, score = cascade.evaluate(fs, patches)
+        _, scanned = variance_norm(patches)
+        # OpenCV's scan skips the next window of a row after one its first stage rejects
+        verdict = dict(zip(grid, zip(passed, depth == 0, scanned, score)))
+        ours, pos = {}, []
+        for y in range(0, img.shape[0] - H + 1, 2):
+            x = 0
+            while x <= img.shape[1] - W:
+                ok, first_rejects, contrast, s = verdict[(x, y)]
+                pos.append((x, y))
+                if ok:
+                    ours[(x, y)] = s
+                x += 4 if (first_rejects and contrast) else 2
+        assert set(ours) == set(ocv)
+        for p in ours:
+            assert ours[p] == pytest.approx(ocv[p], abs=1e-5)
+        n_acc += len(ours)
+        n_rej += len(pos) - len(ours)
+    assert n_acc > 0 and n_rej > 0  # both decisions were compared
+
+
+def test_feature_responses_match_direct_pixel_sums():
+    fs = FeatureSet(W, H)
+    x = np.random.default_rng(3).integers(0, 256, (50, H, W)).astype(np.uint8)
+    norm, _ = variance_norm(x)
+    idx = np.arange(0, len(fs), 97)
+    vals = responses(fs, idx, integrals(x), norm)
+    for row, f in zip(vals, idx):
+        sums = [x[:, r[1]:r[1] + r[3], r[0]:r[0] + r[2]].reshape(len(x), -1).sum(1) for r in fs.rects[f]]
+        w = fs.weights[f]
+        ref = np.float32(w[0]) * sums[0].astype(np.float32) + np.float32(w[1]) * sums[1].astype(np.float32)
+        if w[2] != 0:
+            ref = ref + np.float32(w[2]) * sums[2].astype(np.float32)
+        assert np.array_equal(row, ref * norm)
+
+
+def test_cli_names_a_folder_without_annotations(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "app.cli", "train", "cascade", "--data", str(tmp_path),
+                        "--out", str(tmp_path / "m.xml")], capture_output=True, text=True)
+    assert r.returncode == 1
+    assert "annotation.json" in r.stderr and "Traceback" not in r.stderr

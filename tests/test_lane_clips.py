@@ -1,0 +1,97 @@
+"""Lanes on real video: TuSimple's 20-frame clips through the whole pipeline, scored on frame 20 with the
+TuSimple metric (issue 13's bar), the 10-image sample at least as good, and the lanes in the tracks file."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from app.core import Pipeline
+from app.eval import lane_clips, lanes_sample
+from app.sim import load_scenario, render
+from app.sim.frames import scenario_camera
+from app.tracks_file import frame_record
+from tests.conftest import data_path
+
+# Issue 13, "Done when": on the 12 clips accuracy >= 0.92, FP <= 0.10, FN <= 0.10.
+MIN_ACCURACY, MAX_FP, MAX_FN = 0.92, 0.10, 0.10
+
+
+# Measured with the shipped model (curved boundaries): clips 0.848 / 0.250 / 0.264, sample 0.819 / 0.242 /
+# 0.292; straight boundaries (lanes.curve_enabled false, the model before) clips 0.836 / 0.306 / 0.312, sample
+# 0.798 / 0.250 / 0.300. The regression bounds below sit between the two.
+CLIPS_NOW = {"accuracy": 0.845, "fp": 0.26, "fn": 0.28}
+SAMPLE_NOW = {"accuracy": 0.81, "fp": 0.25, "fn": 0.30}
+
+_clips_cache: dict = {}
+
+
+def _clips(tmp_path_factory) -> dict:
+    if not _clips_cache:
+        pred = tmp_path_factory.mktemp("lane_clips") / "pred.json"
+        _clips_cache["m"] = lane_clips.evaluate(str(data_path("tusimple", "lane_clips")), predictions_out=str(pred))
+        _clips_cache["pred"] = pred
+    return _clips_cache
+
+
+def test_lane_clips_scored_as_tusimple_and_no_worse_than_measured(tmp_path_factory):
+    c = _clips(tmp_path_factory)
+    m = c["m"]
+    assert m["clips"] == 12
+    assert m["accuracy"] >= CLIPS_NOW["accuracy"], m["per_image"]
+    assert m["fp"] <= CLIPS_NOW["fp"], m["per_image"]
+    assert m["fn"] <= CLIPS_NOW["fn"], m["per_image"]
+    # The predictions are a TuSimple submission: one line per labelled image, one x per h_samples row.
+    lines = [json.loads(x) for x in c["pred"].read_text().splitlines()]
+    assert len(lines) == 12
+    for ln in lines:
+        assert all(len(lane) == len(ln["h_samples"]) for lane in ln["lanes"])
+        assert ln["run_time"] > 0
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 13's bar not reached: measured accuracy 0.848, FP 0.250, FN 0.264 on the 12 clips. The misses are "
+    "wrong lines, not imprecise ones: 0313-1/420 takes a concrete seam for the right boundary (the faint dotted "
+    "marking is not found), 0531/...793 the dots splitting a wide lane (not labelled), 0601/...358 straddles a "
+    "marking mid lane change, and 0313-1/60's far-right line is the shoulder's edge"))
+def test_lane_clips_reach_the_tusimple_bar(tmp_path_factory):
+    m = _clips(tmp_path_factory)["m"]
+    assert m["accuracy"] >= MIN_ACCURACY and m["fp"] <= MAX_FP and m["fn"] <= MAX_FN, m
+
+
+def test_lane_sample_no_worse_than_measured():
+    m = lanes_sample.evaluate(str(data_path("tusimple", "lane_sample")))
+    assert m["accuracy"] >= SAMPLE_NOW["accuracy"], m
+    assert m["fp"] <= SAMPLE_NOW["fp"], m
+    assert m["fn"] <= SAMPLE_NOW["fn"], m
+
+
+@pytest.mark.xfail(strict=True, reason="issue 13's bar on the sample not reached: measured accuracy 0.819, "
+                   "FP 0.242, FN 0.292 on the 10 images (each image alone, no tracking)")
+def test_lane_sample_at_least_as_good_as_the_clips_bar():
+    m = lanes_sample.evaluate(str(data_path("tusimple", "lane_sample")))
+    assert m["accuracy"] >= MIN_ACCURACY and m["fp"] <= MAX_FP and m["fn"] <= MAX_FN, m
+
+
+def test_tracks_file_holds_the_lanes_of_every_frame():
+    """Boundaries as image points, lane width and the car's offset in metres, on a rendered road whose
+    lane is 3.6 m wide (scenario steady_following, car centred)."""
+    scenario = load_scenario("steady_following")
+    cam = scenario_camera(scenario)
+    frames = list(render(scenario, frames=range(30)))
+    records = []
+    with Pipeline({"camera": cam.to_dict(), "pipeline": {"preset": "none"}}) as pipe:
+        for f in frames:
+            records.append(frame_record(pipe.process(f.image, f.t_s)))
+    assert all("lanes" in r for r in records)
+    last = records[-1]["lanes"]
+    assert {b["position"] for b in last["boundaries"]} >= {-1, 1}
+    for b in last["boundaries"]:
+        ys = [p[1] for p in b["points"]]
+        assert len(b["points"]) >= 2 and ys == sorted(ys, reverse=True)  # bottom first, upwards
+    widths = [r["lanes"]["width_m"] for r in records[10:] if r["lanes"]["width_m"] is not None]
+    offsets = [r["lanes"]["offset_m"] for r in records[10:] if r["lanes"]["offset_m"] is not None]
+    assert len(widths) >= 15
+    assert abs(float(np.median(widths)) - 3.6) < 0.3
+    assert abs(float(np.median(offsets))) < 0.3

@@ -1,0 +1,226 @@
+"""One definition per concept (issue 11): the FCW level, the fault severities and overall states, the
+health parameters and the camera defaults are each written once, and everything else reads them.
+
+The pins check each definition against the other form that must agree with it (the C header, the DBC,
+the configuration schema, the core's described defaults); the source scan fails when a level or a
+severity is written again as a literal in the product's Python (app/, firmware_bridge/).
+"""
+from __future__ import annotations
+
+import dataclasses
+import io
+import itertools
+import re
+import tokenize
+from pathlib import Path
+
+import pytest
+
+from app.can.database import headway_database
+from app.core import core_schema
+from app.fcw_level import FcwLevel
+from app.sim.camera import CAMERA_KEYS, Camera, default_camera
+from app.supervisor import faults as registry
+from app.supervisor.health import HEALTH_SCHEMA, HealthMonitor, HealthParams
+from tests.conftest import REPO
+
+HEADER = REPO / "csrc" / "include" / "headway.h"
+
+
+# ---- the FCW level -----------------------------------------------------------------------------------
+
+def test_fcw_level_is_the_c_enum_of_headway_h():
+    enum = re.search(r"typedef\s+enum\s*\{([^}]*)\}\s*hw_fcw_level\s*;", HEADER.read_text())
+    if enum is None:
+        pytest.skip("headway.h no longer declares hw_fcw_level: app/fcw_level.py is then the only definition")
+    c_levels = {name: int(value) for name, value in re.findall(r"HW_FCW_(\w+)\s*=\s*(\d+)", enum.group(1))}
+    assert c_levels == {m.name: m.value for m in FcwLevel}
+    from app._headway_core import lib  # the built core says the same
+    assert {m.name: getattr(lib, f"HW_FCW_{m.name}") for m in FcwLevel} == c_levels
+
+
+def test_hw_fcw_value_table_names_the_levels_by_their_labels():
+    signal = headway_database().get_message_by_name("HW_FCW").get_signal_by_name("FCW_LEVEL")
+    assert {int(k): str(v) for k, v in signal.choices.items()} == {m.value: m.label for m in FcwLevel}
+    assert (signal.minimum, signal.maximum) == (min(FcwLevel), max(FcwLevel))
+
+
+def test_the_mcu_link_sends_the_same_levels():
+    from firmware_bridge import WarningLevel
+    from firmware_bridge.messages import FcwWarning
+    assert WarningLevel is FcwLevel
+    assert [FcwWarning(m).fields()[0] for m in FcwLevel] == [0, 1, 2]
+
+
+# ---- fault severities and the overall state ----------------------------------------------------------
+
+def test_hw_status_state_table_is_the_registry_states_in_order():
+    signal = headway_database().get_message_by_name("HW_STATUS").get_signal_by_name("STATE")
+    assert {int(k): str(v) for k, v in signal.choices.items()} == dict(enumerate(registry.STATES))
+    assert set(registry.STATES) >= {f.severity for f in registry.FAULTS}
+
+
+def test_hw_status_has_a_bit_for_every_registry_fault_and_no_other():
+    status = headway_database().get_message_by_name("HW_STATUS")
+    in_dbc = {s.name for s in status.signals if s.name.startswith("FAULT_")}
+    assert in_dbc == {f"FAULT_{f.name.upper()}" for f in registry.FAULTS}
+
+
+@pytest.mark.parametrize("started", [False, True])
+def test_overall_state_over_every_set_of_faults(started):
+    """The rule as docs/can.md and the HW_STATUS comment state it, for all 2^8 fault sets."""
+    names = [f.name for f in registry.FAULTS]
+    for n in range(len(names) + 1):
+        for faults in itertools.combinations(names, n):
+            severities = {registry.BY_NAME[f].severity for f in faults}
+            expected = ("fault" if "fault" in severities else "starting" if not started
+                        else "degraded" if faults else "ok")
+            assert registry.overall_state(faults, started) == expected, faults
+
+
+def test_the_health_monitor_and_a_replay_decide_the_state_alike():
+    """The same faults give the same state in the monitor (service) and in the CAN session's own status
+    (replay, no monitor): both call registry.overall_state."""
+    from app.can import messages as hm
+    from app.can import session
+    assert session.overall_state is registry.overall_state
+    assert not hasattr(hm, "overall_state")
+    h = HealthMonitor(HealthParams(camera_timeout_s=0.5))
+    h.start(0.0)
+    before_frames = h.evaluate(0.1, 0.1, True, 0, can_ok=False, ego_speed_fresh=False)
+    assert before_frames.state == registry.overall_state(before_frames.faults, started=False) == "fault"
+    h.on_result(0.2, 10.0, 30.0, 5.0)
+    report = h.evaluate(0.25, 0.25, True, 0, ego_speed_fresh=False)
+    assert report.faults == ["ego_speed_stale"]
+    assert report.state == registry.overall_state(report.faults, started=True) == "degraded"
+
+
+# ---- health parameters -------------------------------------------------------------------------------
+
+def test_health_params_are_the_schema_keys_with_the_schema_defaults():
+    fields = {f.name: f for f in dataclasses.fields(HealthParams)}
+    assert list(fields) == list(HEALTH_SCHEMA)
+    defaults = HealthParams()
+    for name, spec in HEALTH_SCHEMA.items():
+        assert getattr(defaults, name) == spec["default"], name
+        assert fields[name].type == spec["type"], name
+
+
+# ---- camera defaults ---------------------------------------------------------------------------------
+
+def test_the_sim_camera_defaults_are_the_core_camera_params():
+    core = {k: spec["default"] for k, spec in core_schema()["camera"].items()}
+    assert set(CAMERA_KEYS) <= set(core)
+    assert default_camera() == {k: core[k] for k in CAMERA_KEYS}
+    assert Camera.from_dict({}).to_dict() == pytest.approx(default_camera())
+    default_camera()["fx"] = 1.0  # a caller's copy: the next caller still gets the core's value
+    assert default_camera()["fx"] == core["fx"]
+
+
+def test_the_sim_camera_module_writes_no_number_of_its_own_for_a_default():
+    text = (REPO / "app" / "sim" / "camera.py").read_text()
+    assert not re.search(r"^\s*\w+\s*:\s*(int|float)\s*=\s*[\d.]+", text, re.M), "a camera field has a default"
+    assert not re.search(r'"(fx|fy|cx|cy|height_m|pitch_deg)"\s*:\s*[\d.]+', text), "a camera default dict"
+
+
+# ---- the source scan ---------------------------------------------------------------------------------
+
+_FAULT_NAMES = "|".join(f.name for f in registry.FAULTS)
+_LEVEL_WORDS = r"(?:none|pre_?warning|warning)"
+# (what it catches, pattern): each pattern is a level or a severity written as a literal.
+PATTERNS = [
+    ("an FCW level compared with a number", re.compile(r"\w*level\w*\s*(?:==|!=|<=|>=|<|>)\s*[0-2]\b", re.I)),
+    ("a number assigned as an FCW level",
+     re.compile(r"\b\w*level\w*\s*(?::\s*[\w.]+\s*)?(?<![=!<>])=(?!=)\s*[0-2]\b(?!\.)", re.I)),
+    ("an FCW level defaulted to a number", re.compile(r"[\"'](?:fcw_)?level[\"']\s*[,:]\s*[0-2]\b")),
+    ("FCW levels cycled by their count written out", re.compile(r"(?:Level\(|level\w*\s*=).*%\s*3\b", re.I)),
+    ("FCW level constants defined as numbers",
+     re.compile(r"^\s*(?:NONE|PRE_?WARNING|WARNING)\b(?:\s*,\s*\w+)*\s*=\s*[0-2]\b(?![.x])")),
+    ("FCW level names by number", re.compile(rf"[0-2]\s*:\s*[\"']{_LEVEL_WORDS}[\"']")),
+    ("an FCW level name written out", re.compile(r"[\"'](?:pre_?warning|warning)[\"']")),
+    ("a severity or state name written out", re.compile(r"[\"'](?:fault|degraded|starting)[\"'](?!\s*:)")),
+    ("fault names grouped by hand (a severity set)",
+     re.compile(rf"[\"'](?:{_FAULT_NAMES})[\"']\s*,\s*[\"'](?:{_FAULT_NAMES})[\"']")),
+]
+# The one definition of each: the scan does not look there.
+DEFINITIONS = {Path("app/fcw_level.py"), Path("app/supervisor/faults.py")}
+
+
+def _code_lines(text: str) -> list[tuple[int, str]]:
+    """(line number, code) with comments removed; docstrings stay (they are strings to the tokenizer
+    but hold prose, which the patterns need quotes around to match)."""
+    lines = text.splitlines()
+    try:
+        for tok in tokenize.generate_tokens(io.StringIO(text).readline):
+            if tok.type == tokenize.COMMENT:
+                row, col = tok.start
+                lines[row - 1] = lines[row - 1][:col]
+    except (tokenize.TokenError, IndentationError):  # a fragment (the examples below): comments so far
+        pass
+    return list(enumerate(lines, 1))
+
+
+def scan(text: str) -> list[tuple[int, str, str]]:
+    return [(n, what, line.strip()) for n, line in _code_lines(text) for what, rx in PATTERNS if rx.search(line)]
+
+
+def _product_sources(root: Path):
+    for folder in ("app", "firmware_bridge"):
+        for path in sorted((root / folder).rglob("*.py")):
+            rel = path.relative_to(root)
+            if rel not in DEFINITIONS:
+                yield rel, path.read_text()
+
+
+def test_no_fcw_level_or_severity_is_written_outside_its_one_definition():
+    found = [f"{rel}:{n}: {what}: {line}" for rel, text in _product_sources(REPO) for n, what, line in scan(text)]
+    assert not found, "written again outside app/fcw_level.py / app/supervisor/faults.py:\n" + "\n".join(found)
+
+
+# Lines of the code before issue 11 (each wrote a level or a severity again), and lines that are not.
+BEFORE = [
+    "NONE, PREWARNING, WARNING = 0, 1, 2",
+    'LEVEL_NAMES = {NONE: "none", PREWARNING: "prewarning", WARNING: "warning"}',
+    'FCW_NAMES = {0: "none", 1: "prewarning", 2: "warning"}',
+    'FCW_LEVELS = ("none", "prewarning", "warning")',
+    "            if decision.changed and decision.level > 0:",
+    '    if r.fcw_level > 0:',
+    '        text = "BRAKE!" if r.fcw_level == 2 else "caution"',
+    "def fcw_signals(level: int = 0, available: bool = False,",
+    "        level = 0",
+    '            fcw = {"level": int(getattr(result, "fcw_level", 0) or 0), "ttc_s": ttc}',
+    '        f = hm.fcw_signals(get("level", 0), speed_ok)',
+    "def fake_result(frame: int, n_objects: int, fcw_level: int = 0, lead: int = 1):",
+    "            result = fake_result(k, n_objects, fcw_level=k % 3)",
+    "                level = WarningLevel(int((now - start) / 2.0) % 3)",
+    "    PRE_WARNING = 1  # MCU: amber LED, no sound",
+    'STATES = ("starting", "ok", "degraded", "fault")',
+    'STARTING, OK, DEGRADED_STATE, FAULT_STATE = "starting", "ok", "degraded", "fault"',
+    'FATAL_FAULTS = frozenset({"camera_lost", "core_stalled", "can_error"})',
+    '        return "fault"',
+    '    return "degraded" if faults else "ok"',
+    '    mcu.set_system_ok(self.report is None or self.report.state != "fault")',
+    '"warnings": sum(1 for _, level, _ in s.warnings if level == "warning"),',
+]
+UNRELATED = [
+    "    WARNING = 0x10",
+    "        level = logging.WARNING if bad else logging.INFO",
+    '                "fault": None if self._state is LinkState.UP else self._fault,',
+    "    lane_index=i % 3 - 1, in_path=i % 3 == 1)",
+    '            faults.append("camera_lost")',
+    "            level = 0.8 * level + 0.6 * e  # AR(1)",
+    "    level = r.fcw_level if fcw_level is None else fcw_level",
+    'os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")',
+    "        root.setLevel(level)",
+    '    return None, "none"',
+]
+
+
+@pytest.mark.parametrize("line", BEFORE)
+def test_the_scan_finds_each_way_the_old_code_wrote_a_level_or_severity(line):
+    assert scan(line + "\n"), line
+
+
+@pytest.mark.parametrize("line", UNRELATED)
+def test_the_scan_leaves_unrelated_numbers_and_names_alone(line):
+    assert not scan(line + "\n"), scan(line + "\n")
