@@ -18,11 +18,12 @@ from tests.conftest import data_path
 MIN_ACCURACY, MAX_FP, MAX_FN = 0.92, 0.10, 0.10
 
 
-# Measured with the shipped model (curved boundaries): clips 0.848 / 0.250 / 0.264, sample 0.819 / 0.242 /
-# 0.292; straight boundaries (lanes.curve_enabled false, the model before) clips 0.836 / 0.306 / 0.312, sample
-# 0.798 / 0.250 / 0.300. The regression bounds below sit between the two.
-CLIPS_NOW = {"accuracy": 0.845, "fp": 0.26, "fn": 0.28}
-SAMPLE_NOW = {"accuracy": 0.81, "fp": 0.25, "fn": 0.30}
+# Measured with the shipped model (straight boundaries, lanes.curve_enabled false): clips 0.836 / 0.306 / 0.312,
+# sample 0.798 / 0.250 / 0.300. Bent boundaries (curve_enabled true) measured clips 0.848 / 0.250 / 0.264, sample
+# 0.819 / 0.242 / 0.292, but are off by default: they cost the unmarked congestion scenario its lead
+# (docs/RESULTS.md, lanes). The regression bounds below sit just under the shipped figures.
+CLIPS_NOW = {"accuracy": 0.835, "fp": 0.31, "fn": 0.32}
+SAMPLE_NOW = {"accuracy": 0.795, "fp": 0.25, "fn": 0.30}
 
 _clips_cache: dict = {}
 
@@ -51,7 +52,7 @@ def test_lane_clips_scored_as_tusimple_and_no_worse_than_measured(tmp_path_facto
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "issue 13's bar not reached: measured accuracy 0.848, FP 0.250, FN 0.264 on the 12 clips. The misses are "
+    "issue 13's bar not reached: measured accuracy 0.836, FP 0.306, FN 0.312 on the 12 clips (0.848 / 0.250 / 0.264 with bent boundaries). The misses are "
     "wrong lines, not imprecise ones: 0313-1/420 takes a concrete seam for the right boundary (the faint dotted "
     "marking is not found), 0531/...793 the dots splitting a wide lane (not labelled), 0601/...358 straddles a "
     "marking mid lane change, and 0313-1/60's far-right line is the shoulder's edge"))
@@ -67,8 +68,8 @@ def test_lane_sample_no_worse_than_measured():
     assert m["fn"] <= SAMPLE_NOW["fn"], m
 
 
-@pytest.mark.xfail(strict=True, reason="issue 13's bar on the sample not reached: measured accuracy 0.819, "
-                   "FP 0.242, FN 0.292 on the 10 images (each image alone, no tracking)")
+@pytest.mark.xfail(strict=True, reason="issue 13's bar on the sample not reached: measured accuracy 0.798, "
+                   "FP 0.250, FN 0.300 on the 10 images (bent boundaries: 0.819, 0.242, 0.292) (each image alone, no tracking)")
 def test_lane_sample_at_least_as_good_as_the_clips_bar():
     m = lanes_sample.evaluate(str(data_path("tusimple", "lane_sample")))
     assert m["accuracy"] >= MIN_ACCURACY and m["fp"] <= MAX_FP and m["fn"] <= MAX_FN, m
