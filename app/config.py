@@ -119,7 +119,7 @@ def _check_value(path: str, value: Any, spec: dict) -> Any:
         names = [v.strip() for v in names if v.strip()]
         for v in names:
             if "choices" in spec and v not in spec["choices"].split("|"):
-                raise ConfigFileError(f"{path}: {v!r} is not one of {_choices(spec)}")
+                raise ConfigFileError(f"{path}: {short(v)} is not one of {_choices(spec)}")
         return ",".join(names)
     if t == "bool":
         if not isinstance(value, bool):

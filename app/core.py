@@ -370,3 +370,68 @@ class Pipeline:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+# ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) ----------------------------------------------
+
+def _points(xy: Any) -> np.ndarray:
+    a = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+    if not np.all(np.isfinite(a)):
+        raise ValueError("points must be finite (x, y) pairs")
+    return a
+
+
+class GmPhd:
+    """The core's GM-PHD filter on 2-D image points (csrc/track/gmphd.hpp), step by step.
+    ``params``: keys of the ``gmphd`` configuration section."""
+
+    def __init__(self, params: Optional[dict] = None, seed: int = 1):
+        out = ffi.new("hw_gmphd **")
+        _check(lib.hw_gmphd_create(json.dumps(params or {}).encode(), int(seed), out))
+        self._f = ffi.gc(out[0], lib.hw_gmphd_destroy)
+
+    def predict(self, scale: float = 1.0, centre: tuple = (0.0, 0.0), shift: tuple = (0.0, 0.0)) -> None:
+        _check(lib.hw_gmphd_predict(self._f, float(scale), float(centre[0]), float(centre[1]), float(shift[0]),
+                                    float(shift[1])))
+
+    def births(self, xy: Any, random: bool = False) -> int:
+        a = _points(xy)
+        n = ffi.new("int32_t *")
+        _check(lib.hw_gmphd_births(self._f, ffi.cast("double *", ffi.from_buffer(a)), len(a), int(random), n))
+        return int(n[0])
+
+    def update(self, xy: Any) -> None:
+        a = _points(xy)
+        _check(lib.hw_gmphd_update(self._f, ffi.cast("double *", ffi.from_buffer(a)), len(a)))
+
+    def merge_prune(self) -> None:
+        _check(lib.hw_gmphd_merge_prune(self._f))
+
+    def components(self) -> np.ndarray:
+        """(n, 6) array of weight, mean x, mean y, Pxx, Pxy, Pyy."""
+        n = ffi.new("int32_t *")
+        _check(lib.hw_gmphd_components(self._f, ffi.NULL, 0, n))
+        buf = ffi.new("hw_gm_component[]", max(1, int(n[0])))
+        _check(lib.hw_gmphd_components(self._f, buf, int(n[0]), n))
+        return np.array([[c.w, c.mx, c.my, c.pxx, c.pxy, c.pyy] for c in buf[0:int(n[0])]]).reshape(-1, 6)
+
+    def weight_in(self, left: float, top: float, right: float, bottom: float) -> float:
+        out = ffi.new("double *")
+        _check(lib.hw_gmphd_weight_in(self._f, left, top, right, bottom, out))
+        return float(out[0])
+
+
+def ukf_run(spec: dict, z: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Runs the core's UKF (csrc/track/ukf.hpp) over observations ``z`` (n_steps x z_dim; a NaN row skips the
+    update); returns the states (n_steps x 4) and covariances (n_steps x 4 x 4). ``spec``: see hw_ukf_run."""
+    zz = np.ascontiguousarray(np.asarray(z, dtype=np.float64))
+    if zz.ndim != 2:
+        raise ValueError("z must be a 2-D array: one observation per row")
+    n, dim = zz.shape
+    x = np.zeros((n, 4))
+    p = np.zeros((n, 4, 4))
+    _check(lib.hw_ukf_run(json.dumps(spec).encode(), ffi.cast("double *", ffi.from_buffer(zz)), n, dim,
+                          ffi.cast("double *", ffi.from_buffer(x)), ffi.cast("double *", ffi.from_buffer(p))))
+    return x, p
+
+# ---- END paper 004 units -------------------------------------------------------------------------------------

@@ -22,13 +22,14 @@ def _boxes(results) -> list:
 
 def test_the_registries_are_in_the_configuration_schema():
     pipe = core_schema()["pipeline"]
-    assert set(pipe["preset"]["choices"].split("|")) == {"thesis", "parallax", "parallax_kalman", "shadow_particles", "none"}
+    assert set(pipe["preset"]["choices"].split("|")) == {"thesis", "parallax", "parallax_kalman", "shadow_particles", "phd", "none"}
     assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax"}
     assert {"kalman", "particles", "none"} <= set(pipe["tracker"]["choices"].split("|"))
 
 
 @pytest.mark.parametrize("preset,detectors,tracker", [("thesis", ["shadow"], "kalman"),
-                                                       ("parallax", ["parallax"], "particles")])
+                                                       ("parallax", ["parallax"], "particles"),
+                                                       ("phd", ["shadow"], "phd")])
 def test_a_preset_is_its_composition(preset, detectors, tracker):
     by_name = _run("steady_following", {"preset": preset}, 40)
     by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40)
@@ -56,6 +57,22 @@ def test_crossed_compositions_track_the_lead(preset):
         on_lead.append(any(t.confirmed and _on(t, lead["box_clipped"]) for t in r.tracks))
     assert any(on_lead[:60]), preset
     assert sum(on_lead[60:90]) >= 24, (preset, on_lead)
+
+
+def test_the_phd_tracker_takes_its_vehicles_from_both_detectors():
+    """The phd tracker (paper 004) asks the composition's detectors, whichever they are: fed by shadow and
+    parallax together it confirms a track standing on the steady_following lead within 2 s and keeps one on
+    it over the next second, asking the detectors only every phd.detect_every_n = 3 frames."""
+    fr = frames("steady_following")
+    results = _run("steady_following", {"preset": "phd", "detectors": ["shadow", "parallax"]}, 90)
+    on_lead = []
+    for f, r in zip(fr, results):
+        lead = next(v for v in f.truth if v["id"] == 1)
+        on_lead.append(any(t.confirmed and _on(t, lead["box_clipped"]) for t in r.tracks))
+    assert any(on_lead[:60]), on_lead
+    assert sum(on_lead[60:90]) >= 24, on_lead
+    assert [r.full_detection for r in results].count(True) <= 30
+    assert any(r.road_motion == "accepted" for r in results[2:])
 
 
 def test_the_crossed_kalman_tracker_runs_the_parallax_detector_only_every_n_frames():

@@ -8,6 +8,9 @@
 #include "core/pipeline.hpp"
 #include "core/realtime_loop.hpp"
 #include "base/stopwatch.hpp"
+#include "geometry/flat_road.hpp"
+#include "track/gmphd.hpp"
+#include "track/ukf.hpp"
 
 #include <opencv2/core.hpp>
 #include <opencv2/core/utils/logger.hpp>
@@ -16,6 +19,10 @@
 #include <memory>
 #include <mutex>
 #include <string>
+
+struct hw_gmphd {
+    hw::GmPhd filter;
+};
 
 struct hw_pipeline {
     hw::Config config;
@@ -385,3 +392,175 @@ int hw_pipeline_health(hw_pipeline *p, hw_health *out) {
 }
 
 } // extern "C"
+
+// ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) ------------------------------------------
+
+namespace {
+
+std::vector<cv::Vec2d> points_of(const double *xy, int32_t n) {
+    if (n < 0) throw std::invalid_argument("n must be >= 0");
+    if (n > 0) require(xy, "xy");
+    std::vector<cv::Vec2d> pts(static_cast<size_t>(n));
+    for (int32_t i = 0; i < n; ++i) pts[size_t(i)] = {xy[2 * i], xy[2 * i + 1]};
+    return pts;
+}
+
+nlohmann::json parse_json(const char *text, const char *what) {
+    try {
+        return nlohmann::json::parse(text && *text ? text : "{}");
+    } catch (const nlohmann::json::parse_error &e) {
+        throw std::invalid_argument(std::string(what) + " is not valid JSON: " + e.what());
+    }
+}
+
+Eigen::MatrixXd matrix_of(const nlohmann::json &spec, const char *key, int rows, int cols) {
+    if (!spec.contains(key)) throw std::invalid_argument(std::string("ukf spec: '") + key + "' is missing");
+    const auto &a = spec.at(key);
+    if (!a.is_array() || int(a.size()) != rows * cols)
+        throw std::invalid_argument(std::string("ukf spec: '") + key + "' must be a list of " +
+                                    std::to_string(rows * cols) + " numbers");
+    Eigen::MatrixXd m(rows, cols);
+    for (int i = 0; i < rows * cols; ++i) {
+        if (!a[size_t(i)].is_number()) throw std::invalid_argument(std::string("ukf spec: '") + key + "' holds a non-number");
+        m(i / cols, i % cols) = a[size_t(i)].get<double>();
+    }
+    return m;
+}
+
+} // namespace
+
+extern "C" {
+
+int hw_gmphd_create(const char *params_json, uint32_t seed, hw_gmphd **out) {
+    return guard([&] {
+        require(out, "out");
+        *out = nullptr;
+        hw::GmPhdParams p;
+        hw::ParamMap m("gmphd");
+        p.bind(m);
+        m.read(parse_json(params_json, "gmphd params"));
+        *out = new hw_gmphd{hw::GmPhd(p, seed)};
+        return HW_OK;
+    });
+}
+
+void hw_gmphd_destroy(hw_gmphd *f) { delete f; }
+
+int hw_gmphd_predict(hw_gmphd *f, double scale, double cx, double cy, double tx, double ty) {
+    return guard([&] {
+        require(f, "filter");
+        if (!(scale > 0.0)) throw std::invalid_argument("scale must be > 0");
+        f->filter.predict(scale, {cx, cy}, {tx, ty});
+        return HW_OK;
+    });
+}
+
+int hw_gmphd_births(hw_gmphd *f, const double *xy, int32_t n, int32_t random, int32_t *admitted) {
+    return guard([&] {
+        require(f, "filter");
+        const auto pts = points_of(xy, n);
+        int k = int(pts.size());
+        if (random) k = f->filter.add_births(pts);
+        else for (const auto &p : pts) f->filter.add_birth(p);
+        if (admitted) *admitted = k;
+        return HW_OK;
+    });
+}
+
+int hw_gmphd_update(hw_gmphd *f, const double *xy, int32_t n) {
+    return guard([&] {
+        require(f, "filter");
+        f->filter.update(points_of(xy, n));
+        return HW_OK;
+    });
+}
+
+int hw_gmphd_merge_prune(hw_gmphd *f) {
+    return guard([&] {
+        require(f, "filter");
+        f->filter.merge_and_prune();
+        return HW_OK;
+    });
+}
+
+int hw_gmphd_components(hw_gmphd *f, hw_gm_component *out, int32_t cap, int32_t *n) {
+    return guard([&] {
+        require(f, "filter");
+        require(n, "n");
+        const auto &c = f->filter.components();
+        *n = int32_t(c.size());
+        if (cap > 0) require(out, "out");
+        for (int32_t i = 0; i < cap && size_t(i) < c.size(); ++i)
+            out[i] = {c[size_t(i)].w, c[size_t(i)].m[0], c[size_t(i)].m[1], c[size_t(i)].P(0, 0), c[size_t(i)].P(0, 1),
+                      c[size_t(i)].P(1, 1)};
+        return HW_OK;
+    });
+}
+
+int hw_gmphd_weight_in(hw_gmphd *f, double left, double top, double right, double bottom, double *out) {
+    return guard([&] {
+        require(f, "filter");
+        require(out, "out");
+        *out = f->filter.weight_in(cv::Rect2d(left, top, right - left, bottom - top));
+        return HW_OK;
+    });
+}
+
+int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t z_dim, double *x_out,
+               double *p_out) {
+    return guard([&] {
+        require(x_out, "x_out");
+        if (n_steps < 0 || z_dim < 1 || z_dim > 8) throw std::invalid_argument("n_steps must be >= 0 and z_dim in 1..8");
+        if (n_steps > 0) require(z, "z");
+        const nlohmann::json spec = parse_json(spec_json, "ukf spec");
+        const std::string model = spec.value("model", "");
+        if (model != "linear" && model != "pinhole")
+            throw std::invalid_argument("ukf spec: 'model' must be \"linear\" or \"pinhole\"");
+        const double dt = spec.value("dt", 0.0);
+        if (!(dt > 0.0)) throw std::invalid_argument("ukf spec: 'dt' must be > 0 (s)");
+        hw::UkfParams up;
+        hw::ParamMap um("ukf");
+        up.bind(um);
+        if (spec.contains("ukf")) um.read(spec.at("ukf"));
+        const Eigen::MatrixXd x0 = matrix_of(spec, "x0", 4, 1), P0 = matrix_of(spec, "P0", 4, 4);
+        const Eigen::MatrixXd Q = matrix_of(spec, "Q", 4, 4), R = matrix_of(spec, "R", z_dim, z_dim);
+        hw::Ukf::Observation h;
+        Eigen::MatrixXd H;
+        hw::CameraParams cam;
+        double horizon = 0.0;
+        if (model == "linear") {
+            H = matrix_of(spec, "H", z_dim, 4);
+            h = [&](const hw::Ukf::Vec &x) { return hw::Ukf::Vec(H * x); };
+        } else {
+            if (z_dim != 2) throw std::invalid_argument("ukf spec: the pinhole observation has z_dim 2 (u, v)");
+            hw::ParamMap cm("camera");
+            cam.bind(cm);
+            if (spec.contains("camera")) cm.read(spec.at("camera"));
+            horizon = spec.value("horizon_row", cam.horizon_row());
+            h = [&](const hw::Ukf::Vec &x) {
+                const cv::Point2d p = hw::project_road_point(cam, x(0), x(1), horizon);
+                return hw::Ukf::Vec(Eigen::Vector2d(p.x, p.y));
+            };
+        }
+        const auto f = [](const hw::Ukf::Vec &x, double step) {  // eq. 19
+            hw::Ukf::Vec y = x;
+            y(0) += step * x(2);
+            y(1) += step * x(3);
+            return y;
+        };
+        hw::Ukf ukf(up, x0.col(0), P0);
+        for (int32_t k = 0; k < n_steps; ++k) {
+            if (k > 0) ukf.predict(f, dt, Q);
+            const Eigen::Map<const Eigen::VectorXd> zk(z + size_t(k) * size_t(z_dim), z_dim);
+            if (zk.allFinite()) ukf.update(h, zk, R);
+            for (int i = 0; i < 4; ++i) x_out[4 * k + i] = ukf.x()(i);
+            if (p_out)
+                for (int i = 0; i < 16; ++i) p_out[16 * k + i] = ukf.P()(i / 4, i % 4);
+        }
+        return HW_OK;
+    });
+}
+
+} // extern "C"
+
+// ---- END paper 004 units -------------------------------------------------------------------------------

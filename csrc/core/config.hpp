@@ -17,6 +17,7 @@
 #include "road/road_motion_stage.hpp"
 #include "track/particle_filter.hpp"
 #include "track/tracker_kalman.hpp"
+#include "track/tracker_phd.hpp"
 
 #include <string>
 
@@ -38,13 +39,14 @@ struct PipelineParams {
         m.add("preset", preset, preset_choices(),
               "named composition of detector and tracker parts: thesis (detector shadow: shadow hypotheses + vertical "
               "edges; tracker kalman: Kalman box tracker with ROI search), parallax (detector parallax: road homography "
-              "+ aligned difference; tracker particles: joint particle filter, paper 000), the crossed parallax_kalman "
+              "+ aligned difference; tracker particles: joint particle filter, paper 000), phd (detector shadow; tracker "
+              "phd: feature points by a GM-PHD filter and a UKF per vehicle, paper 004), the crossed parallax_kalman "
               "and shadow_particles, none (lanes only)");
         m.add("detectors", detectors, detector_choices(),
               "detector parts that replace the preset's: a list, or names separated by commas, e.g. [shadow, parallax]; "
               "empty: the preset's. A part that needs the road's motion (parallax) makes the road-motion stage run");
         m.add("tracker", tracker, tracker_choices(),
-              "tracker part that replaces the preset's (kalman, particles, none); empty: the preset's");
+              "tracker part that replaces the preset's (kalman, particles, phd, none); empty: the preset's");
         m.add("queue_capacity", queue_capacity, 1, 1024,
               "results; queue to the supervisor; small so a slow consumer sees fresh results, the oldest is dropped and counted");
         m.add("push_queue_capacity", push_queue_capacity, 1, 1024,
@@ -76,6 +78,7 @@ struct Config {
     ParticleParams particles;         //   joint particle filter
     CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
     FuseParams fuse;                  // fused stage: cascade + shadow detections merged
+    PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
 
     // Parses the JSON text; throws ConfigError naming the key on any problem.
     static Config from_json(const std::string &text);

@@ -5,6 +5,7 @@
 #include "detect/detector_shadow.hpp"
 #include "track/tracker_kalman.hpp"
 #include "track/tracker_particles.hpp"
+#include "track/tracker_phd.hpp"
 
 #include <functional>
 #include <map>
@@ -30,6 +31,7 @@ const std::map<std::string, Factory<Tracker>> &trackers() {
     static const std::map<std::string, Factory<Tracker>> r{
         {"kalman", [](const Config &c) { return std::make_unique<KalmanTracker>(c.shadow, c.verify, c.kalman); }},
         {"particles", [](const Config &c) { return std::make_unique<ParticleTracker>(c.particles, c.parallax.max_dt_s, c.camera); }},
+        {"phd", [](const Config &c) { return std::make_unique<PhdTracker>(c.horizon, c.phd, c.camera); }},
     };
     return r;
 }
@@ -41,6 +43,7 @@ const std::map<std::string, Composition> &presets() {
         {"parallax", {{"parallax"}, "particles"}},
         {"parallax_kalman", {{"parallax"}, "kalman"}},
         {"shadow_particles", {{"shadow"}, "particles"}},
+        {"phd", {{"shadow"}, "phd"}},
         {"none", {{}, ""}},
     };
     return r;

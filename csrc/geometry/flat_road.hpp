@@ -14,6 +14,8 @@
 #include "geometry/camera.hpp"
 #include "geometry/lens.hpp"
 
+#include <opencv2/core/types.hpp>
+
 #include <cmath>
 
 namespace hw {
@@ -41,6 +43,23 @@ inline RoadPoint road_point(const CameraParams &cam, double u, double v, double 
     const double s = cam.height_m / den;
     const double zc = s * (std::cos(th) - yn * std::sin(th)), xc = s * xn;
     return {xc * std::cos(psi) + zc * std::sin(psi) + cam.lateral_m, zc * std::cos(psi) - xc * std::sin(psi)};
+}
+
+// Pixel (u, v) where the point `above_m` above the road at (x_m lateral, z_m forward) is seen, with the
+// horizon at `horizon_row`: the inverse of road_point (above_m = 0). Level frame -> camera: undo the
+// lateral offset and yaw (x_c = (X - lat) cos(psi) - Z sin(psi), z_c = (X - lat) sin(psi) + Z cos(psi)),
+// then the pitch (y = (h - above) cos(theta) - z_c sin(theta), z = (h - above) sin(theta) + z_c cos(theta)),
+// u = cx + fx x_c / z, v = cy + fy y / z. NaN when the point is behind the camera.
+inline cv::Point2d project_road_point(const CameraParams &cam, double x_m, double z_m, double horizon_row,
+                                      double above_m = 0.0) {
+    const double th = pitch_of_horizon(cam, horizon_row);
+    const double psi = cam.yaw_deg * M_PI / 180.0;
+    const double xl = x_m - cam.lateral_m;
+    const double xc = xl * std::cos(psi) - z_m * std::sin(psi), zl = xl * std::sin(psi) + z_m * std::cos(psi);
+    const double yl = cam.height_m - above_m;
+    const double y = yl * std::cos(th) - zl * std::sin(th), z = yl * std::sin(th) + zl * std::cos(th);
+    if (!(z > 1e-6)) return {NAN, NAN};
+    return {cam.cx + cam.fx * xc / z, cam.cy + cam.fy * y / z};
 }
 
 // 1-sigma range uncertainty from a 1-sigma uncertainty of the contact row.

@@ -32,9 +32,36 @@ double slope(const std::deque<std::pair<double, double>> &pts, double &std_error
 
 } // namespace
 
+double TrackKinematics::scale_fit(const TrackState &tr, State &s, double t_s, double &scale_se) const {
+    if (tr.box.width > 1.f) {
+        s.log_w.emplace_back(t_s, std::log(double(tr.box.width)));
+        while (int(s.log_w.size()) > p_.scale_window) s.log_w.pop_front();
+        if (int(s.log_w.size()) >= p_.scale_window && s.log_w.back().first - s.log_w.front().first >= p_.scale_min_span_s)
+            return slope(s.log_w, scale_se);
+    }
+    return NAN;
+}
+
+void TrackKinematics::given_range_ttcs(TrackState &tr, State &s, double t_s) const {
+    const double z = tr.range_m, rate = tr.range_rate_mps;  // rate NaN until the tracker trusts it
+    if (std::isfinite(rate) && -rate > p_.min_closing_mps) tr.ttc_s = float(std::max(0.0, z - p_.ego_front_m) / -rate);
+    double se = NAN;
+    const double scale_rate = scale_fit(tr, s, t_s, se);
+    // the scale TTC as below, checked against the tracker's rate when it has one
+    const bool agrees = !std::isfinite(rate) || std::fabs(-z * scale_rate - rate) <= 3.0 * (z * se + 1.0);
+    if (std::isfinite(scale_rate) && z * scale_rate > p_.min_closing_mps && scale_rate > 3.0 * se && agrees)
+        tr.ttc_scale_s = float(std::max(0.0, z - p_.ego_front_m) / z / scale_rate);
+}
+
 void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row, double t_s) {
     std::unordered_set<int> seen;
     for (auto &tr : tracks) {
+        if (std::isfinite(tr.range_m) && tr.id >= 0) {
+            // The tracker estimated range, lateral and range rate itself (the phd preset's UKF): only the TTCs.
+            seen.insert(tr.id);
+            given_range_ttcs(tr, state_[tr.id], t_s);
+            continue;
+        }
         const float u = tr.box.x + 0.5f * tr.box.width, v = tr.box.y + tr.box.height;
         const RoadPoint rp = road_point(cam_, u, v, horizon_row);
         if (!rp.valid()) continue;  // contact row at or above the horizon: no range
@@ -78,15 +105,8 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
 
         // The scale change of the box: d(ln w)/dt over the last scale_window frames (a full window
         // only: while a track is young its box is still settling).
-        double scale_rate = NAN, scale_se = NAN;
-        if (tr.box.width > 1.f) {
-            s.log_w.emplace_back(t_s, std::log(double(tr.box.width)));
-            while (int(s.log_w.size()) > p_.scale_window) s.log_w.pop_front();
-            if (int(s.log_w.size()) >= p_.scale_window &&
-                s.log_w.back().first - s.log_w.front().first >= p_.scale_min_span_s) {
-                scale_rate = slope(s.log_w, scale_se);
-            }
-        }
+        double scale_se = NAN;
+        const double scale_rate = scale_fit(tr, s, t_s, scale_se);
         // The scale change measures the range rate too, independently of the horizon: dZ/dt = -Z d(ln w)/dt
         // (used by the filter only with scale_rate_fusion; the agreement check below always).
         // The range alone swings with every error of the horizon row (on a real clip the lane vanishing

@@ -10,6 +10,8 @@
 // filter does not trust its rate yet, the closing speed the scale implies (Z d(ln w)/dt) must agree
 // with the filter's within 3 sigma of both, or no scale TTC is given (a far box's pixel of jitter).
 // Optionally (scale_rate_fusion) the fit also updates the filter's rate.
+// A tracker that estimates range and range rate itself (the phd preset's UKF) reports range_m already
+// set: its range, lateral and rate are kept and only the two TTCs are added here.
 #pragma once
 
 #include "base/params.hpp"
@@ -71,6 +73,11 @@ private:
         double t = 0;
         std::deque<std::pair<double, double>> log_w;  // (t, ln width)
     };
+    // ln w slope over the window (NaN until the window is full), adding this frame's width.
+    double scale_fit(const TrackState &tr, State &s, double t_s, double &scale_se) const;
+    // For a track whose tracker gave range and range rate: the range TTC from them and the scale TTC.
+    void given_range_ttcs(TrackState &tr, State &s, double t_s) const;
+
     KinematicsParams p_;
     CameraParams cam_;
     std::unordered_map<int, State> state_;

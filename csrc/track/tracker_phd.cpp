@@ -1,0 +1,321 @@
+#include "track/tracker_phd.hpp"
+
+#include "base/stopwatch.hpp"
+#include "geometry/flat_road.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace hw {
+
+void PhdTrackerParams::bind(ParamMap &m) {
+    m.add("detect_every_n", detect_every_n, 1, 1000,
+          "frames; the detector runs on every n-th frame to find new vehicles and re-anchor tracked ones; the "
+          "features carry the vehicles in between");
+    m.add("estimator", estimator, "weights|covariance|max_weight",
+          "the vehicle's contact point from its stable features: weights (eq. 13, weight-averaged; the paper's "
+          "choice for cost), covariance (eq. 14, weighted by 1/|P|), max_weight (eq. 15, the heaviest feature)");
+    m.add("birth_every_n", birth_every_n, 1, 1000,
+          "frames; new corners are searched in each box (candidate births, eq. 7) every n-th frame");
+    m.add("outlier_px", outlier_px, 0.1, 100.0,
+          "px; a followed feature further than this from the vehicle's image motion (median shift and scale) "
+          "is not a measurement of the vehicle (road, background, the neighbour's edge)");
+    m.add("end_weight", end_weight, 0.0, 1000.0,
+          "eq. 12; a vehicle whose PHD weight summed inside its box falls under this has ended (about the "
+          "expected number of features it still has)");
+    m.add("min_stable", min_stable, 1, 1000,
+          "stable features a vehicle needs before they measure its contact point (fewer: the UKF predicts)");
+    m.add("contact_sigma_px", contact_sigma_px, 0.01, 100.0,
+          "px; 1-sigma of the contact point the features give (R of the UKF); the mean of several LK "
+          "points is steadier than one box edge");
+    m.add("detection_sigma_px", detection_sigma_px, 0.01, 100.0,
+          "px; 1-sigma of a detection's contact point (bottom centre of its box) as a UKF measurement");
+    m.add("anchor_gain", anchor_gain, 0.0, 1.0,
+          "share of a matched detection's box (width, contact point) taken into the vehicle's box and its "
+          "features' offsets: the detector keeps the feature cloud's scale from drifting");
+    m.add("match_iou", match_iou, 0.0, 1.0, "IoU of a detection with a vehicle's box above which it is that vehicle");
+    m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
+          "IoU above which two vehicles are the same; the one with fewer detections goes");
+    m.add("confirm_hits", confirm_hits, 1, 100, "detections (the first included) before a vehicle is confirmed");
+    m.add("max_detection_misses", max_detection_misses, 1, 1000,
+          "detector runs in a row that may miss a confirmed vehicle before it is deleted (a tentative one: 1); "
+          "at detect_every_n 3 the features alone carry a vehicle for 15 frames");
+    m.add("max_dt_s", max_dt_s, 0.01, 100.0, "s; a longer gap between frames drops all vehicles");
+}
+
+PhdTracker::PhdTracker(const HorizonParams &h, const PhdTrackerParams &p, const CameraParams &cam)
+    : p_(p), cam_(cam), horizon_(h, cam), flow_(p.features) {}
+
+void PhdTracker::reset() {
+    vehicles_.clear();
+    flow_.reset();
+    horizon_.reset();
+    next_id_ = 1;
+    frame_ = 0;
+    started_ = false;
+}
+
+namespace {
+
+float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
+    const float inter = (a & b).area();
+    const float uni = a.area() + b.area() - inter;
+    return uni > 0.f ? inter / uni : 0.f;
+}
+
+double median(std::vector<double> &v) {
+    const auto mid = v.begin() + long(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+}
+
+std::vector<cv::Vec2d> means_of(const GmPhd &phd) {
+    std::vector<cv::Vec2d> m;
+    for (const GmComponent &g : phd.components()) m.push_back(g.m);
+    return m;
+}
+
+} // namespace
+
+// Eq. 13-15: the contact point each stable feature implies (its mean minus its offset), fused.
+bool PhdTracker::contact_from_features(const Vehicle &v, cv::Point2d &c) const {
+    double sw = 0.0, best = -1.0;
+    cv::Vec2d acc(0, 0);
+    int n = 0;
+    for (const GmComponent &g : v.phd.components()) {
+        if (g.w < p_.phd.stable_weight) continue;
+        const cv::Vec2d ci = g.m - g.tag * v.width;
+        ++n;
+        if (p_.estimator == "max_weight") {
+            if (g.w > best) { best = g.w; acc = ci; sw = 1.0; }
+            continue;
+        }
+        const double w = p_.estimator == "covariance" ? 1.0 / std::max(1e-12, cv::determinant(g.P)) : g.w;
+        acc += w * ci;
+        sw += w;
+    }
+    if (n < p_.min_stable || !(sw > 0.0)) return false;
+    c = {acc[0] / sw, acc[1] / sw};
+    return true;
+}
+
+void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const std::vector<cv::Point2f> &cur,
+                         const std::vector<uchar> &ok, const cv::Mat &gray, double horizon) {
+    // The vehicle's image motion from its followed features: median shift, median ratio of distances.
+    std::vector<double> dx, dy, ratios, px, py;
+    std::vector<size_t> idx;
+    for (size_t i = 0; i < prev.size(); ++i)
+        if (ok[i]) {
+            idx.push_back(i);
+            dx.push_back(cur[i].x - prev[i].x);
+            dy.push_back(cur[i].y - prev[i].y);
+            px.push_back(prev[i].x);
+            py.push_back(prev[i].y);
+        }
+    double s = 1.0;
+    cv::Vec2d t(v.motion.x, v.motion.y), c(v.contact.x, v.contact.y - 0.5 * v.aspect * v.width);
+    if (idx.size() >= 2) {
+        t = {median(dx), median(dy)};
+        c = {median(px), median(py)};
+        for (size_t a = 0; a < idx.size(); ++a)
+            for (size_t b = a + 1; b < idx.size(); b += std::max<size_t>(1, idx.size() / 8)) {
+                const cv::Point2f d0 = prev[idx[a]] - prev[idx[b]], d1 = cur[idx[a]] - cur[idx[b]];
+                const double n0 = std::hypot(d0.x, d0.y);
+                if (n0 > 4.0) ratios.push_back(std::hypot(d1.x, d1.y) / n0);
+            }
+        if (ratios.size() >= 3) s = std::clamp(median(ratios), 0.8, 1.25);
+        // the vehicle's shift is the median point's: c moves by t, the rest scales about it
+    }
+    v.motion = {t[0], t[1]};
+    v.phd.predict(s, c, t);
+    const cv::Vec2d b0(v.contact.x, v.contact.y), b1 = c + t + s * (b0 - c);
+    v.contact = {b1[0], b1[1]};
+    v.width *= s;
+
+    // The measurement set: followed points that move with the vehicle, and new corners.
+    std::vector<cv::Vec2d> Z;
+    for (size_t i : idx) {
+        const cv::Vec2d p(prev[i].x, prev[i].y), z(cur[i].x, cur[i].y);
+        const cv::Vec2d r = z - (c + t + s * (p - c));
+        if (r.dot(r) <= p_.outlier_px * p_.outlier_px) Z.push_back(z);
+    }
+    if ((frame_ + v.id) % p_.birth_every_n == 0) {
+        std::vector<cv::Vec2d> existing = means_of(v.phd);
+        existing.insert(existing.end(), Z.begin(), Z.end());
+        const std::vector<cv::Vec2d> fresh = box_corners(gray, v.box(), existing, p_.features);
+        std::vector<cv::Vec2d> tags;
+        for (const cv::Vec2d &f : fresh) tags.push_back((f - b1) / std::max(1.0, v.width));
+        v.phd.add_births(fresh, tags);
+        Z.insert(Z.end(), fresh.begin(), fresh.end());
+    }
+    v.phd.update(Z);
+    v.phd.merge_and_prune();
+
+    cv::Point2d cp;
+    v.stable = 0;
+    for (const GmComponent &g : v.phd.components()) v.stable += g.w >= p_.phd.stable_weight;
+    if (contact_from_features(v, cp)) {
+        v.ukf->update(cp, p_.contact_sigma_px, horizon);
+        v.contact = cp;
+    }
+}
+
+void PhdTracker::follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, double horizon) {
+    std::vector<cv::Point2f> prev, cur;
+    std::vector<size_t> start;
+    for (const Vehicle &v : vs) {
+        start.push_back(prev.size());
+        for (const GmComponent &g : v.phd.components()) prev.emplace_back(float(g.m[0]), float(g.m[1]));
+    }
+    start.push_back(prev.size());
+    std::vector<uchar> ok;
+    flow_.track(prev, cur, ok);
+    if (cur.size() != prev.size()) {  // first frame: nothing followed
+        cur = prev;
+        ok.assign(prev.size(), 0);
+    }
+    for (size_t k = 0; k < vs.size(); ++k) {
+        const auto a = long(start[k]), b = long(start[k + 1]);
+        measure(vs[k], {prev.begin() + a, prev.begin() + b}, {cur.begin() + a, cur.begin() + b},
+                {ok.begin() + a, ok.begin() + b}, gray, horizon);
+    }
+}
+
+void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon) {
+    const cv::Point2d contact(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
+    if (!road_point(cam_, contact.x, contact.y, horizon).valid()) return;
+    Vehicle v(next_id_, GmPhd(p_.phd, uint32_t(next_id_)));
+    v.ukf = std::make_unique<VehicleUkf>(p_.ukf, cam_, contact.x, contact.y, horizon);
+    v.contact = contact;
+    v.width = d.box.width;
+    v.aspect = d.box.height / std::max(1.f, d.box.width);
+    v.confidence = d.score;
+    // The first features: every corner is a birth (no draw) and measured once.
+    const std::vector<cv::Vec2d> corners = box_corners(gray, d.box, {}, p_.features);
+    for (const cv::Vec2d &f : corners) v.phd.add_birth(f, (f - cv::Vec2d(contact.x, contact.y)) / v.width);
+    v.phd.update(corners);
+    v.phd.merge_and_prune();
+    v.confirmed = v.hits >= p_.confirm_hits;
+    ++next_id_;
+    vehicles_.push_back(std::move(v));
+}
+
+void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon) {
+    std::vector<bool> used(dets.size(), false);
+    for (Vehicle &v : vehicles_) {
+        const cv::Rect2f vb = v.box();
+        int best = -1;
+        float best_iou = float(p_.match_iou);
+        for (size_t i = 0; i < dets.size(); ++i) {
+            const float o = iou(vb, dets[i].box);
+            if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
+        }
+        if (best < 0) {
+            v.detection_misses++;
+            v.confidence *= 0.8f;
+            continue;
+        }
+        used[size_t(best)] = true;
+        const Hypothesis &d = dets[size_t(best)];
+        const cv::Point2d dc(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
+        v.ukf->update(dc, p_.detection_sigma_px, horizon);
+        // Re-anchor: the box and each feature's offset move towards the detected box.
+        const double g = p_.anchor_gain;
+        v.width = (1.0 - g) * v.width + g * d.box.width;
+        v.contact = (1.0 - g) * v.contact + g * dc;
+        v.aspect = (1.0 - g) * v.aspect + g * d.box.height / std::max(1.f, d.box.width);
+        for (GmComponent &c : v.phd.components())
+            c.tag = (1.0 - g) * c.tag + g * (c.m - cv::Vec2d(dc.x, dc.y)) / std::max(1.0f, d.box.width);
+        v.hits++;
+        v.detection_misses = 0;
+        v.confirmed = v.confirmed || v.hits >= p_.confirm_hits;
+        v.confidence = 0.7f * v.confidence + 0.3f * d.score;
+    }
+    for (size_t i = 0; i < dets.size(); ++i) {
+        if (used[i]) continue;
+        const cv::Rect2f &b = dets[i].box;
+        const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
+        bool explained = false;
+        for (const Vehicle &v : vehicles_) {
+            const cv::Rect2f vb = v.box();
+            explained = explained || iou(vb, b) >= 0.2f || vb.contains(foot);
+        }
+        if (!explained) start_vehicle(ctx.gray, dets[i], horizon);
+    }
+}
+
+void PhdTracker::prune(const FrameContext &ctx, double horizon) {
+    for (size_t i = 0; i < vehicles_.size(); ++i)
+        for (size_t j = i + 1; j < vehicles_.size(); ++j) {
+            Vehicle &a = vehicles_[i], &b = vehicles_[j];
+            if (a.duplicate || b.duplicate || iou(a.box(), b.box()) < p_.duplicate_iou) continue;
+            (a.hits > b.hits || (a.hits == b.hits && a.id < b.id) ? b : a).duplicate = true;
+        }
+    const cv::Size size = ctx.gray.size();
+    const auto gone = [&](const Vehicle &v) {
+        const cv::Rect2f b = v.box();
+        const int limit = v.confirmed ? p_.max_detection_misses : 1;
+        const bool ended = v.age > 1 && v.phd.weight_in(cv::Rect2d(b)) < p_.end_weight;  // eq. 12
+        return v.duplicate || ended || v.detection_misses >= limit || !(v.width >= 3.0) ||
+               v.contact.y <= horizon + 1.0 || b.x + b.width < 0.f || b.x > size.width || b.y > size.height ||
+               !(v.ukf->range() > 0.5);
+    };
+    vehicles_.erase(std::remove_if(vehicles_.begin(), vehicles_.end(), gone), vehicles_.end());
+}
+
+TrackState PhdTracker::report(const Vehicle &v) const {
+    TrackState s;
+    s.id = v.id;
+    s.confirmed = v.confirmed;
+    s.age_frames = v.age;
+    s.box = v.box();
+    s.confidence = std::clamp(v.confidence, 0.f, 1.f);
+    s.range_m = float(v.ukf->range());
+    s.range_sigma_m = float(v.ukf->range_sigma());
+    s.lateral_m = float(v.ukf->lateral());
+    // the rate once the filter has settled on it, as the box trackers' range filter does
+    if (v.ukf->range_rate_sigma() < 2.0) s.range_rate_mps = float(v.ukf->range_rate());
+    return s;
+}
+
+void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+                      StageTimes &times, bool &full_detection) {
+    CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
+    Stopwatch track_time;
+    float detect_ms = 0.f;
+    double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
+    if (dt < 0.0 || dt > p_.max_dt_s) {
+        vehicles_.clear();
+        flow_.reset();
+        dt = 0.0;
+    }
+    started_ = true;
+    last_t_s_ = ctx.t_s;
+    const double horizon = horizon_.update(ctx.lanes);
+
+    flow_.next_frame(ctx.gray);
+    for (Vehicle &v : vehicles_) {
+        v.ukf->predict(dt);
+        v.age++;
+    }
+    follow_features(vehicles_, ctx.gray, horizon);
+
+    // Every n-th frame the detector parts: new vehicles, and re-anchoring of the tracked ones. A part
+    // that could not run (no road motion yet) counts as no detection: nothing is missed for it.
+    full_detection = false;
+    if (frame_ % p_.detect_every_n == 0) {
+        Stopwatch sd;
+        std::vector<Hypothesis> dets;
+        full_detection = detectors.detect(ctx.road(), dets, times);
+        detect_ms = sd.ms();
+        if (full_detection) use_detections(ctx, dets, horizon);
+    }
+    ++frame_;
+    prune(ctx, horizon);
+
+    tracks.clear();
+    for (const Vehicle &v : vehicles_) tracks.push_back(report(v));
+    times.add("track", std::max(0.f, track_time.ms() - detect_ms));
+}
+
+} // namespace hw

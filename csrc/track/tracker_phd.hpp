@@ -1,0 +1,105 @@
+// tracker_phd.hpp - tracker part "phd" (paper 004): the feature points inside each vehicle followed by a GM-PHD
+// filter, the vehicle's position from its stable features (eq. 13-15), and its range and velocity
+// from a UKF through the pinhole observation (eq. 16-21).
+//
+// Per frame, for each vehicle:
+//   1. Its features of the previous frame (the PHD components' means) are followed by pyramidal LK
+//      with the forward-backward check (box_features.hpp). Their median shift and median change of
+//      pairwise distance give the vehicle's image motion (shift t, scale s about the features' median c);
+//      a followed point more than outlier_px from that motion (the road, the background) is left out.
+//   2. PHD prediction with that motion (eq. 6); every birth_every_n frames new corners in the box are
+//      candidate births (eq. 7, admitted with probability P_clutter); the followed points and the new
+//      corners are the measurement set of the PHD update (eq. 3-5); merging and pruning (eq. 8-11).
+//   3. Each feature carries (as its PHD tag) its offset from the vehicle's contact point (bottom centre
+//      of the box) in vehicle widths, set when it is born. Each stable feature (weight >= stable_weight)
+//      thus points at a contact point m - tag w; the estimator fuses them: by weight (eq. 13), by inverse
+//      covariance determinant (eq. 14) or the heaviest one (eq. 15).
+//   4. The UKF (vehicle_ukf.hpp) predicts with constant velocity and updates with that contact point.
+//   5. Every detect_every_n frames it asks the detector parts (the phd preset: shadow) for a full
+//      detection; any detector composes (shadow, parallax, both). A detection overlapping a vehicle re-measures its
+//      contact point (UKF update), pulls its width and features' offsets towards the detected box, and
+//      counts as a hit (confirmation); an unexplained detection starts a vehicle.
+//   6. A vehicle ends when the PHD weight inside its box falls under end_weight (eq. 12), when the
+//      detector has missed it max_detection_misses times in a row, or when it leaves the image.
+// Range, lateral offset and range rate are the UKF's; the geometry stage adds the TTCs.
+#pragma once
+
+#include "geometry/horizon.hpp"
+#include "track/box_features.hpp"
+#include "track/gmphd.hpp"
+#include "track/tracker.hpp"
+#include "track/vehicle_ukf.hpp"
+
+#include <memory>
+#include <vector>
+
+namespace hw {
+
+struct PhdTrackerParams {
+    int detect_every_n = 3;            // frames between runs of the detector (new vehicles, re-anchoring)
+    std::string estimator = "weights";  // weights (eq. 13) | covariance (eq. 14) | max_weight (eq. 15)
+    int birth_every_n = 2;             // frames between searches for new corners (candidate births)
+    double outlier_px = 1.5;           // px; a followed point this far from the vehicle's motion is not measured
+    double end_weight = 1.5;           // eq. 12: weight inside the box under which a vehicle has ended
+    int min_stable = 3;                // stable features needed to measure the contact point
+    double contact_sigma_px = 0.8;     // px; 1-sigma of the features' contact point (UKF R)
+    double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
+    double anchor_gain = 0.3;          // share of a matched detection's box taken into width and offsets
+    double match_iou = 0.3;            // detection <-> vehicle box overlap that is the same vehicle
+    double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
+    int confirm_hits = 2;              // detections before a vehicle is confirmed
+    int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
+    double max_dt_s = 1.0;             // s; a longer gap between frames restarts tracking
+    BoxFeatureParams features;         // corners and LK (section phd_features)
+    GmPhdParams phd;                   // the GM-PHD filter (section gmphd)
+    VehicleUkfParams ukf;              // the UKF (section phd_ukf)
+
+    void bind(ParamMap &m);
+};
+
+class PhdTracker final : public Tracker {
+public:
+    PhdTracker(const HorizonParams &horizon, const PhdTrackerParams &p, const CameraParams &camera);
+    void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
+              bool &full_detection) override;
+    void reset() override;
+
+private:
+    struct Vehicle {
+        Vehicle(int id_, const GmPhd &phd_) : id(id_), phd(phd_) {}
+        int id = 0;
+        GmPhd phd;
+        std::unique_ptr<VehicleUkf> ukf;
+        cv::Point2d contact;           // bottom centre of the box, px
+        double width = 0.0, aspect = 0.8;  // box width px, height / width
+        cv::Point2d motion{0, 0};      // image shift of the last frame, px
+        int age = 1, hits = 1, detection_misses = 0;
+        bool confirmed = false, duplicate = false;
+        int stable = 0;                // stable features this frame
+        float confidence = 0.5f;
+        cv::Rect2f box() const {
+            return {float(contact.x - 0.5 * width), float(contact.y - aspect * width), float(width), float(aspect * width)};
+        }
+    };
+
+    void follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, double horizon);
+    void measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const std::vector<cv::Point2f> &cur,
+                 const std::vector<uchar> &ok, const cv::Mat &gray, double horizon);
+    bool contact_from_features(const Vehicle &v, cv::Point2d &c) const;
+    void use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon);
+    void start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);
+    void prune(const FrameContext &ctx, double horizon);
+    TrackState report(const Vehicle &v) const;
+
+    PhdTrackerParams p_;
+    CameraParams cam_;
+    HorizonTracker horizon_;
+    PointFlow flow_;
+    std::vector<Vehicle> vehicles_;
+    int next_id_ = 1;
+    int64_t frame_ = 0;
+    double last_t_s_ = 0.0;
+    bool started_ = false;
+};
+
+} // namespace hw

@@ -1,0 +1,91 @@
+"""The phd preset (paper 004: feature points of each vehicle by a GM-PHD filter, its range by a UKF) on
+rendered scenarios with exact ground truth: the lead is followed under one id with metre-level range, the
+range rate of a steadily followed lead is steadier than the Kalman box tracker's, and every FCW case of the
+suite passes through it with its margin (warnings in time, none where none is due)."""
+from __future__ import annotations
+
+import functools
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from app.core import Pipeline
+from app.eval.fcw_scenarios import NO_WARNING, REQUIRED_TTC_S, evaluate
+from tests.thesis_scenes import best_match, frames, lead
+from app.sim import load_scenario
+from app.sim.frames import scenario_camera
+
+
+@functools.lru_cache(maxsize=None)
+def _run(name: str, preset: str, sections_json: str = "{}") -> tuple:
+    cam = scenario_camera(load_scenario(name)).to_dict()
+    fr = frames(name)
+    with Pipeline({"pipeline": {"preset": preset}, "camera": cam, **json.loads(sections_json)}) as p:
+        return fr, tuple(p.process(f.image, f.t_s) for f in fr)
+
+
+def _lead_errors(name: str, preset: str, sections_json: str = "{}"):
+    """Per frame with the lead within 60 m and tracked (confirmed, IoU >= 0.5): range error, range-rate
+    error (NaN while the tracker gives none), and the track id; plus the frames the lead was visible."""
+    fr, results = _run(name, preset, sections_json)
+    rows, visible = [], 0
+    for f, r in zip(fr, results):
+        g = lead(f.truth)
+        if g is None or f.index < 10:
+            continue
+        visible += 1
+        conf = [t for t in r.tracks if t.confirmed]
+        i, v = best_match([t.box for t in conf], g["box"])
+        if v < 0.5:
+            continue
+        t = conf[i]
+        rate = np.nan if t.range_rate_mps is None else t.range_rate_mps - g["relative_speed_mps"]
+        rows.append((t.range_m - g["longitudinal_m"], rate, t.id))
+    return rows, visible
+
+
+@pytest.mark.parametrize("name", ["steady_following", "stopped_lead_72kmh", "lead_braking_0p3g"])
+def test_lead_followed_with_metre_level_range(name):
+    rows, visible = _lead_errors(name, "phd")
+    assert len(rows) >= 0.9 * visible, f"{name}: lead tracked in {len(rows)} of {visible} frames"
+    err = np.abs([r[0] for r in rows])
+    # measured: 2.16 / 1.88 / 0.73 m (thesis preset 1.91 / 1.21 / 0.63 m since self-calibration); docs/phd.md
+    assert err.mean() <= 2.5, f"{name}: mean absolute range error {err.mean():.2f} m"
+    assert len({r[2] for r in rows}) == 1, f"{name}: the lead changed id"
+
+
+@pytest.mark.parametrize("name", ["steady_following"])
+def test_range_rate_steadier_than_the_box_tracker(name):
+    # measured: 0.64 m/s against 0.85 m/s; on an approaching lead it is not (stopped_lead_72kmh 1.38 against
+    # 0.92 m/s, lead_braking_0p3g 1.01 against 0.85 m/s: docs/phd.md)
+    def rate_error(preset):
+        rows, _ = _lead_errors(name, preset)
+        e = np.array([r[1] for r in rows])
+        return float(np.mean(np.abs(e[np.isfinite(e)])))
+
+    phd, thesis = rate_error("phd"), rate_error("thesis")
+    assert phd < thesis, f"{name}: mean range-rate error phd {phd:.2f} m/s, thesis {thesis:.2f} m/s"
+
+
+@pytest.fixture(scope="module")
+def phd_config(tmp_path_factory):
+    path = tmp_path_factory.mktemp("phd") / "phd.yaml"
+    path.write_text(yaml.safe_dump({"pipeline": {"preset": "phd"}}))
+    return str(path)
+
+
+@pytest.mark.parametrize("scenario", sorted(REQUIRED_TTC_S))
+def test_ncap_scenario_warns_in_time_through_phd(scenario, phd_config):
+    r = evaluate(scenario, phd_config)
+    assert r["warnings"] >= 1, f"{scenario}: no warning at all"
+    assert r["true_ttc_s"] is not None and r["margin_s"] >= 0, (
+        f"{scenario}: warned at true TTC {r['true_ttc_s']}, required >= {r['required_ttc_s']} s")
+    assert r["ttc_used_s"] is not None and 0 < r["ttc_used_s"] <= 3.5
+
+
+@pytest.mark.parametrize("scenario", NO_WARNING)
+def test_no_false_warning_through_phd(scenario, phd_config):
+    r = evaluate(scenario, phd_config)
+    assert r["warnings"] == 0, f"{scenario}: false warning at t={r['first_warning_t_s']} s"
