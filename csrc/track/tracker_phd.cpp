@@ -57,12 +57,6 @@ void PhdTracker::reset() {
 
 namespace {
 
-float iou(const cv::Rect2f &a, const cv::Rect2f &b) {
-    const float inter = (a & b).area();
-    const float uni = a.area() + b.area() - inter;
-    return uni > 0.f ? inter / uni : 0.f;
-}
-
 double median(std::vector<double> &v) {
     const auto mid = v.begin() + long(v.size() / 2);
     std::nth_element(v.begin(), mid, v.end());
@@ -207,7 +201,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         int best = -1;
         float best_iou = float(p_.match_iou);
         for (size_t i = 0; i < dets.size(); ++i) {
-            const float o = iou(vb, dets[i].box);
+            const float o = box_iou(vb, dets[i].box);
             if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
         }
         if (best < 0) {
@@ -238,7 +232,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         bool explained = false;
         for (const Vehicle &v : vehicles_) {
             const cv::Rect2f vb = v.box();
-            explained = explained || iou(vb, b) >= 0.2f || vb.contains(foot);
+            explained = explained || box_iou(vb, b) >= 0.2f || vb.contains(foot);
         }
         if (!explained) start_vehicle(ctx.gray, dets[i], horizon);
     }
@@ -248,7 +242,7 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
     for (size_t i = 0; i < vehicles_.size(); ++i)
         for (size_t j = i + 1; j < vehicles_.size(); ++j) {
             Vehicle &a = vehicles_[i], &b = vehicles_[j];
-            if (a.duplicate || b.duplicate || iou(a.box(), b.box()) < p_.duplicate_iou) continue;
+            if (a.duplicate || b.duplicate || box_iou(a.box(), b.box()) < p_.duplicate_iou) continue;
             (a.hits > b.hits || (a.hits == b.hits && a.id < b.id) ? b : a).duplicate = true;
         }
     const cv::Size size = ctx.gray.size();
