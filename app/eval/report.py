@@ -146,16 +146,19 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
         else:
             report["skipped"]["tusimple"] = f"{supp} not found"
     if "lanes" in parts:
+        def lane_example(prefix: str):
+            """Writes a scored lane image, annotated, as examples/PREFIX_NAME.jpg (NAME: its folder)."""
+            def keep(lab, gray, r):
+                name = Path(lab["raw_file"]).parent.name
+                cv2.imwrite(str(out / "examples" / f"{prefix}_{name}.jpg"), annotate(gray, r))
+            return keep
+
         sample = data / "tusimple" / "lane_sample"
         if sample.exists():
             from app.eval import lanes_sample
 
-            def keep_lane(lab, gray, r):
-                name = Path(lab["raw_file"]).parent.name
-                cv2.imwrite(str(out / "examples" / f"lanes_{name}.jpg"), annotate(gray, r))
-
             say("lane sample")
-            report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=keep_lane,
+            report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=lane_example("lanes"),
                                                     predictions_out=str(out / "lanes_sample_pred.json"))
         else:
             report["skipped"]["lanes"] = f"{sample} not found"
@@ -163,14 +166,10 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
         if clips.exists():
             from app.eval import lane_clips
 
-            def keep_clip(lab, gray, r):
-                name = Path(lab["raw_file"]).parent.name
-                cv2.imwrite(str(out / "examples" / f"lane_clip_{name}.jpg"), annotate(gray, r))
-
             say("lane clips")
             report["lane_clips"] = lane_clips.evaluate(str(clips), config_path, preset,
                                                        predictions_out=str(out / "lane_clips_pred.json"),
-                                                       on_clip=keep_clip)
+                                                       on_clip=lane_example("lane_clip"))
         else:
             report["skipped"]["lane_clips"] = f"{clips} not found"
     if "range" in parts:
