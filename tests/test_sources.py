@@ -75,6 +75,20 @@ def test_corrupt_image_in_folder_is_a_decode_event(tmp_path):
     assert [r.frame for r in results] == [0, 2] and "decode_error" in results[1].events
 
 
+def test_truncated_jpeg_in_folder_is_a_decode_event_not_a_grey_frame(tmp_path):
+    """libjpeg decodes a cut file into a half-grey image and reports success; the folder source must not."""
+    rng = np.random.default_rng(14)
+    img = rng.integers(0, 255, (480, 640), np.uint8)
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"{i:03d}.jpg"), img)
+    whole = (tmp_path / "001.jpg").read_bytes()
+    (tmp_path / "001.jpg").write_bytes(whole[: len(whole) // 2])
+    assert cv2.imread(str(tmp_path / "001.jpg"), cv2.IMREAD_GRAYSCALE) is not None  # OpenCV alone accepts it
+    results, health = play({"kind": "folder", "path": str(tmp_path), "fps": 10.0})
+    assert [r.frame for r in results] == [0, 2] and "decode_error" in results[1].events
+    assert health["decode_errors"] == 1
+
+
 @pytest.mark.parametrize(
     "spec_of, match",
     [

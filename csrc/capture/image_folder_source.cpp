@@ -5,11 +5,33 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 
 namespace hw {
 
 namespace fs = std::filesystem;
+
+// libjpeg and libpng decode a file cut short (a copy interrupted, a card pulled) into an image whose lower
+// part is grey, and imread reports success: a wrong frame, silently. A whole JPEG ends with its end-of-image
+// marker (FF D9, within its last 1024 bytes as JPEG_TAIL_BYTES allows) and a whole PNG with its IEND chunk; the same
+// rule as app/recording.py's truncation() for the Python readers.
+static bool cut_short(const std::vector<uchar> &data, const std::string &path) {
+    std::string ext = fs::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    const size_t n = data.size();
+    auto has_tail = [&](const char *marker, size_t len, size_t tail) {
+        const size_t from = n > tail ? n - tail : 0;
+        for (size_t i = from; i + len <= n; ++i)
+            if (std::equal(marker, marker + len, reinterpret_cast<const char *>(data.data()) + i)) return true;
+        return false;
+    };
+    if (ext == ".jpg" || ext == ".jpeg") return n < 4 || !has_tail("\xff\xd9", 2, 1024);
+    if (ext == ".png") return n < 8 || !has_tail("IEND", 4, 32);
+    return false;
+}
 
 ImageFolderSource::ImageFolderSource(const std::string &path, double fps, SourceSize size)
     : path_(path), fps_(fps), size_(size) {
@@ -26,7 +48,11 @@ ImageFolderSource::ImageFolderSource(const std::string &path, double fps, Source
 ReadStatus ImageFolderSource::read(Frame &out) {
     if (next_ >= files_.size()) return ReadStatus::End;
     const size_t i = next_++;
-    cv::Mat img = cv::imread(files_[i], cv::IMREAD_GRAYSCALE);
+    std::ifstream in(files_[i], std::ios::binary);
+    std::vector<uchar> data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (!in.good() && !in.eof()) return ReadStatus::DecodeError;
+    if (data.empty() || cut_short(data, files_[i])) return ReadStatus::DecodeError;
+    cv::Mat img = cv::imdecode(data, cv::IMREAD_GRAYSCALE);
     if (img.empty()) return ReadStatus::DecodeError;
     if (img.cols != size_.width || img.rows != size_.height) return ReadStatus::SizeChanged;
     out.gray = img;
