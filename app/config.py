@@ -17,7 +17,7 @@ from typing import Any, Optional, Union
 import yaml
 
 from app.can.config_schema import CAN_SCHEMA
-from app.core import core_schema
+from app.core import core_moved_keys, core_schema
 from app.fcw import FCW_SCHEMA
 from app.recording import FPS_MAX, FPS_MIN
 from app.safe_yaml import YamlLimitError, load_yaml, short, short_name
@@ -101,6 +101,12 @@ def schema() -> dict[str, dict[str, dict]]:
 
 
 @functools.lru_cache(maxsize=1)
+def _moved_keys() -> dict[str, str]:
+    """{"old_section.key": "new_section.key"} for the keys that moved, as the core lists them."""
+    return core_moved_keys()
+
+
+@functools.lru_cache(maxsize=1)
 def _registry() -> dict[str, dict[str, dict]]:
     """schema() built once (the core's part is compiled in): read only, for validation."""
     return schema()
@@ -170,6 +176,10 @@ def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[s
         if not isinstance(values, dict):
             raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
         for key, value in values.items():
+            moved_to = _moved_keys().get(f"{sec}.{key}")
+            if moved_to:
+                raise ConfigFileError(f"{origin}: {sec}.{key}: moved to {moved_to} (one definition for every stage); "
+                                      f"set {moved_to} instead")
             if key not in sch[sec]:
                 raise ConfigFileError(f"{origin}: {sec}.{short_name(key)}: unknown key ({_known(key, sch[sec])})")
             cfg[sec][key] = _check_value(f"{origin}: {sec}.{key}", value, sch[sec][key])

@@ -243,7 +243,14 @@ def _config_json(p: Any) -> dict:
 
 def core_schema() -> dict:
     """Every key the core knows: {section: {key: {default, type, min, max, doc}}}."""
-    return _config_json(ffi.NULL)
+    described = _config_json(ffi.NULL)
+    described.pop("moved_keys")
+    return described
+
+
+def core_moved_keys() -> dict[str, str]:
+    """The core's keys that moved to a shared definition: {"old_section.key": "new_section.key"}."""
+    return _config_json(ffi.NULL)["moved_keys"]
 
 
 _live: "weakref.WeakSet[Pipeline]" = weakref.WeakSet()

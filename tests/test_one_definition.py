@@ -123,6 +123,63 @@ def test_the_sim_camera_module_writes_no_number_of_its_own_for_a_default():
     assert not re.search(r'"(fx|fy|cx|cy|height_m|pitch_deg)"\s*:\s*[\d.]+', text), "a camera default dict"
 
 
+# ---- shared physical constants -----------------------------------------------------------------------
+
+# Each physical constant that several stages use is one key, in the section named here (issue 11): the
+# hood line in the camera section, lane and vehicle widths in the road section.
+SHARED_KEYS = {
+    "hood_frac": "camera",
+    "lane_width_m": "road",
+    "min_lane_width_m": "road",
+    "max_lane_width_m": "road",
+    "vehicle_width_m": "road",
+}
+# Earlier names of the same constants (the hood line was also called bottom_ignore_frac).
+OLD_NAMES = {"bottom_ignore_frac": "hood_frac"}
+
+
+def second_definitions(schema: dict) -> list[str]:
+    """Every key of `schema` ({section: {key: spec}}) that defines a shared constant outside its section."""
+    found = []
+    for section, keys in schema.items():
+        for key in keys:
+            name = OLD_NAMES.get(key, key)
+            if name in SHARED_KEYS and section != SHARED_KEYS[name]:
+                found.append(f"{section}.{key} (the one definition is {SHARED_KEYS[name]}.{name})")
+    return found
+
+
+def test_each_shared_constant_is_one_key_of_the_core():
+    schema = core_schema()
+    assert not second_definitions(schema), second_definitions(schema)
+    for key, section in SHARED_KEYS.items():
+        assert key in schema[section], f"{section}.{key} missing"
+
+
+@pytest.mark.parametrize("section, key", [("lanes", "hood_frac"), ("parallax", "hood_frac"),
+                                          ("shadow", "bottom_ignore_frac"), ("lanes", "lane_width_m"),
+                                          ("lead", "lane_width_m"), ("self_calibration", "lane_width_m"),
+                                          ("parallax", "vehicle_width_m"), ("lead", "max_lane_width_m")])
+def test_the_check_catches_a_second_definition(section, key):
+    """The definitions before issue 11 finished: each one, added back, is found."""
+    schema = core_schema()
+    schema.setdefault(section, {})[key] = {"default": 0.0, "type": "float"}
+    assert [f for f in second_definitions(schema) if f.startswith(f"{section}.{key} ")], (section, key)
+
+
+def test_the_stages_read_the_shared_constants_from_their_one_section():
+    """No stage of the core binds a width or hood key of its own: `m.add("lane_width_m"` and the others appear
+    only where camera.hood_frac and the road section are defined."""
+    csrc = REPO / "csrc"
+    homes = {"hood_frac": csrc / "geometry" / "camera.hpp"}
+    homes.update({k: csrc / "geometry" / "road_params.hpp" for k, s in SHARED_KEYS.items() if s == "road"})
+    for path in sorted(csrc.rglob("*.[ch]pp")):
+        text = path.read_text()
+        for key in list(SHARED_KEYS) + list(OLD_NAMES):
+            if re.search(rf'\.add\(\s*"{key}"', text):
+                assert path == homes.get(key), f"{path.relative_to(REPO)} binds {key}"
+
+
 # ---- the source scan ---------------------------------------------------------------------------------
 
 _FAULT_NAMES = "|".join(f.name for f in registry.FAULTS)

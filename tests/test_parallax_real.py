@@ -13,15 +13,14 @@ def udacity_parallax(*path: str, max_frames=None):
     """Frames, frame rate and the parallax configuration (camera fitted to the lanes, bonnet) of a Udacity clip."""
     frames, fps = road_motion.read_video(data_path("udacity", *path), max_frames=max_frames)
     cam = road_motion.fit_horizon(road_motion.udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
-    return frames, fps, {"camera": cam, "pipeline": {"preset": "parallax"},
-                         "parallax": {"hood_frac": road_motion.HOOD[path[-1]]}}
+    return frames, fps, {"camera": {**cam, "hood_frac": road_motion.HOOD[path[-1]]}, "pipeline": {"preset": "parallax"}}
 
 
 def test_tme_motorway_homography_is_accepted_on_most_frames():
     """tme08 (dashed markings, 20 fps, no CAN speed). Measured: 87 % of 45 windows accepted."""
     frames, _ = road_motion.read_tme(data_path("tme", "tme08"))
     cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
-    cfg = {"camera": cam, "pipeline": {"preset": "parallax"}, "parallax": {"hood_frac": road_motion.HOOD["tme08"]}}
+    cfg = {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}, "pipeline": {"preset": "parallax"}}
     h = road_motion.homography_windows(frames, cfg, window=6, step=3)
     assert h["pairs"] == 15
     assert h["accepted_rate"] >= 0.7, h
@@ -35,7 +34,7 @@ def test_tme_motorway_alignment_leaves_less_than_no_alignment():
     above the unaligned one, which is what the old measure reported."""
     frames, _ = road_motion.read_tme(data_path("tme", "tme08"))
     cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
-    cfg = {"camera": cam, "pipeline": {"preset": "parallax"}, "parallax": {"hood_frac": road_motion.HOOD["tme08"]}}
+    cfg = {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}, "pipeline": {"preset": "parallax"}}
     h = road_motion.homography_windows(frames, cfg, window=6, step=3)
     assert h["residual_median"] < 0.65 * h["unwarped_median"], h
     assert h["raw_residual_median"] > h["residual_median"] + 3.0, h  # the brightness change is real and large
@@ -73,7 +72,7 @@ def test_tme_running_homography_is_accepted_on_most_frames():
     48 of 49; the first pair has no estimate yet) and never coasts longer than 3 frames."""
     frames, fps = road_motion.read_tme(data_path("tme", "tme08"))
     cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
-    cfg = {"camera": cam, "pipeline": {"preset": "parallax"}, "parallax": {"hood_frac": road_motion.HOOD["tme08"]}}
+    cfg = {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}, "pipeline": {"preset": "parallax"}}
     rf = road_motion.track_continuity(frames, cfg, fps)["running_filter"]
     assert rf["accepted_rate"] >= 0.9 and rf["longest_coast_frames"] <= 3, rf
 

@@ -25,7 +25,7 @@ from app.recording import open_recording
 
 TME_FPS = 20.0  # frames/s of the TME Motorway sequences
 UDACITY_FX_AT_1280 = 1150.0  # px, assumed (typical of the Udacity dash camera at 1280x720)
-# Share of the image height taken by the car's bonnet (parallax.hood_frac), read off the frames.
+# Share of the image height taken by the car's bonnet (camera.hood_frac), read off the frames.
 HOOD = {"tme08": 0.04, "project_video_cut.mp4": 0.07, "test_small1.mp4": 0.07, "test_small2.mp4": 0.07,
         "test_video.mp4": 0.07, "solidWhiteRight.mp4": 0.0}
 
@@ -249,7 +249,7 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
     if tme.exists():
         frames, fps = read_tme(tme)
         cam = fit_horizon(tme_camera(data / "tme" / "calibration.ini"), frames)
-        cfg = {"camera": cam, "pipeline": {"preset": preset}, "parallax": {"hood_frac": HOOD["tme08"]}}
+        cfg = {"camera": {**cam, "hood_frac": HOOD["tme08"]}, "pipeline": {"preset": preset}}
         report["tme08"] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                            "continuity": track_continuity(frames, cfg, fps),
                            "visible_throughout": identity(frames, cfg, fps, visible_throughout("tme08"))}
@@ -262,7 +262,7 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
             continue
         frames, fps = read_video(clip, udacity_max_frames)
         cam = fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
-        cfg = {"camera": cam, "pipeline": {"preset": preset}, "parallax": {"hood_frac": HOOD.get(clip.name, 0.0)}}
+        cfg = {"camera": {**cam, "hood_frac": HOOD.get(clip.name, 0.0)}, "pipeline": {"preset": preset}}
         report[clip.name] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                              "continuity": track_continuity(frames, cfg, fps)}
         if visible_throughout(clip.name) and udacity_max_frames is None:

@@ -32,7 +32,7 @@ TUSIMPLE_LANE_PITCH_DEG = 10.5
 def tusimple_config(cfg: dict, pitch_deg: float = TUSIMPLE_CAMERA["pitch_deg"]) -> dict:
     """`cfg` set up for the TuSimple recordings: their camera, and the bonnet in the bottom 8 % masked."""
     cfg["camera"].update(TUSIMPLE_CAMERA, pitch_deg=pitch_deg)
-    cfg["lanes"]["hood_frac"] = 0.08
+    cfg["camera"]["hood_frac"] = 0.08
     return cfg
 
 

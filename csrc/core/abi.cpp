@@ -249,7 +249,10 @@ int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *need
         require(needed, "needed");
         nlohmann::json j;
         if (p) j = p->config.to_json();
-        else j = hw::Config().describe();  // no pipeline: describe every key with its default
+        else {  // no pipeline: describe every key with its default, and the keys that moved
+            j = hw::Config().describe();
+            j["moved_keys"] = hw::Config::moved_keys();
+        }
         const std::string s = j.dump();
         *needed = int32_t(s.size() + 1);
         if (!buf || buf_len < *needed) throw std::invalid_argument("buffer too small for the configuration");

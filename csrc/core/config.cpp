@@ -11,6 +11,7 @@ namespace {
 // Applies `fn(name, params)` to every section, so reading, writing and describing list them once.
 template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("camera", c.camera);
+    fn("road", c.road);
     fn("pipeline", c.pipeline);
     fn("lanes", c.lanes);
     fn("shadow", c.shadow);
@@ -32,7 +33,49 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("phd_ukf", c.phd.ukf);
 }
 
+// Keys that moved to one shared definition (issue 11): {old section, old key, new "section.key"}. A
+// configuration that still uses one gets an error naming the new key, never a silent default.
+struct MovedKey {
+    const char *section, *key, *to;
+};
+constexpr MovedKey kMovedKeys[] = {
+    {"lanes", "hood_frac", "camera.hood_frac"},
+    {"parallax", "hood_frac", "camera.hood_frac"},
+    {"shadow", "bottom_ignore_frac", "camera.hood_frac"},
+    {"cascade", "bottom_ignore_frac", "camera.hood_frac"},
+    {"lanes", "lane_width_m", "road.lane_width_m"},
+    {"shadow", "lane_width_m", "road.lane_width_m"},
+    {"cascade", "lane_width_m", "road.lane_width_m"},
+    {"lead", "lane_width_m", "road.lane_width_m"},
+    {"self_calibration", "lane_width_m", "road.lane_width_m"},
+    {"lead", "min_lane_width_m", "road.min_lane_width_m"},
+    {"lead", "max_lane_width_m", "road.max_lane_width_m"},
+    {"shadow", "vehicle_width_m", "road.vehicle_width_m"},
+    {"cascade", "vehicle_width_m", "road.vehicle_width_m"},
+    {"parallax", "vehicle_width_m", "road.vehicle_width_m"},
+};
+
+void reject_moved_keys(const json &root) {
+    for (const auto &m : kMovedKeys)
+        if (root.contains(m.section) && root.at(m.section).is_object() && root.at(m.section).contains(m.key))
+            throw ConfigError(std::string(m.section) + "." + m.key + ": moved to " + m.to +
+                              " (one definition for every stage); set " + m.to + " instead");
+}
+
+// The road section is read once and handed to every unit that uses it (their `road` member).
+void share_road(Config &c) {
+    for (RoadParams *r : {&c.lanes.assembly.road, &c.shadow.road.road, &c.cascade.road.road, &c.lead.road,
+                          &c.self_calibration.road, &c.parallax.detect.road})
+        *r = c.road;
+}
+
 } // namespace
+
+json Config::moved_keys() {
+    json out = json::object();
+    for (const auto &m : kMovedKeys) out[std::string(m.section) + "." + m.key] = m.to;
+    return out;
+}
 
 Config Config::from_json(const std::string &text) {
     json root;
@@ -42,6 +85,7 @@ Config Config::from_json(const std::string &text) {
         throw ConfigError(std::string("configuration is not valid JSON: ") + e.what());
     }
     if (!root.is_object()) throw ConfigError("configuration: expected a mapping of sections");
+    reject_moved_keys(root);
     Config c;
     std::vector<std::string> known;
     for_each_section(c, [&](const char *name, auto &params) {
@@ -53,6 +97,10 @@ Config Config::from_json(const std::string &text) {
             throw ConfigError(it.key() + ": unknown section of the core configuration");
     if (c.pipeline.reconnect_max_s < c.pipeline.reconnect_initial_s)
         throw ConfigError("pipeline.reconnect_max_s: must be >= pipeline.reconnect_initial_s");
+    if (c.road.lane_width_m < c.road.min_lane_width_m || c.road.lane_width_m > c.road.max_lane_width_m)
+        throw ConfigError("road.lane_width_m: must lie within [road.min_lane_width_m, road.max_lane_width_m], or "
+                          "lead selection disbelieves every lane of the nominal width");
+    share_road(c);
     composition_of(c.pipeline);  // the parts exist and fit together
     return c;
 }

@@ -11,6 +11,7 @@
 #include "fcw/lead_selection.hpp"
 #include "geometry/camera.hpp"
 #include "geometry/horizon.hpp"
+#include "geometry/road_params.hpp"
 #include "geometry/self_calibration.hpp"
 #include "geometry/track_kinematics.hpp"
 #include "lanes/lane_tracker.hpp"
@@ -62,7 +63,8 @@ struct PipelineParams {
 };
 
 struct Config {
-    CameraParams camera;
+    CameraParams camera;              // also the hood line (camera.hood_frac) every stage stops at
+    RoadParams road;                  // lane and vehicle widths; handed to every unit's `road` by from_json
     PipelineParams pipeline;
     LaneParams lanes;
     ShadowParams shadow;
@@ -80,8 +82,11 @@ struct Config {
     FuseParams fuse;                  // fused stage: cascade + shadow detections merged
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
 
-    // Parses the JSON text; throws ConfigError naming the key on any problem.
+    // Parses the JSON text; throws ConfigError naming the key on any problem (a key that moved to
+    // another section: naming the new one).
     static Config from_json(const std::string &text);
+    // Keys that moved, "section.key" -> the key that replaced it, as from_json reports them.
+    static nlohmann::json moved_keys();
     nlohmann::json to_json();        // effective values
     nlohmann::json describe();       // every key with type, range, default and doc
 };

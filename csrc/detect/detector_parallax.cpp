@@ -81,9 +81,6 @@ void ParallaxSection::bind(ParamMap &m) {
           "it also takes in what stands beside the road, and road the homography extrapolates to (synthetic suite, "
           "particle seeds 1/2/3: MOTA 0.583/0.566/0.541 against 0.586/0.575/0.597 with 0, precision 0.83-0.87 "
           "against 0.87-0.88; overpass_shadow 0.37-0.54 against 0.60-0.63); 0 keeps the lane model's area");
-    m.add("hood_frac", hood_frac, 0.0, 0.5,
-          "share of the image height at the bottom taken by the car's own bonnet: it moves with the camera, not "
-          "with the road, so it gives no features and no differences; 0 for none");
     m.add("exclude_vehicle_corners", exclude_vehicle_corners,
           "corners inside the boxes of confirmed vehicles are not used for the homography: they are not on the road");
     m.add("search_max_speed_mps", search_max_speed_mps, 1.0, 100.0,

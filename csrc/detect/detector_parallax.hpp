@@ -27,7 +27,6 @@ struct ParallaxSection {
     double band_above_horizon = 0.08;  // share of the image height above the horizon kept in the road band
     double road_range_m = 120.0;       // m; the road area is continued toward the vanishing point up to here
     double road_lanes_each_side = 2.0; // lane widths; the road area covers at least the ego lane +- this
-    double hood_frac = 0.0;            // share of the image height at the bottom that is the car's bonnet
     bool exclude_vehicle_corners = true;  // road features inside confirmed vehicles' boxes are not used
     double max_dt_s = 1.0;             // s; a longer gap between frames starts everything again
     int long_gap = 3;                  // frames back of the second, long-gap difference (0, 1: none)

@@ -36,7 +36,6 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("photometric_trim", photometric_trim, 1.0, 100.0,
           "robust sigmas (1.4826 MAD) beyond which a road cell is left out of the brightness fit (vehicles, moving "
           "shadows)");
-    m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0, "m; vehicle width the region widths are compared with");
     m.add("min_width_frac", min_width_frac, 0.01, 1.0,
           "expected widths; a narrower region is no vehicle; 0.3 still takes a vehicle a third inside the image "
           "(entering from the side)");
@@ -368,7 +367,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
 
     for (const auto &g : regions) {
         float yb = cell_y(float(g.y1 + 1));
-        const float w_exp = float(std::max(0.0, p.vehicle_width_m * cam.fx * (yb - horizon_row) / (cam.fy * cam.height_m)));
+        const float w_exp = float(std::max(0.0, p.road.vehicle_width_m * cam.fx * (yb - horizon_row) / (cam.fy * cam.height_m)));
         // The width is that of the region's bottom band (bottom_band_frac expected widths tall): the
         // contact zone spans the vehicle, while a guardrail or marking streak joined to it rises sideways.
         const int band_rows = std::max(1, int(std::lround(float(p.bottom_band_frac) * w_exp / cell_px_h)));

@@ -71,7 +71,7 @@ RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraPar
     r.horizon_row = float(yh);
     // First scanned row: the ground row of a vehicle at max_range, y = y_h + fy * h / Z_max.
     r.y_top = std::max(2, int(std::ceil(yh + c.fy * c.height_m / p.max_range_m)));
-    r.y_bottom = std::min(size.height - 2, int(size.height * (1.0 - p.bottom_ignore_frac)));
+    r.y_bottom = std::min(size.height - 2, int(size.height * (1.0 - cam.hood_frac)));
     if (r.empty()) return r;
     const int n = r.y_bottom - r.y_top;
     r.x_left.assign(n, 0); r.x_right.assign(n, -1); r.width_px.assign(n, 0.f);
@@ -79,14 +79,14 @@ RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraPar
     const double x_vp = c.cx - c.fx * std::tan(c.yaw_rad);
     for (int i = 0; i < n; ++i) {
         const double y = r.y_top + i;
-        const float w_cam = flat_road_width(y, yh, c, p.vehicle_width_m);
+        const float w_cam = flat_road_width(y, yh, c, p.road.vehicle_width_m);
         double xl = 1e30, xr = -1e30;
         float w = w_cam;
         if (r.from_lanes) {
             const float el = lanes.ego_left.x_at(float(y)), er = lanes.ego_right.x_at(float(y));
             const float lw = er - el;
             if (std::isfinite(lw) && lw > 0.f) {
-                w = float(lw * p.vehicle_width_m / p.lane_width_m);
+                w = float(lw * p.road.vehicle_width_m / p.road.lane_width_m);
                 xl = el - p.adjacent_lanes * lw;
                 xr = er + p.adjacent_lanes * lw;
             }
@@ -95,7 +95,7 @@ RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraPar
                 xl = std::min(xl, pl); xr = std::max(xr, pr);
             }
         } else if (w_cam > 0.f) {
-            const double scale = w_cam / p.vehicle_width_m;  // px per metre at this row = fx / Z
+            const double scale = w_cam / p.road.vehicle_width_m;  // px per metre at this row = fx / Z
             xl = x_vp + scale * (-c.lateral_m - p.road_half_width_m);
             xr = x_vp + scale * (-c.lateral_m + p.road_half_width_m);
         }
@@ -124,9 +124,9 @@ float expected_vehicle_width(float y, cv::Size size, const LaneModel &lanes, con
     const ScaledCamera c = scale_camera(cam, size);
     if (lanes_usable(lanes)) {
         const float lw = lanes.lane_width_px(y);
-        if (std::isfinite(lw) && lw > 0.f) return float(lw * p.vehicle_width_m / p.lane_width_m);
+        if (std::isfinite(lw) && lw > 0.f) return float(lw * p.road.vehicle_width_m / p.road.lane_width_m);
     }
-    return flat_road_width(y, horizon_row(lanes, c, size), c, p.vehicle_width_m);
+    return flat_road_width(y, horizon_row(lanes, c, size), c, p.road.vehicle_width_m);
 }
 
 } // namespace hw

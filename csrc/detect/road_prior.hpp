@@ -3,7 +3,7 @@
 // Two sources, the lane model first and the flat-road camera model as fallback:
 //  - lanes valid: the scan area is the lane stage's road polygon, widened to at least the ego lane
 //    plus `adjacent_lanes` lane widths each side (so vehicles in the adjacent lanes are always
-//    scanned); expected vehicle width w(y) = lane_width_px(y) * vehicle_width_m / lane_width_m
+//    scanned); expected vehicle width w(y) = lane_width_px(y) * road.vehicle_width_m / road.lane_width_m
 //    (thesis 2.4.2.1: "the width of a vehicle in an image is related to the width of the lane").
 //  - lanes invalid: a trapezoid of half-width road_half_width_m around the camera's ego-lane
 //    centre line, and w(y) from the pinhole model of a level road:
@@ -14,26 +14,19 @@
 #include "base/params.hpp"
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
+#include "geometry/road_params.hpp"
 
 #include <vector>
 
 namespace hw {
 
 struct RoadPriorParams {
-    double vehicle_width_m = 1.8;     // m; nominal rear width of a passenger car
-    double lane_width_m = 3.6;        // m; nominal lane width that the lane model's pixel width stands for
+    RoadParams road;                  // section "road" (vehicle_width_m, lane_width_m), handed in by the configuration
     double road_half_width_m = 9.0;   // m; fallback scan half-width around the ego-lane centre
     int adjacent_lanes = 2;           // lanes scanned each side of the ego lane at least
     double max_range_m = 120.0;       // m; the scan starts at the row of this range below the horizon
-    double bottom_ignore_frac = 0.0;  // fraction of the image height at the bottom not scanned (hood)
 
     void bind(ParamMap &m) {
-        m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0,
-              "m; expected rear width of a vehicle; with the lane width it gives the expected width in "
-              "pixels at each row; 1.8 m is a typical passenger car (the thesis sizes ROIs for cars)");
-        m.add("lane_width_m", lane_width_m, 2.0, 6.0,
-              "m; nominal lane width; converts the lane model's pixel width into the expected vehicle "
-              "width; 3.6 m is a motorway lane");
         m.add("road_half_width_m", road_half_width_m, 1.0, 50.0,
               "m; without a valid lane model the detector scans this far either side of the ego-lane "
               "centre; 9 m covers the ego lane and two lanes each side");
@@ -43,8 +36,6 @@ struct RoadPriorParams {
         m.add("max_range_m", max_range_m, 10.0, 1000.0,
               "m; the scan starts at the row of this range on a flat road; farther vehicles are a few "
               "pixels wide and cannot be verified anyway");
-        m.add("bottom_ignore_frac", bottom_ignore_frac, 0.0, 0.5,
-              "fraction of the image height; rows at the bottom not scanned (ego bonnet); 0 scans all");
     }
 };
 

@@ -24,7 +24,7 @@ bool LeadSelector::lanes_believed(const LaneModel &lanes, double horizon_row) co
     const double z = cam_.fy * cam_.height_m / (y - horizon_row);
     const double width_m = (xr - xl) * z / cam_.fx;
     const double u0 = cam_.cx - cam_.fx * std::tan(cam_.yaw_deg * M_PI / 180.0) - cam_.fx * cam_.lateral_m / z;
-    return width_m >= p_.min_lane_width_m && width_m <= p_.max_lane_width_m && xl < u0 && u0 < xr;
+    return width_m >= p_.road.min_lane_width_m && width_m <= p_.road.max_lane_width_m && xl < u0 && u0 < xr;
 }
 
 int LeadSelector::update(std::vector<TrackState> &tracks, const LaneModel &lanes, const EgoMotion &ego,
@@ -51,7 +51,7 @@ int LeadSelector::update(std::vector<TrackState> &tracks, const LaneModel &lanes
             // around the predicted path x_p(Z) = -kappa Z^2 / 2
             const double half_w = 0.5 * t.box.width * t.range_m / cam_.fx;
             const double rel = t.lateral_m + 0.5 * kappa * t.range_m * t.range_m;
-            t.lane_index = int(std::lround(rel / p_.lane_width_m));
+            t.lane_index = int(std::lround(rel / p_.road.lane_width_m));
             share = overlap_share(rel - half_w, rel + half_w, -half_path, half_path);
         }
         if (!std::isfinite(share)) continue;  // no lanes and no range: in_path stays unknown

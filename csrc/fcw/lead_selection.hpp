@@ -17,13 +17,14 @@
 #include "base/params.hpp"
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
+#include "geometry/road_params.hpp"
 
 #include <vector>
 
 namespace hw {
 
 struct LeadParams {
-    double lane_width_m = 3.6;     // lane width assumed where no lane model is available
+    RoadParams road;               // section "road": lane width without lanes, believable lane widths
     double enter_overlap = 0.35;   // share of a vehicle's width inside the ego lane to enter the path
     double exit_overlap = 0.05;    // the lead leaves the path below this share (it has left the lane)
     double max_range_m = 150.0;    // farther vehicles are never the lead
@@ -31,12 +32,8 @@ struct LeadParams {
     double path_margin_m = 0.2;    // added each side of the ego width
     int lanes_stale_frames = 15;   // lanes not measured for this many frames are uncertain: use the path
     double horizon_margin_px = 2.0; // a box bottom less than this below the horizon is not on the road
-    double min_lane_width_m = 2.5; // an ego lane narrower than this on the flat road is not believed
-    double max_lane_width_m = 4.0; // nor one wider (motorway lanes are 3.5-3.75 m)
 
     void bind(ParamMap &m) {
-        m.add("lane_width_m", lane_width_m, 2.0, 6.0,
-              "m; lane width used for the ego corridor and lane index when no lane model is available");
         m.add("enter_overlap", enter_overlap, 0.0, 1.0,
               "share of the vehicle width inside the ego lane for it to be in path; 0.35 ignores an adjacent car "
               "touching the line but catches a cut-in early");
@@ -55,12 +52,6 @@ struct LeadParams {
         m.add("horizon_margin_px", horizon_margin_px, 0.0, 100.0,
               "px; a box whose bottom is not at least this far below the horizon row does not stand on the road "
               "and is never the lead");
-        m.add("min_lane_width_m", min_lane_width_m, 1.0, 10.0,
-              "m; a lane model whose ego lane is narrower than this at its lower end (flat road, current horizon) "
-              "is uncertain: lines found on vehicles or seams of an unmarked road; the path from the yaw rate is used");
-        m.add("max_lane_width_m", max_lane_width_m, 1.0, 20.0,
-              "m; nor one wider than this; lanes are built 3.0-3.75 m wide, and lines on an unmarked road (vehicle "
-              "sides, seams) made a 4.2-4.8 m \"lane\" holding the adjacent cars in congestion_no_markings");
     }
 };
 

@@ -24,6 +24,7 @@ struct CameraParams {
     double lateral_m = 0.0;   // m, camera offset right of the ego-lane centre line of the car
     double k1 = 0.0, k2 = 0.0, k3 = 0.0;  // radial lens distortion (OpenCV model, geometry/lens.hpp)
     double p1 = 0.0, p2 = 0.0;            // tangential lens distortion
+    double hood_frac = 0.0;   // share of the image height at the bottom that is the car's own bonnet
 
     void bind(ParamMap &m) {
         m.add("width", width, 16, 8192, "px; frame width the intrinsics refer to; frames of another size are rejected");
@@ -42,6 +43,10 @@ struct CameraParams {
         m.add("p1", p1, -1.0, 1.0, "tangential distortion coefficient p1");
         m.add("p2", p2, -1.0, 1.0, "tangential distortion coefficient p2");
         m.add("k3", k3, -1000.0, 1000.0, "radial distortion r^6 coefficient");
+        m.add("hood_frac", hood_frac, 0.0, 0.5,
+              "share of the image height at the bottom taken by the car's own bonnet (the hood line); those rows "
+              "are not scanned for lane markings or shadows, and give no road features or differences (the bonnet "
+              "moves with the camera, not with the road); e.g. 0.08 for TuSimple's 1280x720 clips; 0 for none");
     }
 
     bool has_distortion() const { return k1 != 0.0 || k2 != 0.0 || k3 != 0.0 || p1 != 0.0 || p2 != 0.0; }

@@ -27,8 +27,6 @@ void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("max_yaw_dev_deg", max_yaw_dev_deg, 0.0, 20.0, "deg; the yaw estimate stays within the configured yaw +- this");
     m.add("max_height_dev", max_height_dev, 0.0, 0.9,
           "relative; the height estimate stays within the configured height * (1 +- this)");
-    m.add("lane_width_m", lane_width_m, 2.5, 5.0,
-          "m; ego-lane width assumed for the height (3.6 m motorway; 3.25-3.75 m elsewhere: a few per cent of bias)");
     m.add("max_lateral_rate_mps", max_lateral_rate_mps, 0.0, 5.0,
           "m/s; faster lateral motion within the lane is a lane change (~1 m/s), when the car is turned against "
           "the lane: no measurement");
@@ -93,7 +91,7 @@ void SelfCalibration::update(const LaneModel &lanes, double yaw_rate_rps, double
     if (!(v1 - vh > 20.0) || !(w1 > w2) || !(w2 > 0)) return;
     // lateral offset of the lane centre from the image axis, in metres at row v1 (scale W / w1)
     const double centre = 0.5 * (lanes.ego_left.x_at(float(v1)) + lanes.ego_right.x_at(float(v1)));
-    const double offset_m = (centre - cfg_.cx) * p_.lane_width_m / w1;
+    const double offset_m = (centre - cfg_.cx) * p_.road.lane_width_m / w1;
     const bool steady_lane = std::isfinite(last_offset_m_) && dt > 0 &&
                              std::abs(offset_m - last_offset_m_) / dt <= p_.max_lateral_rate_mps;
     last_offset_m_ = offset_m;
@@ -103,7 +101,7 @@ void SelfCalibration::update(const LaneModel &lanes, double yaw_rate_rps, double
     const double pitch = std::atan((cfg_.cy - vh) / cfg_.fy) / kDeg;
     const double yaw = std::atan((cfg_.cx - uvp) / cfg_.fx) / kDeg;
     const double a = (w1 - w2) / (v1 - v2);  // px of lane width per row
-    const double h = cfg_.fx * p_.lane_width_m * std::cos(pitch * kDeg) / (cfg_.fy * a);
+    const double h = cfg_.fx * p_.road.lane_width_m * std::cos(pitch * kDeg) / (cfg_.fy * a);
     const double r_ang = p_.angle_noise_deg * p_.angle_noise_deg;
     bool used = pitch_.update(pitch, r_ang, p_.gate_sigma);
     used |= yaw_.update(yaw, r_ang, p_.gate_sigma);

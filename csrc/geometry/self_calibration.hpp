@@ -11,7 +11,7 @@
 //          h = fx W cos(theta) / (fy a), a = (w(v1) - w(v2)) / (v1 - v2) from the two boundary lines.
 // Why the lane width and not the ego speed against the road's image motion: lanes are measured by
 // every preset (the road-motion fit runs only in the parallax preset) and need no vehicle bus; the
-// price is the assumed lane width (road.lane_width_m of the lead section: 3.6 m; real lanes are
+// price is the assumed lane width (road.lane_width_m: 3.6 m; real lanes are
 // 3.25-3.75 m, so a few per cent of bias on a road with another standard), which the limits bound.
 //
 // Each parameter is a scalar Kalman filter: random walk (process noise for slow load changes),
@@ -31,6 +31,7 @@
 #include "base/params.hpp"
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
+#include "geometry/road_params.hpp"
 
 #include <cmath>
 
@@ -47,7 +48,7 @@ struct SelfCalibrationParams {
     double max_pitch_dev_deg = 3.0;    // the estimate stays within the configured pitch +- this
     double max_yaw_dev_deg = 3.0;      // the estimate stays within the configured yaw +- this
     double max_height_dev = 0.25;      // the estimate stays within the configured height * (1 +- this)
-    double lane_width_m = 3.6;         // assumed ego-lane width for the height
+    RoadParams road;                   // section "road": lane_width_m, the ego-lane width assumed for the height
     double max_lateral_rate_mps = 0.3; // faster lateral motion in the lane is a lane change: no update
     double max_yaw_rate_rps = 0.02;    // faster turning is a curve: no update
     double gate_sigma = 4.0;           // innovations beyond this many sigma are outliers

@@ -82,7 +82,7 @@ LaneAssignment assign_lanes(const std::vector<LaneCandidate> &c, const CameraPar
                             const LaneAssemblyParams &p, int prev_left_id, int prev_right_id,
                             float expected_width_k) {
     LaneAssignment a;
-    const float lw = float(p.lane_width_m);
+    const float lw = float(p.road.lane_width_m);
     const float w_min = float(p.min_lane_width_frac) * lw, w_max = float(p.max_lane_width_frac) * lw;
     const float hyst = float(p.hysteresis_m);
     std::vector<float> X(c.size());
@@ -190,7 +190,7 @@ std::vector<cv::Point> road_polygon(const LaneModel &m, float width_k, cv::Size 
     const float y_b = float(size.height - 1);
     cv::Point2f vp = m.vanishing_point;
     if (!std::isfinite(vp.x) || !std::isfinite(vp.y)) vp = {hp.vp_x, hp.row};
-    const float dk = std::isfinite(width_k) ? width_k : slope_from_lateral(cam, float(p.lane_width_m));
+    const float dk = std::isfinite(width_k) ? width_k : slope_from_lateral(cam, float(p.road.lane_width_m));
     const float y_t = std::min(y_b - 1.f, row_at_range(cam, vp.y, float(p.road_range_m)));
 
     // Outer lines: the adjacent boundary where known, else the nearest known boundary shifted out
@@ -206,7 +206,7 @@ std::vector<cv::Point> road_polygon(const LaneModel &m, float width_k, cv::Size 
     if (!have_left) {
         // Camera model default: ego lane centred on the car (camera lateral_m right of the car's
         // centre), +- 1.5 lanes beyond the ego lane's boundaries, all meeting at the horizon prior.
-        const float lw = float(p.lane_width_m), xc = -float(cam.lateral_m);
+        const float lw = float(p.road.lane_width_m), xc = -float(cam.lateral_m);
         vp = {hp.vp_x, hp.row};
         left = {vp.x, vp.y, slope_from_lateral(cam, xc - 2.f * lw)};
         right = {vp.x, vp.y, slope_from_lateral(cam, xc + 2.f * lw)};

@@ -14,6 +14,7 @@
 #include "base/params.hpp"
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
+#include "geometry/road_params.hpp"
 #include "lanes/road_geometry.hpp"
 
 #include <vector>
@@ -21,9 +22,9 @@
 namespace hw {
 
 struct LaneAssemblyParams {
-    double lane_width_m = 3.6;           // m; expected lane width
-    double min_lane_width_frac = 0.6;    // of lane_width_m; narrowest plausible ego lane
-    double max_lane_width_frac = 1.5;    // of lane_width_m; widest plausible ego lane
+    RoadParams road;                     // section "road" (lane_width_m), handed in by the configuration
+    double min_lane_width_frac = 0.6;    // of road.lane_width_m; narrowest plausible ego lane
+    double max_lane_width_frac = 1.5;    // of road.lane_width_m; widest plausible ego lane
     double horizon_tolerance_deg = 4.0;  // deg; how far the true horizon may be from the pitch's
     double vp_inlier_frac = 0.02;        // fraction of width; a line passes through the VP within this
     double road_range_m = 80.0;          // m; top of the boundaries and of the road polygon
@@ -31,13 +32,11 @@ struct LaneAssemblyParams {
     double hysteresis_m = 0.15;          // m; a boundary crossing under the camera changes side past this
 
     void bind(ParamMap &m) {
-        m.add("lane_width_m", lane_width_m, 1.5, 6.0,
-              "m; expected lane width; 3.6 m (highway); sets plausibility and the default road area");
         m.add("min_lane_width_frac", min_lane_width_frac, 0.1, 1.0,
-              "fraction of lane_width_m; narrowest ego lane accepted; 0.6 allows narrow lanes and a camera "
+              "fraction of road.lane_width_m; narrowest ego lane accepted; 0.6 allows narrow lanes and a camera "
               "height known only to +-30 %");
         m.add("max_lane_width_frac", max_lane_width_frac, 1.0, 3.0,
-              "fraction of lane_width_m; widest ego lane accepted; 1.5, below the two lanes of a missed marking");
+              "fraction of road.lane_width_m; widest ego lane accepted; 1.5, below the two lanes of a missed marking");
         m.add("horizon_tolerance_deg", horizon_tolerance_deg, 0.0, 30.0,
               "deg; how far the true horizon may lie from the one the camera pitch predicts (pitch known "
               "roughly, pitching on bumps); bounds where the vanishing point is searched");
@@ -78,7 +77,7 @@ bool consensus_vanishing_point(const std::vector<LaneCandidate> &lines, const Ho
 
 // Ego pair and adjacent boundaries among `c`. prev_left_id / prev_right_id: ids of last frame's ego
 // boundaries (continuity; hysteresis when one crosses under the camera); expected_width_k: the
-// ego width as a slope difference when known from tracking (NaN: from lane_width_m).
+// ego width as a slope difference when known from tracking (NaN: from road.lane_width_m).
 LaneAssignment assign_lanes(const std::vector<LaneCandidate> &c, const CameraParams &cam,
                             const LaneAssemblyParams &p, int prev_left_id = -1, int prev_right_id = -1,
                             float expected_width_k = kNaN);

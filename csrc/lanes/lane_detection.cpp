@@ -90,7 +90,7 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     out.frames_since_observed = out.valid ? 0 : 1;
     LaneCurveState curve;  // one image: no curvature history
     fit_lane_curves(m.points, std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row, cam,
-                    float(p.assembly.lane_width_m), p.curve, curve, out);
+                    float(p.assembly.road.lane_width_m), p.curve, curve, out);
     ego_lane_metrics(cam, out);
     return out;
 }

@@ -73,7 +73,7 @@ void LaneTracker::associate(const LaneMeasurement &m, const HorizonPrior &hp) {
         const float rel = c.fit.rel_sigma_at(y);
         return std::isfinite(rel) ? s2 * rel * rel : 100.f * s2;
     };
-    const float lw = float(p_.assembly.lane_width_m);
+    const float lw = float(p_.assembly.road.lane_width_m);
     const float wb = std::max(1.f, lw * px_per_m(cam_, hp.row, yb_));
     const float wr = std::max(1.f, lw * px_per_m(cam_, hp.row, yr_));
     struct Pair { float d; size_t t, m; };
@@ -218,7 +218,7 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
     build_lane_model(cands, a, vp_, gray.size(), cam_, hp, p_.assembly, out);
     out.frames_since_observed = frames_since_observed_;
     const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
-    fit_lane_curves(m.points, y_h, cam_, float(p_.assembly.lane_width_m), p_.curve, curve_, out);
+    fit_lane_curves(m.points, y_h, cam_, float(p_.assembly.road.lane_width_m), p_.curve, curve_, out);
     ego_lane_metrics(cam_, out);
 }
 

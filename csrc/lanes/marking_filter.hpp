@@ -29,7 +29,6 @@ struct MarkingFilterParams {
     double max_range_m = 60.0;       // m; farthest road range scanned (markings beyond are a few px)
     int max_scan_rows = 200;         // rows; at most this many rows are filtered (cost bound)
     int min_run_rows = 2;            // scanned rows; a marking point needs neighbours to make a run this long
-    double hood_frac = 0.0;          // fraction of the image height at the bottom not scanned (bonnet)
     int work_width_px = 640;         // px; wider rows are block-averaged down to about this width
 
     void bind(ParamMap &m) {
@@ -59,9 +58,6 @@ struct MarkingFilterParams {
         m.add("min_run_rows", min_run_rows, 1, 2,
               "scanned rows; 2: a point is kept only if the next or previous scanned row has a point where the "
               "marking would continue (markings are long, texture specks and noise are not); 1 keeps all");
-        m.add("hood_frac", hood_frac, 0.0, 0.5,
-              "fraction of the image height; bottom rows not scanned (bonnet in view, e.g. 0.08 for "
-              "TuSimple's 1280x720 clips); 0 for none");
         m.add("work_width_px", work_width_px, 64, 8192,
               "px; rows of frames at least twice this wide are averaged over blocks of width/work_width "
               "pixels before filtering: a 1280-wide marking then looks as at 640 (the thesis' 1-pixel "
