@@ -57,11 +57,12 @@ LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, con
     if (band.rows() < 2) return m;
     std::vector<MarkingPoint> &pts = m.points;
     find_marking_points(gray, band, cam, hp, p.filter, pts);
+    const float frac = float(p.vehicle_mask_frac);  // upper part of each box: the vehicle's body
     if (vehicles && !vehicles->empty())
         pts.erase(std::remove_if(pts.begin(), pts.end(),
                                  [&](const MarkingPoint &q) {
                                      for (const auto &b : *vehicles)
-                                         if (q.x >= b.x && q.x <= b.x + b.width && q.y >= b.y && q.y <= b.y + b.height)
+                                         if (q.x >= b.x && q.x <= b.x + b.width && q.y >= b.y && q.y <= b.y + frac * b.height)
                                              return true;
                                      return false;
                                  }),
