@@ -147,10 +147,17 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
             report["skipped"]["tusimple"] = f"{supp} not found"
     if "lanes" in parts:
         def lane_example(prefix: str):
-            """Writes a scored lane image, annotated, as examples/PREFIX_NAME.jpg (NAME: its folder)."""
+            """Writes a scored lane image, annotated, as examples/PREFIX_NAME.jpg (NAME: its folder): the
+            model's boundaries as `annotate` draws them and the labelled lanes as red dots (one per h_samples row),
+            so a miss can be told apart at a glance (wrong line, extent, curvature)."""
             def keep(lab, gray, r):
                 name = Path(lab["raw_file"]).parent.name
-                cv2.imwrite(str(out / "examples" / f"{prefix}_{name}.jpg"), annotate(gray, r))
+                img = annotate(gray, r)
+                for lane in lab["lanes"]:
+                    for x, y in zip(lane, lab["h_samples"]):
+                        if x >= 0:
+                            cv2.circle(img, (int(round(x)), int(y)), max(2, img.shape[1] // 400), (0, 0, 255), -1)
+                cv2.imwrite(str(out / "examples" / f"{prefix}_{name}.jpg"), img)
             return keep
 
         sample = data / "tusimple" / "lane_sample"

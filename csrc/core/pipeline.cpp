@@ -43,7 +43,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
     out.image_change = stats.change;
     {
         Stopwatch sw;
-        lanes_.update(frame.gray, out.lanes);
+        lanes_.update(frame.gray, out.lanes, last_tracks_);
         out.times.add("lanes", sw.ms());
     }
     if (parts_.tracker) {
@@ -56,7 +56,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
         const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera, ego, motion};
         parts_.tracker->step(ctx, parts_.detectors, out.tracks, out.times, out.full_detection);
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
-        if (parts_.road) last_tracks_ = out.tracks;
+        last_tracks_ = out.tracks;
     }
     // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset)
     EgoMotion ego{ego_speed_mps_, ego_yaw_rate_rps_};

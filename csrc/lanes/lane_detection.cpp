@@ -1,6 +1,7 @@
 // lane_detection.cpp - the lane markings of one frame: filter, Hough, consensus, assignment.
 #include "lanes/lane_tracker.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 
@@ -48,13 +49,24 @@ bool keep_consensus(std::vector<LaneCandidate> &lines, const HorizonPrior &hp, c
 // Two passes: the strong lines in a wide window give the vanishing point by consensus (skipped
 // when the caller knows it), then every marking is searched in a narrow window around it.
 LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam,
-                                   const HorizonPrior &hp, const cv::Point2f *known_vp) {
+                                   const HorizonPrior &hp, const cv::Point2f *known_vp,
+                                   const std::vector<cv::Rect2f> *vehicles) {
     check_frame(gray, cam);
     LaneMeasurement m;
     const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
     if (band.rows() < 2) return m;
     std::vector<MarkingPoint> &pts = m.points;
     find_marking_points(gray, band, cam, hp, p.filter, pts);
+    const float frac = float(p.vehicle_mask_frac);  // upper part of each box: the vehicle's body
+    if (vehicles && !vehicles->empty())
+        pts.erase(std::remove_if(pts.begin(), pts.end(),
+                                 [&](const MarkingPoint &q) {
+                                     for (const auto &b : *vehicles)
+                                         if (q.x >= b.x && q.x <= b.x + b.width && q.y >= b.y && q.y <= b.y + frac * b.height)
+                                             return true;
+                                     return false;
+                                 }),
+                  pts.end());
 
     // Narrow search around vp: the lines through it, with the vanishing point refined by them.
     auto narrow = [&](cv::Point2f vp, bool tracked) {

@@ -184,11 +184,15 @@ void LaneTracker::carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignm
     ++width_age_;
 }
 
-void LaneTracker::update(const cv::Mat &gray, LaneModel &out) {
+void LaneTracker::update(const cv::Mat &gray, LaneModel &out, const std::vector<TrackState> &vehicles) {
     const HorizonPrior hp = search_prior();
     const bool have_vp = std::isfinite(vp_.x) && std::isfinite(vp_.y);
     const cv::Point2f known_vp(hp.vp_x, hp.row);
-    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp, have_vp ? &known_vp : nullptr);
+    hidden_.clear();
+    if (p_.reject_in_vehicles)
+        for (const auto &v : vehicles)
+            if (v.confirmed) hidden_.push_back(v.box);
+    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp, have_vp ? &known_vp : nullptr, &hidden_);
     associate(m, hp);
 
     std::vector<LaneCandidate> cands = candidates();

@@ -81,6 +81,7 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
 
     std::vector<uint8_t> row_buf(size_t(w), 0);
     std::vector<float> rising, falling;
+    std::vector<int> rising_g, falling_g;  // |response| of each edge
     const int t_min = int(std::ceil(p.min_edge_contrast));
 
     for (int y = band.y_top; y <= band.y_bottom; y += band.step) {
@@ -108,6 +109,8 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
         // computed on the fly in a window (g_prev, g_cur, g_next) around x.
         rising.clear();
         falling.clear();
+        rising_g.clear();
+        falling_g.clear();
         const unsigned band_t = unsigned(2 * t_edge - 1);
         int g_prev = int(row[2]) - int(row[0]), g_cur = int(row[3]) - int(row[1]);
         for (int x = 2; x < w - 2; ++x) {
@@ -115,9 +118,13 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
             const int v = g_cur;
             if (unsigned(v + t_edge - 1) >= band_t) {  // |v| >= t_edge: rare
                 if (v > 0) {
-                    if (v >= g_prev && v > g_next) rising.push_back(float(x) + peak_offset(g_prev, v, g_next));
+                    if (v >= g_prev && v > g_next) {
+                        rising.push_back(float(x) + peak_offset(g_prev, v, g_next));
+                        rising_g.push_back(v);
+                    }
                 } else if (v <= g_prev && v < g_next) {
                     falling.push_back(float(x) + peak_offset(-g_prev, -v, -g_next));
+                    falling_g.push_back(-v);
                 }
             }
             g_prev = g_cur;
@@ -133,33 +140,52 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
         const float w_max = (1.2f * float(p.marking_max_m) * ppm_hi + 2.f) / scale;
         const float dy_vp = std::max(1.f, float(y) - (hp.row + hp.tol_px));
 
-        // Pair each dark-to-bright edge with the next bright-to-dark edge, if no other
-        // dark-to-bright edge comes first.
-        size_t j = 0;
+        // Pair each dark-to-bright edge with the nearest bright-to-dark edge after it that closes a
+        // valid bar (width, contrast). Worn or textured paint has weaker edges inside the bar; they
+        // are crossed, not taken as the bar's end (the bar is judged on its mean against both sides).
+        // A rising edge inside an accepted bar starts no second bar.
+        size_t j0 = 0;
+        float bar_end = -1.f;
         for (size_t i = 0; i < rising.size(); ++i) {
             const float r = rising[i];
-            while (j < falling.size() && falling[j] <= r) ++j;
-            if (j == falling.size()) break;
-            const float f = falling[j];
-            if (i + 1 < rising.size() && rising[i + 1] < f) continue;
-            // A slanted marking is wider along the row by sqrt(1 + k^2), k = dx/dy of the line from
-            // the vanishing point through it.
-            const float k = std::min(kMaxSlope, std::fabs(full_x(0.5f * (r + f)) - hp.vp_x) / dy_vp);
-            const float width = f - r;
-            if (width < w_min || width > w_max * std::sqrt(1.f + k * k)) continue;
-
-            // Bar: pixels strictly between the edges; sides: one pixel beyond each edge pixel.
-            int a = int(std::floor(r)) + 1, b = int(std::ceil(f)) - 1;
-            if (b < a) a = b = int(std::lround(0.5f * (r + f)));
-            int sum = 0;
-            for (int x = a; x <= b; ++x) sum += row[x];
-            const float inside = float(sum) / float(b - a + 1);
-            const int xl = std::max(0, int(std::floor(r)) - 1);
-            const int xr = std::min(w - 1, int(std::ceil(f)) + 1);
-            const float side = float(std::max(row[xl], row[xr]));
-            const float contrast = inside - side;
-            if (contrast < float(p.min_bar_contrast) || contrast < float(p.min_bar_ratio) * side) continue;
-            out.push_back({full_x(0.5f * (r + f)), float(y), contrast});
+            if (r < bar_end) continue;
+            while (j0 < falling.size() && falling[j0] <= r) ++j0;
+            if (j0 == falling.size()) break;
+            const float w_far = w_max * std::sqrt(1.f + kMaxSlope * kMaxSlope);  // widest at any slant
+            for (size_t j = j0; j < falling.size() && falling[j] - r <= w_far; ++j) {
+                const float f = falling[j];
+                // A slanted marking is wider along the row by sqrt(1 + k^2), k = dx/dy of the line from
+                // the vanishing point through it.
+                const float k = std::min(kMaxSlope, std::fabs(full_x(0.5f * (r + f)) - hp.vp_x) / dy_vp);
+                if (f - r < w_min || f - r > w_max * std::sqrt(1.f + k * k)) continue;
+                // Bar: pixels strictly between the edges; sides: one pixel beyond each edge pixel.
+                int a = int(std::floor(r)) + 1, b = int(std::ceil(f)) - 1;
+                if (b < a) a = b = int(std::lround(0.5f * (r + f)));
+                int sum = 0, lowest = 255;
+                for (int x = a; x <= b; ++x) {
+                    sum += row[x];
+                    lowest = std::min(lowest, int(row[x]));
+                }
+                const float inside = float(sum) / float(b - a + 1);
+                const int xl = std::max(0, int(std::floor(r)) - 1);
+                const int xr = std::min(w - 1, int(std::ceil(f)) + 1);
+                const float side = float(std::max(row[xl], row[xr]));
+                const float contrast = inside - side;
+                if (contrast < float(p.min_bar_contrast) || contrast < float(p.min_bar_ratio) * side) continue;
+                // Across inner edges (texture of worn paint) the bar must stay brighter than its sides
+                // everywhere, and every inner edge must be weaker than both of the bar's own edges: two
+                // markings, or a marking and a bright patch, have road (a dip) or strong edges between.
+                const int own = std::min(rising_g[i], falling_g[j]);
+                bool inner_weak = true;
+                for (size_t q = j0; q < j && inner_weak; ++q) inner_weak = falling_g[q] < own;
+                for (size_t q = i + 1; q < rising.size() && rising[q] < f && inner_weak; ++q)
+                    inner_weak = rising_g[q] < own;
+                const bool crosses = j > j0 || (i + 1 < rising.size() && rising[i + 1] < f);
+                if (crosses && (!p.cross_inner_edges || !inner_weak || float(lowest) <= side)) continue;
+                out.push_back({full_x(0.5f * (r + f)), float(y), contrast});
+                bar_end = f;
+                break;
+            }
         }
     }
     if (p.min_run_rows >= 2) keep_runs(out, band, hp);
