@@ -18,12 +18,13 @@ from tests.conftest import data_path
 MIN_ACCURACY, MAX_FP, MAX_FN = 0.92, 0.10, 0.10
 
 
-# Measured with the shipped model (boundaries bent with the road, marking points inside confirmed vehicles dropped):
-# clips 0.839 / 0.257 / 0.257, sample 0.819 / 0.242 / 0.292. Before (straight boundaries, no vehicle mask): clips
-# 0.836 / 0.306 / 0.312, sample 0.798 / 0.250 / 0.300 (docs/RESULTS.md, lanes). The regression bounds below sit just
-# under the shipped figures.
-CLIPS_NOW = {"accuracy": 0.835, "fp": 0.26, "fn": 0.26}
-SAMPLE_NOW = {"accuracy": 0.815, "fp": 0.245, "fn": 0.295}
+# Measured with the shipped model (straight boundaries, lanes.curve_enabled and lanes.reject_in_vehicles false):
+# clips 0.836 / 0.306 / 0.312, sample 0.798 / 0.250 / 0.300. Bent boundaries with marking points on vehicles dropped
+# measured clips 0.839 / 0.257 / 0.257 on their branch, but 0.839 / 0.326 / 0.326 once every stage masks the bonnet
+# (camera.hood_frac), and cost the unmarked congestion scenario precision, so they are off (docs/RESULTS.md, lanes).
+# The regression bounds below sit just under the shipped figures.
+CLIPS_NOW = {"accuracy": 0.835, "fp": 0.31, "fn": 0.32}
+SAMPLE_NOW = {"accuracy": 0.795, "fp": 0.25, "fn": 0.30}
 
 _clips_cache: dict = {}
 
@@ -52,7 +53,7 @@ def test_lane_clips_scored_as_tusimple_and_no_worse_than_measured(tmp_path_facto
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "issue 13's bar not reached: measured accuracy 0.839, FP 0.257, FN 0.257 on the 12 clips. The misses are "
+    "issue 13's bar not reached: measured accuracy 0.836, FP 0.306, FN 0.312 on the 12 clips. The misses are "
     "wrong lines, not imprecise ones: 0313-1/420 takes concrete seams (the worn dashes and the faint dots give few "
     "marking points), 0313-1/60's left ego curve follows a dark strip beside the marking, 0531/...793 takes the dots "
     "splitting a wide lane (not labelled), 0531/...694 the trailer's underside, 0601/...358 and /...021 label lanes two "
@@ -87,8 +88,8 @@ def test_lines_through_vehicles_are_rejected_with_reject_in_vehicles(tmp_path):
     """0313-1/180: without lanes.reject_in_vehicles the left adjacent boundary runs across the car in the next lane
     (its rear window and trim) where the labelled dashes are hidden (measured 0.799, FP 0.33, FN 0.33); with the
     confirmed vehicles' boxes masked it is the labelled line (measured 0.951, FN 0)."""
-    off = _clips_with(tmp_path, {"reject_in_vehicles": False})["clip"]["0313-1/180"]
-    on = _clips_with(tmp_path, {"reject_in_vehicles": True})["clip"]["0313-1/180"]
+    off = _clips_with(tmp_path, {"curve_enabled": True, "reject_in_vehicles": False})["clip"]["0313-1/180"]
+    on = _clips_with(tmp_path, {"curve_enabled": True, "reject_in_vehicles": True})["clip"]["0313-1/180"]
     assert off["fn"] > 0, off
     assert on["accuracy"] >= 0.94 and on["fn"] == 0, on
 
@@ -100,8 +101,8 @@ def test_lane_sample_no_worse_than_measured():
     assert m["fn"] <= SAMPLE_NOW["fn"], m
 
 
-@pytest.mark.xfail(strict=True, reason="issue 13's bar on the sample not reached: measured accuracy 0.819, "
-                   "FP 0.242, FN 0.292 on the 10 images (each image alone, no tracking)")
+@pytest.mark.xfail(strict=True, reason="issue 13's bar on the sample not reached: measured accuracy 0.798, "
+                   "FP 0.250, FN 0.300 on the 10 images (each image alone, no tracking)")
 def test_lane_sample_at_least_as_good_as_the_clips_bar():
     m = lanes_sample.evaluate(str(data_path("tusimple", "lane_sample")))
     assert m["accuracy"] >= MIN_ACCURACY and m["fp"] <= MAX_FP and m["fn"] <= MAX_FN, m
