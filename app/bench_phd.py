@@ -1,11 +1,11 @@
 """Cost of the phd preset's tracker (features, LK, GM-PHD, UKF: the "track" stage, the detector's stages
 excluded) per 640x480 frame, against the number of vehicles it holds and the features per vehicle.
 
-The frames are the synthetic scenarios with the most traffic (and nine cars side by side, for 8 vehicles at
-once); each frame's "track" time is a sample for the number of vehicles (tracks, confirmed or not) the
-tracker then held: wall time, and the thread's CPU time ("track_cpu"), which a loaded machine does not inflate. The features per vehicle are
-set by phd_features.max_per_vehicle (corners looked for per box) and gmphd.max_components (the cap).
-Pinned to one core, as `headway bench`.
+The frames are the synthetic scenarios with the most traffic, and ten cars side by side (8 vehicles held at
+once); each frame's time is a sample for the number of vehicles (tracks, confirmed or not) the tracker then
+held: wall time ("track") and the thread's CPU time ("track_cpu"), which a loaded machine does not inflate.
+The features per vehicle are set by phd_features.max_per_vehicle (corners looked for per box) and
+gmphd.max_components (the cap). Pinned to one core, as `headway bench`.
 
     python -m app.bench_phd [--features 12,24,40] [--json]
 """
@@ -22,38 +22,40 @@ import numpy as np
 
 from app.core import Pipeline
 
-SCENARIOS = ("dense_traffic", "adjacent_passing", "steady_following", "lane_change", "cut_in", "nine_vehicles")
+SCENARIOS = ("dense_traffic", "adjacent_passing", "steady_following", "lane_change", "cut_in", "many_vehicles")
 
-# No shipped scenario keeps 8 vehicles in the tracker at once (dense_traffic: 7 at most): nine cars at the
-# ego's speed, three per lane, 9-70 m ahead, all in view for 4 s.
-NINE_VEHICLES = """
-name: nine_vehicles
-description: Nine cars at the ego's speed on three lanes, 9-70 m ahead (the phd tracker's cost at 8+ vehicles).
+# No shipped scenario keeps 8 vehicles in the tracker at once (dense_traffic: 7 at most): ten cars at the
+# ego's speed on a five-lane road, two per lane, 12-50 m ahead, all in view for 4 s.
+MANY_VEHICLES = """
+name: many_vehicles
+description: Ten cars at the ego's speed on five lanes, 12-50 m ahead (the phd tracker's cost at 8+ vehicles).
 duration_s: 4.0
 fps: 30
 seed: 77
+road: {lanes: 5}
 ego: {speed_kmh: 60}
 vehicles:
-  - {id: 1, kind: car, lane: 0, z_m: 14, speed_kmh: 60}
-  - {id: 2, kind: car, lane: 0, z_m: 42, speed_kmh: 60}
-  - {id: 3, kind: car, lane: -1, z_m: 9, speed_kmh: 60}
-  - {id: 4, kind: car, lane: -1, z_m: 22, speed_kmh: 60}
-  - {id: 5, kind: car, lane: -1, z_m: 48, speed_kmh: 60}
-  - {id: 6, kind: car, lane: 1, z_m: 11, speed_kmh: 60}
-  - {id: 7, kind: car, lane: 1, z_m: 26, speed_kmh: 60}
-  - {id: 8, kind: car, lane: 1, z_m: 52, speed_kmh: 60}
-  - {id: 9, kind: car, lane: 0, z_m: 70, speed_kmh: 60}
+  - {id: 1, kind: car, lane: -2, z_m: 16, speed_kmh: 60}
+  - {id: 2, kind: car, lane: -2, z_m: 40, speed_kmh: 60}
+  - {id: 3, kind: car, lane: -1, z_m: 12, speed_kmh: 60}
+  - {id: 4, kind: van, lane: -1, z_m: 32, speed_kmh: 60}
+  - {id: 5, kind: car, lane: 0, z_m: 20, speed_kmh: 60}
+  - {id: 6, kind: car, lane: 0, z_m: 50, speed_kmh: 60}
+  - {id: 7, kind: car, lane: 1, z_m: 14, speed_kmh: 60}
+  - {id: 8, kind: van, lane: 1, z_m: 34, speed_kmh: 60}
+  - {id: 9, kind: car, lane: 2, z_m: 18, speed_kmh: 60}
+  - {id: 10, kind: car, lane: 2, z_m: 44, speed_kmh: 60}
 """
 
 
 def _scenario(name: str):
     from app.sim import load_scenario
 
-    if name != "nine_vehicles":
+    if name != "many_vehicles":
         return load_scenario(name)
     with tempfile.TemporaryDirectory() as d:
-        path = Path(d) / "nine_vehicles.yaml"
-        path.write_text(NINE_VEHICLES)
+        path = Path(d) / "many_vehicles.yaml"
+        path.write_text(MANY_VEHICLES)
         return load_scenario(path)
 
 
@@ -96,7 +98,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         return 0
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"load average {load:.1f} on {os.cpu_count()} cores")
-    print("| features per vehicle (search = cap) | N vehicles | frames | CPU median ms | CPU p99 ms | wall median ms | wall p99 ms |")
+    print("| features per vehicle (search = cap) | N vehicles | frames | CPU median ms | CPU p99 ms | "
+          "wall median ms | wall p99 ms |")
     print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for k, costs in report.items():
         for n, c in costs.items():

@@ -88,7 +88,8 @@ def test_lead_range_and_rate_beat_the_box_tracker():
         return np.array(rng), np.array(rate)
 
     (phd_range, phd_rate), (box_range, box_rate) = errors("phd"), errors("thesis")
-    msg = f"phd range {phd_range.round(2)} rate {phd_rate.round(2)}; thesis range {box_range.round(2)} rate {box_rate.round(2)}"
+    msg = (f"phd range {phd_range.round(2)} rate {phd_rate.round(2)}; "
+           f"thesis range {box_range.round(2)} rate {box_rate.round(2)}")
     assert phd_range.mean() < box_range.mean(), msg
     assert np.sum(phd_range <= box_range) >= 5, msg
     assert phd_rate.mean() <= 0.8 * box_rate.mean(), msg

@@ -533,7 +533,8 @@ int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t 
             h = [&](const hw::Ukf::Vec &x) { return hw::Ukf::Vec(H * x); };
         } else {
             if (z_dim != 2 && z_dim != 3)
-                throw std::invalid_argument("ukf spec: the pinhole observation has z_dim 2 (u, v) or 3 (u, v, expansion e)");
+                throw std::invalid_argument(
+                    "ukf spec: the pinhole observation has z_dim 2 (u, v) or 3 (u, v, expansion e)");
             hw::ParamMap cm("camera");
             cam.bind(cm);
             if (spec.contains("camera")) cm.read(spec.at("camera"));
