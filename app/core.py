@@ -429,8 +429,9 @@ class GmPhd:
 
 
 def ukf_run(spec: dict, z: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Runs the core's UKF (csrc/track/ukf.hpp) over observations ``z`` (n_steps x z_dim; a NaN row skips the
-    update); returns the states (n_steps x 4) and covariances (n_steps x 4 x 4). ``spec``: see hw_ukf_run."""
+    """Runs the core's UKF (csrc/track/ukf.hpp) over observations ``z`` (n_steps x z_dim; NaN entries are left
+    out of that step's update); returns the states (n_steps x 4) and covariances (n_steps x 4 x 4).
+    ``spec``: see hw_ukf_run."""
     zz = np.ascontiguousarray(np.asarray(z, dtype=np.float64))
     if zz.ndim != 2:
         raise ValueError("z must be a 2-D array: one observation per row")

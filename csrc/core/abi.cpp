@@ -535,14 +535,20 @@ int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t 
             H = matrix_of(spec, "H", z_dim, 4);
             h = [&](const hw::Ukf::Vec &x) { return hw::Ukf::Vec(H * x); };
         } else {
-            if (z_dim != 2) throw std::invalid_argument("ukf spec: the pinhole observation has z_dim 2 (u, v)");
+            if (z_dim != 2 && z_dim != 3)
+                throw std::invalid_argument(
+                    "ukf spec: the pinhole observation has z_dim 2 (u, v) or 3 (u, v, expansion e)");
             hw::ParamMap cm("camera");
             cam.bind(cm);
             if (spec.contains("camera")) cm.read(spec.at("camera"));
             horizon = spec.value("horizon_row", cam.horizon_row());
             h = [&](const hw::Ukf::Vec &x) {
                 const cv::Point2d p = hw::project_road_point(cam, x(0), x(1), horizon);
-                return hw::Ukf::Vec(Eigen::Vector2d(p.x, p.y));
+                hw::Ukf::Vec y(z_dim);
+                y(0) = p.x;
+                y(1) = p.y;
+                if (z_dim == 3) y(2) = x(1) > 0.1 ? -x(3) / x(1) : NAN;  // e = -(dZ/dt)/Z (vehicle_ukf.hpp)
+                return y;
             };
         }
         const auto f = [](const hw::Ukf::Vec &x, double step) {  // eq. 19
@@ -554,8 +560,29 @@ int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t 
         hw::Ukf ukf(up, x0.col(0), P0);
         for (int32_t k = 0; k < n_steps; ++k) {
             if (k > 0) ukf.predict(f, dt, Q);
+            // the finite entries of this step's observation are used, the NaN ones left out
             const Eigen::Map<const Eigen::VectorXd> zk(z + size_t(k) * size_t(z_dim), z_dim);
-            if (zk.allFinite()) ukf.update(h, zk, R);
+            std::vector<int> use;
+            for (int i = 0; i < z_dim; ++i)
+                if (std::isfinite(zk(i))) use.push_back(i);
+            if (int(use.size()) == z_dim) {
+                ukf.update(h, zk, R);
+            } else if (!use.empty()) {
+                const int m = int(use.size());
+                Eigen::VectorXd zs(m);
+                Eigen::MatrixXd Rs(m, m);
+                for (int i = 0; i < m; ++i) {
+                    zs(i) = zk(use[size_t(i)]);
+                    for (int j = 0; j < m; ++j) Rs(i, j) = R(use[size_t(i)], use[size_t(j)]);
+                }
+                const auto hs = [&](const hw::Ukf::Vec &x) {
+                    const hw::Ukf::Vec y = h(x);
+                    hw::Ukf::Vec out(m);
+                    for (int i = 0; i < m; ++i) out(i) = y(use[size_t(i)]);
+                    return out;
+                };
+                ukf.update(hs, zs, Rs);
+            }
             for (int i = 0; i < 4; ++i) x_out[4 * k + i] = ukf.x()(i);
             if (p_out)
                 for (int i = 0; i < 16; ++i) p_out[16 * k + i] = ukf.P()(i / 4, i % 4);

@@ -241,10 +241,11 @@ int hw_gmphd_weight_in(hw_gmphd *f, double left, double top, double right, doubl
 
 /* Runs the UKF over n_steps observations z[n_steps * z_dim] (a NaN row skips the update) and writes
  * the state after each step into x_out[n_steps * 4] and its covariance into p_out[n_steps * 16]
- * (row-major; p_out may be NULL). spec_json: {"model": "linear"|"pinhole", "dt": s, "x0": [4], "P0": [16],
- * "Q": [16], "R": [z_dim^2], "ukf": {"alpha", "beta", "kappa"}, and for "linear" "H": [z_dim * 4]; for
- * "pinhole" (z = the contact point (u, v) of the state [X, Z, dX/dt, dZ/dt]) "camera": {camera keys} and
- * optionally "horizon_row" (default: the camera's pitch)}. The transition is constant velocity (eq. 19). */
+ * (row-major; p_out may be NULL); NaN entries of a row are left out of that update. spec_json: {"model":
+ * "linear"|"pinhole", "dt": s, "x0": [4], "P0": [16], "Q": [16], "R": [z_dim^2], "ukf": {"alpha", "beta",
+ * "kappa"}, and for "linear" "H": [z_dim * 4]; for "pinhole" (z = the contact point (u, v) of the state
+ * [X, Z, dX/dt, dZ/dt], and with z_dim 3 the image expansion rate e = -(dZ/dt)/Z, 1/s) "camera": {camera
+ * keys} and optionally "horizon_row" (default: the camera's pitch)}. The transition is constant velocity. */
 int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t z_dim, double *x_out,
                double *p_out);
 /* ---- END paper 004 units ------------------------------------------------------------------------- */

@@ -28,6 +28,9 @@ void BoxFeatureParams::bind(ParamMap &m) {
     m.add("lk_iterations", lk_iterations, 1, 100, "Lucas-Kanade iterations per level at most");
     m.add("fb_max_px", fb_max_px, 0.01, 50.0,
           "px; a point tracked forward then backward must come back this close to its start, or it is lost");
+    m.add("roi_margin_px", roi_margin_px, 4, 1000,
+          "px; LK works on the pyramids of the points' bounding box grown by this much (the largest image motion "
+          "of a vehicle between frames plus the window at the coarsest level); the rest of the frame is not read");
 }
 
 std::vector<cv::Vec2d> box_corners(const cv::Mat &gray, const cv::Rect2f &box, const std::vector<cv::Vec2d> &existing,
@@ -65,26 +68,43 @@ std::vector<cv::Vec2d> box_corners(const cv::Mat &gray, const cv::Rect2f &box, c
 }
 
 void PointFlow::next_frame(const cv::Mat &gray) {
-    prev_.swap(cur_);
-    cur_.clear();
-    cv::buildOpticalFlowPyramid(gray, cur_, cv::Size(p_.lk_window_px, p_.lk_window_px), p_.lk_levels, false);
+    std::swap(prev_, cur_);
+    gray.copyTo(cur_);  // into the buffer of two frames ago: no allocation once running
 }
 
 void PointFlow::track(const std::vector<cv::Point2f> &pts, std::vector<cv::Point2f> &out, std::vector<uchar> &ok) const {
     out.clear();
     ok.assign(pts.size(), 0);
-    if (pts.empty() || !ready()) return;
+    if (pts.empty() || !ready() || prev_.size() != cur_.size()) return;
+    // The region: the points' bounding box plus the margin, clipped to the frame.
+    float x0 = pts[0].x, x1 = x0, y0 = pts[0].y, y1 = y0;
+    for (const cv::Point2f &q : pts) {
+        x0 = std::min(x0, q.x); x1 = std::max(x1, q.x);
+        y0 = std::min(y0, q.y); y1 = std::max(y1, q.y);
+    }
+    const int m = p_.roi_margin_px;
+    const cv::Rect roi = cv::Rect(cv::Point(int(std::floor(x0)) - m, int(std::floor(y0)) - m),
+                                  cv::Point(int(std::ceil(x1)) + m + 1, int(std::ceil(y1)) + m + 1)) &
+                         cv::Rect(0, 0, cur_.cols, cur_.rows);
+    if (roi.width < 2 || roi.height < 2) return;
     const cv::Size win(p_.lk_window_px, p_.lk_window_px);
+    const cv::Point2f off(float(roi.x), float(roi.y));
+    std::vector<cv::Mat> pyr0, pyr1;
+    const int levels = cv::buildOpticalFlowPyramid(prev_(roi), pyr0, win, p_.lk_levels, false);
+    cv::buildOpticalFlowPyramid(cur_(roi), pyr1, win, levels, false);
+    std::vector<cv::Point2f> local(pts);
+    for (cv::Point2f &q : local) q -= off;
     const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, p_.lk_iterations, 0.03);
     std::vector<uchar> st_f, st_b;
     std::vector<float> err;
     std::vector<cv::Point2f> back;
-    cv::calcOpticalFlowPyrLK(prev_, cur_, pts, out, st_f, err, win, p_.lk_levels, term);
-    cv::calcOpticalFlowPyrLK(cur_, prev_, out, back, st_b, err, win, p_.lk_levels, term);
+    cv::calcOpticalFlowPyrLK(pyr0, pyr1, local, out, st_f, err, win, levels, term);
+    cv::calcOpticalFlowPyrLK(pyr1, pyr0, out, back, st_b, err, win, levels, term);
     const double fb2 = p_.fb_max_px * p_.fb_max_px;
     for (size_t i = 0; i < pts.size(); ++i) {
-        const cv::Point2f d = back[i] - pts[i];
+        const cv::Point2f d = back[i] - local[i];
         ok[i] = st_f[i] && st_b[i] && double(d.dot(d)) <= fb2;
+        out[i] += off;
     }
 }
 

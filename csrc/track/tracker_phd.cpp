@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <ctime>
 
 namespace hw {
 
@@ -25,6 +26,15 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "expected number of features it still has)");
     m.add("min_stable", min_stable, 1, 1000,
           "stable features a vehicle needs before they measure its contact point (fewer: the UKF predicts)");
+    m.add("min_depth_ratio", min_depth_ratio, 0.0, 1.0,
+          "a feature whose row below the horizon is under this share of the contact point's (a point near the "
+          "camera's height) gives no contact row: its row error would be divided by this share");
+    m.add("expansion_sigma_min", expansion_sigma_min, 0.0, 1.0,
+          "least 1-sigma of the frame-to-frame scale of a vehicle's feature cloud, as a range-rate observation of "
+          "the UKF (e = (s - 1)/dt = -(dZ/dt)/Z); 0 = the scale is not observed");
+    m.add("expansion_min_width_px", expansion_min_width_px, 0.0, 10000.0,
+          "px; the cloud's expansion is observed only on a vehicle at least this wide: on a narrower (far) one the "
+          "points of the road and background around it pass the motion check and bias the scale");
     m.add("contact_sigma_px", contact_sigma_px, 0.01, 100.0,
           "px; 1-sigma of the contact point the features give (R of the UKF); the mean of several LK "
           "points is steadier than one box edge");
@@ -57,6 +67,13 @@ void PhdTracker::reset() {
 
 namespace {
 
+// CPU time of the calling thread, ms: the tracker's cost without the time other processes took the core.
+double thread_cpu_ms() {
+    timespec t{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+    return 1e3 * double(t.tv_sec) + 1e-6 * double(t.tv_nsec);
+}
+
 double median(std::vector<double> &v) {
     const auto mid = v.begin() + long(v.size() / 2);
     std::nth_element(v.begin(), mid, v.end());
@@ -71,20 +88,29 @@ std::vector<cv::Vec2d> means_of(const GmPhd &phd) {
 
 } // namespace
 
-// Eq. 13-15: the contact point each stable feature implies (its mean minus its offset), fused.
-bool PhdTracker::contact_from_features(const Vehicle &v, cv::Point2d &c) const {
+// Eq. 13-15: the contact point each stable feature implies, fused. A feature's tag t is its offset from the
+// contact point in units of the contact's depth below the horizon, d = v_c - v_h (= fy h / Z): a point H
+// above the road and X beside the contact is seen at v = v_h + d (1 - H/h), u = u_c + d X/h, so
+// t = (X/h, -H/h) is the same at every range and the feature alone gives d = (v - v_h) / (1 + t_y) and the
+// contact (u - t_x d, v_h + d). A row error e of the feature becomes e / (1 + t_y) in d: each implied
+// contact is weighted by k^2 = (1 + t_y)^2 on top of the estimator's weight, and points near the camera's
+// height (k < min_depth_ratio) say nothing about the range and are left out.
+bool PhdTracker::contact_from_features(const Vehicle &v, double horizon, cv::Point2d &c) const {
     double sw = 0.0, best = -1.0;
     cv::Vec2d acc(0, 0);
     int n = 0;
     for (const GmComponent &g : v.phd.components()) {
-        if (g.w < p_.phd.stable_weight) continue;
-        const cv::Vec2d ci = g.m - g.tag * v.width;
+        const double k = 1.0 + g.tag[1];
+        if (g.w < p_.phd.stable_weight || k < p_.min_depth_ratio) continue;
+        const double d = (g.m[1] - horizon) / k;
+        const cv::Vec2d ci(g.m[0] - g.tag[0] * d, horizon + d);
         ++n;
         if (p_.estimator == "max_weight") {
             if (g.w > best) { best = g.w; acc = ci; sw = 1.0; }
             continue;
         }
-        const double w = p_.estimator == "covariance" ? 1.0 / std::max(1e-12, cv::determinant(g.P)) : g.w;
+        const double w = p_.estimator == "covariance" ? k * k * k * k / std::max(1e-12, cv::determinant(g.P))
+                                                      : g.w * k * k;
         acc += w * ci;
         sw += w;
     }
@@ -93,8 +119,14 @@ bool PhdTracker::contact_from_features(const Vehicle &v, cv::Point2d &c) const {
     return true;
 }
 
+// A feature's tag (see contact_from_features) for the contact point `contact`; (0, 0) at or above the horizon.
+cv::Vec2d PhdTracker::tag_of(const cv::Vec2d &m, const cv::Point2d &contact, double horizon) {
+    const double d = contact.y - horizon;
+    return d > 1.0 ? (m - cv::Vec2d(contact.x, contact.y)) / d : cv::Vec2d(0, 0);
+}
+
 void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const std::vector<cv::Point2f> &cur,
-                         const std::vector<uchar> &ok, const cv::Mat &gray, double horizon) {
+                         const std::vector<uchar> &ok, const cv::Mat &gray, double horizon, double dt) {
     // The vehicle's image motion from its followed features: median shift, median ratio of distances.
     std::vector<double> dx, dy, ratios, px, py;
     std::vector<size_t> idx;
@@ -120,6 +152,37 @@ void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const
         if (ratios.size() >= 3) s = std::clamp(median(ratios), 0.8, 1.25);
         // the vehicle's shift is the median point's: c moves by t, the rest scales about it
     }
+    // The cloud's expansion as a range-rate observation (vehicle_ukf.hpp): e = (s - 1) / dt. The median of
+    // pair ratios above is robust but biased by the position noise (|d + n| > |d| on average: ~sigma^2/|d|^2,
+    // 3e-4 per frame, 0.5 m/s at 50 m); the ratio of the RMS spreads of the points that move with the vehicle,
+    // s_e = sqrt(sum |q - q_mean|^2 / sum |p - p_mean|^2), has the noise in both frames cancel. Its 1-sigma:
+    // the pair ratios' spread (1.4826 MAD) over the square root of the points, at least the floor.
+    if (p_.expansion_sigma_min > 0.0 && dt > 0.0 && ratios.size() >= 6 && v.width >= p_.expansion_min_width_px) {
+        std::vector<cv::Vec2d> P0, P1;
+        cv::Vec2d m0(0, 0), m1(0, 0);
+        for (size_t i : idx) {
+            const cv::Vec2d p(prev[i].x, prev[i].y), z(cur[i].x, cur[i].y);
+            const cv::Vec2d r = z - (c + t + s * (p - c));
+            if (r.dot(r) > p_.outlier_px * p_.outlier_px) continue;
+            P0.push_back(p);
+            P1.push_back(z);
+            m0 += p;
+            m1 += z;
+        }
+        if (P0.size() >= size_t(std::max(3, p_.min_stable))) {
+            m0 *= 1.0 / double(P0.size());
+            m1 *= 1.0 / double(P1.size());
+            double s0 = 0.0, s1 = 0.0;
+            for (size_t i = 0; i < P0.size(); ++i) {
+                s0 += (P0[i] - m0).dot(P0[i] - m0);
+                s1 += (P1[i] - m1).dot(P1[i] - m1);
+            }
+            std::vector<double> dev;
+            for (double r : ratios) dev.push_back(std::abs(r - s));
+            const double sigma = std::max(p_.expansion_sigma_min, 1.4826 * median(dev) / std::sqrt(double(P0.size())));
+            if (s0 > 16.0) v.ukf->update_expansion((std::sqrt(s1 / s0) - 1.0) / dt, sigma / dt);
+        }
+    }
     v.motion = {t[0], t[1]};
     v.phd.predict(s, c, t);
     const cv::Vec2d b0(v.contact.x, v.contact.y), b1 = c + t + s * (b0 - c);
@@ -138,7 +201,7 @@ void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const
         existing.insert(existing.end(), Z.begin(), Z.end());
         const std::vector<cv::Vec2d> fresh = box_corners(gray, v.box(), existing, p_.features);
         std::vector<cv::Vec2d> tags;
-        for (const cv::Vec2d &f : fresh) tags.push_back((f - b1) / std::max(1.0, v.width));
+        for (const cv::Vec2d &f : fresh) tags.push_back(tag_of(f, v.contact, horizon));
         v.phd.add_births(fresh, tags);
         Z.insert(Z.end(), fresh.begin(), fresh.end());
     }
@@ -148,13 +211,13 @@ void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const
     cv::Point2d cp;
     v.stable = 0;
     for (const GmComponent &g : v.phd.components()) v.stable += g.w >= p_.phd.stable_weight;
-    if (contact_from_features(v, cp)) {
+    if (contact_from_features(v, horizon, cp)) {
         v.ukf->update(cp, p_.contact_sigma_px, horizon);
         v.contact = cp;
     }
 }
 
-void PhdTracker::follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, double horizon) {
+void PhdTracker::follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, double horizon, double dt) {
     std::vector<cv::Point2f> prev, cur;
     std::vector<size_t> start;
     for (const Vehicle &v : vs) {
@@ -171,7 +234,7 @@ void PhdTracker::follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, 
     for (size_t k = 0; k < vs.size(); ++k) {
         const auto a = long(start[k]), b = long(start[k + 1]);
         measure(vs[k], {prev.begin() + a, prev.begin() + b}, {cur.begin() + a, cur.begin() + b},
-                {ok.begin() + a, ok.begin() + b}, gray, horizon);
+                {ok.begin() + a, ok.begin() + b}, gray, horizon, dt);
     }
 }
 
@@ -186,7 +249,7 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double 
     v.confidence = d.score;
     // The first features: every corner is a birth (no draw) and measured once.
     const std::vector<cv::Vec2d> corners = box_corners(gray, d.box, {}, p_.features);
-    for (const cv::Vec2d &f : corners) v.phd.add_birth(f, (f - cv::Vec2d(contact.x, contact.y)) / v.width);
+    for (const cv::Vec2d &f : corners) v.phd.add_birth(f, tag_of(f, contact, horizon));
     v.phd.update(corners);
     v.phd.merge_and_prune();
     v.confirmed = v.hits >= p_.confirm_hits;
@@ -219,7 +282,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         v.contact = (1.0 - g) * v.contact + g * dc;
         v.aspect = (1.0 - g) * v.aspect + g * d.box.height / std::max(1.f, d.box.width);
         for (GmComponent &c : v.phd.components())
-            c.tag = (1.0 - g) * c.tag + g * (c.m - cv::Vec2d(dc.x, dc.y)) / std::max(1.0f, d.box.width);
+            c.tag = (1.0 - g) * c.tag + g * tag_of(c.m, dc, horizon);
         v.hits++;
         v.detection_misses = 0;
         v.confirmed = v.confirmed || v.hits >= p_.confirm_hits;
@@ -276,7 +339,9 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
                       StageTimes &times, bool &full_detection) {
     CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
     Stopwatch track_time;
+    const double cpu0 = thread_cpu_ms();
     float detect_ms = 0.f;
+    double detect_cpu_ms = 0.0;
     double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
     if (dt < 0.0 || dt > p_.max_dt_s) {
         vehicles_.clear();
@@ -292,16 +357,18 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
         v.ukf->predict(dt);
         v.age++;
     }
-    follow_features(vehicles_, ctx.gray, horizon);
+    follow_features(vehicles_, ctx.gray, horizon, dt);
 
     // Every n-th frame the detector parts: new vehicles, and re-anchoring of the tracked ones. A part
     // that could not run (no road motion yet) counts as no detection: nothing is missed for it.
     full_detection = false;
     if (frame_ % p_.detect_every_n == 0) {
         Stopwatch sd;
+        const double c0 = thread_cpu_ms();
         std::vector<Hypothesis> dets;
         full_detection = detectors.detect(ctx.road(), dets, times);
         detect_ms = sd.ms();
+        detect_cpu_ms = thread_cpu_ms() - c0;
         if (full_detection) use_detections(ctx, dets, horizon);
     }
     ++frame_;
@@ -310,6 +377,8 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
     tracks.clear();
     for (const Vehicle &v : vehicles_) tracks.push_back(report(v));
     times.add("track", std::max(0.f, track_time.ms() - detect_ms));
+    // the same work in CPU time of this thread (a loaded machine preempts the wall time; app/bench_phd.py)
+    times.add("track_cpu", float(std::max(0.0, thread_cpu_ms() - cpu0 - detect_cpu_ms)));
 }
 
 } // namespace hw

@@ -11,10 +11,16 @@
 //      candidate births (eq. 7, admitted with probability P_clutter); the followed points and the new
 //      corners are the measurement set of the PHD update (eq. 3-5); merging and pruning (eq. 8-11).
 //   3. Each feature carries (as its PHD tag) its offset from the vehicle's contact point (bottom centre
-//      of the box) in vehicle widths, set when it is born. Each stable feature (weight >= stable_weight)
-//      thus points at a contact point m - tag w; the estimator fuses them: by weight (eq. 13), by inverse
-//      covariance determinant (eq. 14) or the heaviest one (eq. 15).
-//   4. The UKF (vehicle_ukf.hpp) predicts with constant velocity and updates with that contact point.
+//      of the box) in units of the contact's depth below the horizon d = v_c - v_h (= fy h / Z), set when
+//      it is born and pulled towards each matched detection. A point H above the road has the tag
+//      (X/h, -H/h) at every range, so each stable feature (weight >= stable_weight) gives the contact
+//      alone: d = (v - v_h) / (1 + t_y), contact (u - t_x d, v_h + d); no box width enters (the box width
+//      was the old unit: a box 2-7 px too wide put the contact 0.5-1.3 px low, docs/phd.md). The
+//      estimator fuses them: by weight (eq. 13), by inverse covariance determinant (eq. 14) or the
+//      heaviest one (eq. 15), each also by (1 + t_y)^2 (a row error is divided by 1 + t_y).
+//   4. The UKF (vehicle_ukf.hpp) predicts with constant velocity and updates with that contact point, and
+//      with the feature cloud's expansion (s - 1)/dt = -(dZ/dt)/Z, which carries the range rate without
+//      the contact row's pixel offset.
 //   5. Every detect_every_n frames it asks the detector parts (the phd preset: shadow) for a full
 //      detection; any detector composes (shadow, parallax, both). A detection overlapping a vehicle re-measures its
 //      contact point (UKF update), pulls its width and features' offsets towards the detected box, and
@@ -42,9 +48,12 @@ struct PhdTrackerParams {
     double outlier_px = 1.5;           // px; a followed point this far from the vehicle's motion is not measured
     double end_weight = 1.5;           // eq. 12: weight inside the box under which a vehicle has ended
     int min_stable = 3;                // stable features needed to measure the contact point
+    double min_depth_ratio = 0.6;      // a feature's row below the horizon / the contact's under this: not used for range
+    double expansion_sigma_min = 0.002;  // least 1-sigma of the cloud's frame-to-frame scale (UKF rate observation)
+    double expansion_min_width_px = 40.0;  // px; narrower (far) vehicles: no expansion observation
     double contact_sigma_px = 0.8;     // px; 1-sigma of the features' contact point (UKF R)
     double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
-    double anchor_gain = 0.3;          // share of a matched detection's box taken into width and offsets
+    double anchor_gain = 0.5;          // share of a matched detection's box taken into width and offsets
     double match_iou = 0.3;            // detection <-> vehicle box overlap that is the same vehicle
     double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
     int confirm_hits = 2;              // detections before a vehicle is confirmed
@@ -82,10 +91,11 @@ private:
         }
     };
 
-    void follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, double horizon);
+    void follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, double horizon, double dt);
     void measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const std::vector<cv::Point2f> &cur,
-                 const std::vector<uchar> &ok, const cv::Mat &gray, double horizon);
-    bool contact_from_features(const Vehicle &v, cv::Point2d &c) const;
+                 const std::vector<uchar> &ok, const cv::Mat &gray, double horizon, double dt);
+    bool contact_from_features(const Vehicle &v, double horizon, cv::Point2d &c) const;
+    static cv::Vec2d tag_of(const cv::Vec2d &m, const cv::Point2d &contact, double horizon);
     void use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon);
     void start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);
     void prune(const FrameContext &ctx, double horizon);

@@ -7,6 +7,10 @@
 // pinhole camera with its pitch (from the horizon row) and yaw: z = (u, v) = project_road_point(X, Z)
 // (geometry/flat_road.hpp), R = sigma^2 I in px^2. The UKF carries the observation's curvature
 // (dv/dZ = -fy h / Z^2) over the range uncertainty instead of linearising it.
+// Second observation, the image expansion of the vehicle's feature cloud between two frames dt apart: a
+// rigid face at range Z grows by s = Z(t - dt) / Z(t), so e = (s - 1) / dt = -(dZ/dt) / Z (1/s), with
+// 1-sigma from the spread of the features' distance ratios. It carries the range rate without any pixel
+// offset of the contact row (a bottom edge 1 px low biases range and rate alike; the scale does not).
 #pragma once
 
 #include "base/params.hpp"
@@ -37,6 +41,8 @@ public:
     void predict(double dt);
     // The contact point (u, v) measured with 1-sigma `sigma_px`; false if it was not usable.
     bool update(const cv::Point2d &uv, double sigma_px, double horizon_row);
+    // The expansion rate e = (s - 1) / dt measured with 1-sigma `sigma_per_s`; false if not usable.
+    bool update_expansion(double e_per_s, double sigma_per_s);
     // The contact point the state predicts.
     cv::Point2d predicted_contact(double horizon_row) const;
 
