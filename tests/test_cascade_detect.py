@@ -67,20 +67,25 @@ def test_cascade_meets_the_issue_bar(cascade_scores):
 
 
 def test_core_confidence_is_the_verifier_probability_the_trainer_computes():
-    """The core's verifier (C++, cv::HOGDescriptor + the shipped weights) gives each cascade detection the
+    """The core's verifier (C++, cv::HOGDescriptor + the shipped network) gives each cascade detection the
     probability the training code (app/train/verifier.py) computes for the same box."""
     from app.eval.tusimple_boxes import tusimple_config
-    from app.train.verifier import box_features, hog
+    from app.train.verifier import Mlp, box_features, geometry_features, hog
 
     supp = data_path("tusimple", "supp")
     entry = json.loads((supp / "annotation.json").read_text())[0]
     gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
-    fs = cv2.FileStorage(str(configuration.SHIPPED_VERIFIER), cv2.FILE_STORAGE_READ)
-    w, b = fs.getNode("weights").mat().ravel(), fs.getNode("bias").real()
+    model = Mlp.load(str(configuration.SHIPPED_VERIFIER))
     cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": ""}}))  # "": the shipped verifier
-    with Pipeline(configuration.core_sections(cfg)) as pipe:
-        tracks = pipe.run_stage("cascade", gray).tracks
-    assert tracks
-    x = box_features(hog(), gray, [t.box for t in tracks])
-    p = 1 / (1 + np.exp(-(x @ w + b)))
+    off = tusimple_config(configuration.load(None))
+    with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
+        r = pipe.run_stage("cascade", gray)
+        tracks = r.tracks
+        # the same groups without the verifier: confidence n / (n + neighbors_half) gives their window counts
+        half = off["cascade"]["neighbors_half"]
+        n = [round(half * t.confidence / (1 - t.confidence)) for t in plain.run_stage("cascade", gray).tracks]
+    assert tracks and len(n) == len(tracks)
+    boxes = [t.box for t in tracks]
+    x = np.c_[box_features(hog(), gray, boxes), geometry_features(boxes, n, r.horizon_row, cfg["camera"]["height_m"])]
+    p = model.probability(x)
     assert np.abs(p - np.array([t.confidence for t in tracks])).max() < 0.02

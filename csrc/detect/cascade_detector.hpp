@@ -13,7 +13,8 @@
 // `scale_factor` from the model's own up to `max_window_frac` of the image height.
 // Raw windows accepted by every stage are grouped (IoU >= group_iou with the group's strongest
 // window, box = mean of the group); a group of n windows gets confidence n / (n + neighbors_half),
-// and groups of fewer than min_neighbors windows are dropped. With a verifier (vehicle_verifier.hpp)
+// and groups of fewer than min_neighbors windows are dropped. With a verifier (vehicle_verifier.hpp:
+// HOG of the box, log(1 + n) and the vehicle height the box implies, through a small trained network)
 // the confidence is instead its probability that the group's box holds a vehicle.
 #pragma once
 
@@ -50,7 +51,8 @@ struct CascadeParams {
               "path of the OpenCV cascade XML; empty = the model shipped with Headway "
               "(app/models/vehicle_cascade.xml, recipe in docs/cascade.md)");
         m.add("verifier", verifier, nullptr,
-              "path of the HOG + logistic-regression verifier judging every cascade detection; empty = the "
+              "path of the verifier (HOG + neighbours + implied height, one-hidden-layer network) judging every "
+              "cascade detection; empty = the "
               "model shipped with Headway (app/models/vehicle_verifier.yml); off (default) = the cascade's "
               "neighbour count alone, which measured better on the TuSimple validation split (docs/cascade.md)");
         road.bind(m);
