@@ -102,7 +102,17 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                                  : float(n / (n + p_.neighbors_half));
         out.push_back(d);
     }
-    return out;
+    if (p_.nms_iou >= 1.0) return out;
+    // non-maximum suppression by confidence: most confident first, drop what overlaps a kept one
+    std::stable_sort(out.begin(), out.end(),
+                     [](const CascadeDetection &a, const CascadeDetection &b) { return a.confidence > b.confidence; });
+    std::vector<CascadeDetection> kept;
+    for (const auto &d : out) {
+        bool dup = false;
+        for (const auto &k : kept) dup = dup || box_iou(d.box, k.box) >= p_.nms_iou;
+        if (!dup) kept.push_back(d);
+    }
+    return kept;
 }
 
 } // namespace hw
