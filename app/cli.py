@@ -91,7 +91,8 @@ def _cmd_train(args) -> int:
         from app.train import verifier
 
         cfg = configuration.load(args.config) if args.config else tusimple_config(configuration.load(None))
-        verifier.train(args.data, args.cascade, args.out, cfg, every=args.every, c=args.c)
+        verifier.train(args.data, args.cascade, args.out, cfg, every=args.every, hidden=args.hidden,
+                       epochs=args.epochs, decay=args.decay, seed=args.seed)
         return 0
     # `headway train cascade`: the Viola-Jones trainer (app/train/cascade, independent of the rest of app)
     from app.train.cascade import TrainParams, train
@@ -104,7 +105,7 @@ def _cmd_train(args) -> int:
         raise ValueError(f"--window {args.window}: at least 6 px each way (OpenCV ignores a 1-px border)")
     p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
                     features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
-                    seed=args.seed, max_minutes=args.max_minutes)
+                    seed=args.seed, max_minutes=args.max_minutes, resume=args.resume or "")
     log_fh = open(args.log, "w") if args.log else None
 
     def log(line: str) -> None:
@@ -226,13 +227,17 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--min-hit-rate", type=float, default=0.995, help="per stage (default 0.995)")
     t.add_argument("--max-false-alarm", type=float, default=0.5, help="per stage (default 0.5)")
     t.add_argument("--max-minutes", type=float, default=55.0, help="no stage starts after this (default 55)")
+    t.add_argument("--resume", help="a cascade XML written by this trainer: keep its stages and train more")
     t.add_argument("--log", help="also write the per-stage log here")
-    t = ts.add_parser("verifier", help="HOG + logistic regression judging the cascade's detections")
+    t = ts.add_parser("verifier", help="HOG + a one-hidden-layer network judging the cascade's detections")
     t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, as for the cascade)")
     t.add_argument("--cascade", required=True, help="the cascade XML whose detections are judged")
     t.add_argument("--out", required=True, help="verifier model (.yml)")
     t.add_argument("--every", type=int, default=4, help="use every N-th image (default 4)")
-    t.add_argument("--c", type=float, default=10.0, help="inverse L2 regularisation (default 10)")
+    t.add_argument("--hidden", type=int, default=64, help="hidden units (default 64)")
+    t.add_argument("--epochs", type=int, default=12, help="passes over the samples (default 12)")
+    t.add_argument("--decay", type=float, default=1e-4, help="L2 weight decay (default 1e-4)")
+    t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")
 
     s = sub.add_parser("calibrate", help="camera intrinsics and lens distortion from chessboard photos -> camera: YAML")

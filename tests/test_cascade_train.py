@@ -125,3 +125,25 @@ def test_cli_names_a_folder_without_annotations(tmp_path):
                         "--out", str(tmp_path / "m.xml")], capture_output=True, text=True)
     assert r.returncode == 1
     assert "annotation.json" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_training_resumes_from_a_written_cascade(tiny_cascade, tmp_path):
+    """`--resume`: the XML the trainer wrote reads back into the same stages (features, thresholds,
+    leaves), and a resumed run keeps them and adds stages after them."""
+    from app.train.cascade.model import Cascade
+
+    cascade, out, _ = tiny_cascade
+    fs = FeatureSet(W, H)
+    back = Cascade.from_xml(fs, str(out))
+    assert back.stages == cascade.stages
+    first = tmp_path / "first.xml"
+    Cascade(W, H, stages=cascade.stages[:1]).save(fs, str(first))
+    folder = _dataset(tmp_path / "data", 40, 1)
+    p = TrainParams(width=W, height=H, stages=2, num_pos=200, num_neg=200, features=400, min_box_height=10,
+                    max_weak=20, seed=0, resume=str(first))
+    lines = []
+    resumed = train([str(folder)], str(tmp_path / "more.xml"), p, log=lines.append)
+    assert resumed.stages[0] == cascade.stages[0] and len(resumed.stages) == 2
+    assert [ln[:8] for ln in lines if ln.startswith("stage")] == ["stage  1"]
+    with pytest.raises(ValueError, match="window"):
+        Cascade.from_xml(FeatureSet(W + 2, H), str(out))

@@ -98,10 +98,21 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n));
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
-        d.confidence = verifier_ ? verifier_->probability(gray, d.box) : float(n / (n + p_.neighbors_half));
+        d.confidence = verifier_ ? verifier_->probability(gray, d.box, n, cam.horizon_row(), hc)
+                                 : float(n / (n + p_.neighbors_half));
         out.push_back(d);
     }
-    return out;
+    if (p_.nms_iou >= 1.0) return out;
+    // non-maximum suppression by confidence: most confident first, drop what overlaps a kept one
+    std::stable_sort(out.begin(), out.end(),
+                     [](const CascadeDetection &a, const CascadeDetection &b) { return a.confidence > b.confidence; });
+    std::vector<CascadeDetection> kept;
+    for (const auto &d : out) {
+        bool dup = false;
+        for (const auto &k : kept) dup = dup || box_iou(d.box, k.box) >= p_.nms_iou;
+        if (!dup) kept.push_back(d);
+    }
+    return kept;
 }
 
 } // namespace hw

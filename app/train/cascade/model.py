@@ -7,6 +7,7 @@ single-precision leaves as OpenCV does; its score is the last stage's sum.
 """
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -99,6 +100,38 @@ class Cascade:
             out += ["      </rects>", "      <tilted>0</tilted></_>"]
         out += ["  </features>", "</cascade>", "</opencv_storage>", ""]
         return "\n".join(out)
+
+    @staticmethod
+    def from_xml(fs: FeatureSet, path: str) -> "Cascade":
+        """A cascade this trainer wrote (to train more stages on it): features mapped back to `fs`."""
+        root = ET.parse(path).getroot().find("cascade")
+        if root is None or root.findtext("featureType", "").strip() != "HAAR":
+            raise ValueError(f"{path}: not an OpenCV HAAR cascade XML")
+        w, h = int(root.findtext("width")), int(root.findtext("height"))
+        if (w, h) != (fs.width, fs.height):
+            raise ValueError(f"{path}: window {w}x{h}, not the {fs.width}x{fs.height} being trained")
+        index = {}
+        for i, (rs, ws) in enumerate(zip(fs.rects, fs.weights)):
+            index[tuple((*r, float(wt)) for r, wt in zip(rs.tolist(), ws.tolist()) if wt != 0)] = i
+        feats = []
+        for f in root.find("features"):
+            key = tuple((*map(int, r.text.split()[:4]), float(np.float32(r.text.split()[4]))) for r in f.find("rects"))
+            if key not in index or f.findtext("tilted", "0").strip() != "0":
+                raise ValueError(f"{path}: feature {key} is not one of the upright Haar features this trainer uses")
+            feats.append(index[key])
+        c = Cascade(w, h)
+        for node in root.find("stages"):
+            f32 = lambda v: float(np.float32(v))  # noqa: E731  the values were float32 when written
+            st = Stage(threshold=f32(node.findtext("stageThreshold")))
+            for weak in node.find("weakClassifiers"):
+                _, _, fi, t = weak.findtext("internalNodes").split()
+                lv, rv = weak.findtext("leafValues").split()
+                st.features.append(feats[int(fi)])
+                st.thresholds.append(f32(t))
+                st.left.append(f32(lv))
+                st.right.append(f32(rv))
+            c.stages.append(st)
+        return c
 
     def save(self, fs: FeatureSet, path: str) -> None:
         with open(path, "w") as fh:

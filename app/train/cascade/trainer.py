@@ -36,6 +36,7 @@ class TrainParams:
     max_aspect: float = 3.0         # width/height above this: a long side view, not used as positive
     seed: int = 0
     max_minutes: float = 55.0       # no new stage starts after this (the whole run fits in an hour)
+    resume: str = ""                # cascade XML written by this trainer: its stages are kept, more are added
 
 
 def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str], None] = print) -> Cascade:
@@ -52,12 +53,17 @@ def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str],
         f"({p.width}x{p.height}, boxes >= {p.min_box_height:g} px, mirrored, contrast > 10 grey levels); "
         f"{len(fs)} Haar features; params {asdict(p)}")
     cascade = Cascade(p.width, p.height, params=asdict(p))
+    # the cascade's false alarms per window scanned, measured while mining (resumed: each stage's nominal rate)
+    fa_rate = 1.0
+    if p.resume:
+        cascade.stages = Cascade.from_xml(fs, p.resume).stages
+        fa_rate = p.max_false_alarm ** len(cascade.stages)
+        log(f"resumed: {len(cascade.stages)} stages from {p.resume}")
     miner = Miner(items, p.width, p.height, rng)
-    fa_rate = 1.0   # the cascade's false alarms per window scanned, measured while mining
     tmp = tempfile.NamedTemporaryFile(suffix=".xml", delete=False)
     tmp.close()
     try:
-        for s in range(p.stages):
+        for s in range(len(cascade.stages), p.stages):
             if time.perf_counter() - t_start > p.max_minutes * 60:
                 log(f"stop: {p.max_minutes:g} min used")
                 break
