@@ -25,4 +25,20 @@ bool ShadowDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &out
     return true;
 }
 
+bool ShadowDetector::unverified(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+    Stopwatch sh;
+    for (const ShadowHypothesis &s : shadow_hypotheses(ctx.gray, ctx.lanes, ctx.camera, shadow_)) {
+        Hypothesis h;
+        h.box = s.box;
+        h.foot = {s.box.x + 0.5f * s.box.width, s.box.y + s.box.height};
+        h.score = s.strength;
+        h.strength = s.strength;
+        h.source = "shadow";
+        h.road_gray = s.road_gray;
+        out.push_back(h);
+    }
+    times.add("hypotheses", sh.ms());
+    return true;
+}
+
 } // namespace hw
