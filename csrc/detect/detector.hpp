@@ -37,6 +37,17 @@ struct Hypothesis {
     float appearance = kNaN; // 0..1; a learned appearance model's score (the cascade's); NaN: the detector has none
 };
 
+// A hypothesis measured at the bottom centre of its box.
+inline Hypothesis hypothesis_of(const cv::Rect2f &box, float score, float strength, const char *source) {
+    Hypothesis h;
+    h.box = box;
+    h.foot = {box.x + 0.5f * box.width, box.y + box.height};
+    h.score = score;
+    h.strength = strength;
+    h.source = source;
+    return h;
+}
+
 class Detector {
 public:
     virtual ~Detector() = default;

@@ -77,16 +77,8 @@ std::vector<Hypothesis> HypothesisMerge::merge_and_verify(const RoadContext &ctx
     }
     // Thinned as the shadow detector does; each kept detection keeps its anchor's source name.
     std::vector<Hypothesis> out;
-    for (size_t i : strongest_apart(found, verify_.nms_iou)) {
-        const Detection &d = found[i];
-        Hypothesis h;
-        h.box = d.box;
-        h.foot = {d.box.x + 0.5f * d.box.width, bottom_of(d.box)};
-        h.score = d.score;
-        h.strength = d.score;
-        h.source = source[i];
-        out.push_back(h);
-    }
+    for (size_t i : strongest_apart(found, verify_.nms_iou))
+        out.push_back(hypothesis_of(found[i].box, found[i].score, found[i].score, source[i]));
     return out;
 }
 
