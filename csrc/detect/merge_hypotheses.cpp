@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace hw {
 
@@ -35,6 +36,7 @@ float road_gray_below(const cv::Mat &gray, const cv::Rect2f &b) {
 struct Group {
     Hypothesis anchor;
     float appearance = 0.f;  // best appearance score among the members (0: none)
+    bool several = false;    // hypotheses of two or more detectors
 };
 
 } // namespace
@@ -51,23 +53,26 @@ std::vector<Hypothesis> HypothesisMerge::merge_and_verify(const RoadContext &ctx
         for (auto &k : groups)
             if (!g && same_vehicle(k.anchor, h, p_)) g = &k;
         if (!g) {
-            groups.push_back({h, 0.f});
+            groups.push_back({h, 0.f, false});
             g = &groups.back();
         }
+        g->several = g->several || std::strcmp(g->anchor.source, h.source) != 0;
         if (std::isfinite(h.appearance)) g->appearance = std::max(g->appearance, h.appearance);
     }
 
     std::vector<Detection> found;
     std::vector<const char *> source;
     for (const Group &g : groups) {
+        const bool shadow_edge = std::isfinite(g.anchor.road_gray);
+        if (!shadow_edge && !g.several && g.appearance < float(p_.min_appearance)) continue;
         const cv::Rect2f &b = g.anchor.box;
         const float bottom = bottom_of(b);
         // The anchor as the verification's bottom edge (its box's height is not used).
         ShadowHypothesis s;
         s.box = cv::Rect2f(b.x, bottom - 0.5f * b.width, b.width, 0.5f * b.width);
         s.expected_width_px = expected_vehicle_width(bottom, ctx.gray.size(), ctx.lanes, ctx.camera, road_);
-        s.road_gray = std::isfinite(g.anchor.road_gray) ? g.anchor.road_gray : road_gray_below(ctx.gray, b);
-        s.strength = std::isfinite(g.anchor.road_gray) ? g.anchor.strength : 0.f;  // the shadow's depth
+        s.road_gray = shadow_edge ? g.anchor.road_gray : road_gray_below(ctx.gray, b);
+        s.strength = shadow_edge ? g.anchor.strength : 0.f;  // the shadow's depth
         if (!std::isfinite(s.road_gray)) continue;
         Detection d;
         if (!verify_one(ctx.gray, s, verify_, d)) continue;

@@ -5,7 +5,8 @@
 // bottom rows lie within bottom_tol of their width of each other and their column spans overlap by
 // at least span_iou (1-D IoU). A merged vehicle takes its bottom edge and sides from its anchor, the
 // member with the most precise bottom: a measured shadow edge (road_gray known), else a learned
-// appearance (the cascade's box), else any (a parallax region).
+// appearance (the cascade's box), else any (a parallax region). A vehicle without a shadow edge that
+// one detector alone found needs a cascade score of at least min_appearance.
 // Then ONE verification, the shadow detector's (verify.hpp, verify_one): the vehicle width expected
 // at the bottom row (road_prior.hpp, from the lane model or the flat-road camera), two vertical-edge
 // sides standing out against the road, the road's texture under the bottom edge (standing on the
@@ -31,6 +32,7 @@ struct MergeParams {
     double bottom_tol = 0.25;        // widths; bottom rows at most this far apart can be one vehicle
     double span_iou = 0.5;           // 1-D IoU of the column spans, at least, for one vehicle
     double appearance_weight = 1.0;  // w: share of the cascade's score added as independent evidence
+    double min_appearance = 1.0;     // a vehicle without a shadow edge, found by one detector: its cascade score, at least (1: never)
 
     void bind(ParamMap &m) {
         m.add("bottom_tol", bottom_tol, 0.0, 2.0,
@@ -41,6 +43,10 @@ struct MergeParams {
         m.add("appearance_weight", appearance_weight, 0.0, 1.0,
               "share w of a learned appearance score c (the cascade's) that raises a verified vehicle's score s_v: "
               "s = 1 - (1 - s_v)(1 - w c); 0 ignores the cascade's score");
+        m.add("min_appearance", min_appearance, 0.0, 1.0,
+              "a vehicle among whose hypotheses is no shadow edge and that one detector alone found (the cascade or "
+              "the parallax difference) is kept only if its cascade score c reaches this (a parallax region alone has "
+              "c = 0); two detectors agreeing, or a shadow edge, need no appearance; 0 keeps every verified vehicle");
     }
 };
 
