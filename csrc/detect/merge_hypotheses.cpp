@@ -35,8 +35,14 @@ float road_gray_below(const cv::Mat &gray, const cv::Rect2f &b) {
 
 struct Group {
     Hypothesis anchor;
+    std::vector<const char *> sources;  // the detectors of its members, each once
     float appearance = 0.f;  // best appearance score among the members (0: none)
-    bool several = false;    // hypotheses of two or more detectors
+
+    bool has(const char *source) const {
+        for (const char *s : sources)
+            if (std::strcmp(s, source) == 0) return true;
+        return false;
+    }
 };
 
 } // namespace
@@ -49,14 +55,16 @@ std::vector<Hypothesis> HypothesisMerge::merge_and_verify(const RoadContext &ctx
     });
     std::vector<Group> groups;
     for (const Hypothesis &h : order) {
+        // One hypothesis per detector in a vehicle: two of one detector stay apart, each verified (as the
+        // shadow detector alone does), the overlap thinned after.
         Group *g = nullptr;
         for (auto &k : groups)
-            if (!g && same_vehicle(k.anchor, h, p_)) g = &k;
+            if (!g && !k.has(h.source) && same_vehicle(k.anchor, h, p_)) g = &k;
         if (!g) {
-            groups.push_back({h, 0.f, false});
+            groups.push_back({h, {}, 0.f});
             g = &groups.back();
         }
-        g->several = g->several || std::strcmp(g->anchor.source, h.source) != 0;
+        g->sources.push_back(h.source);
         if (std::isfinite(h.appearance)) g->appearance = std::max(g->appearance, h.appearance);
     }
 
@@ -64,7 +72,7 @@ std::vector<Hypothesis> HypothesisMerge::merge_and_verify(const RoadContext &ctx
     std::vector<const char *> source;
     for (const Group &g : groups) {
         const bool shadow_edge = std::isfinite(g.anchor.road_gray);
-        if (!shadow_edge && !g.several && g.appearance < float(p_.min_appearance)) continue;
+        if (!shadow_edge && g.sources.size() < 2 && g.appearance < float(p_.min_appearance)) continue;
         const cv::Rect2f &b = g.anchor.box;
         const float bottom = bottom_of(b);
         // The anchor as the verification's bottom edge (its box's height is not used).
