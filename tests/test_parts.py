@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+from app.config import SHIPPED_CASCADE
 from app.core import ConfigError, Pipeline, core_schema
 from tests.thesis_scenes import config, frames
 
@@ -12,6 +13,7 @@ from tests.thesis_scenes import config, frames
 def _run(name: str, pipeline: dict, n: int) -> list:
     cfg = config(name)
     cfg["pipeline"] = pipeline
+    cfg["cascade"] = {"model": str(SHIPPED_CASCADE)}  # the core alone has no default model (app/config.py fills it)
     with Pipeline(cfg) as p:
         return [p.process(f.image, f.t_s) for f in frames(name)[:n]]
 
@@ -22,14 +24,17 @@ def _boxes(results) -> list:
 
 def test_the_registries_are_in_the_configuration_schema():
     pipe = core_schema()["pipeline"]
-    assert set(pipe["preset"]["choices"].split("|")) == {"thesis", "parallax", "parallax_kalman", "shadow_particles", "phd", "none"}
-    assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax"}
+    assert set(pipe["preset"]["choices"].split("|")) == {"thesis", "parallax", "parallax_kalman", "shadow_particles", "phd",
+                                                               "cascade", "fused", "none"}
+    assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax", "cascade"}
     assert {"kalman", "particles", "none"} <= set(pipe["tracker"]["choices"].split("|"))
 
 
 @pytest.mark.parametrize("preset,detectors,tracker", [("thesis", ["shadow"], "kalman"),
                                                        ("parallax", ["parallax"], "particles"),
-                                                       ("phd", ["shadow"], "phd")])
+                                                       ("phd", ["shadow"], "phd"),
+                                                       ("cascade", ["cascade"], "phd"),
+                                                       ("fused", ["cascade", "shadow", "parallax"], "kalman")])
 def test_a_preset_is_its_composition(preset, detectors, tracker):
     by_name = _run("steady_following", {"preset": preset}, 40)
     by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40)

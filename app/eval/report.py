@@ -11,7 +11,7 @@ import cv2
 
 from app.annotate import annotate
 
-PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion")
+PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion", "real_fcw")
 
 
 def _f(x, nd=3) -> str:
@@ -99,6 +99,12 @@ def markdown(report: dict) -> str:
             out.append(f"| {r['scenario']} | {t_first} | {_f(r['ttc_used_s'], 2)} | {_f(r['true_ttc_s'], 2)} | "
                        f"{'-' if req is None else req} | {margin} | {r['warnings']} | {r['prewarnings']} | {verdict} |")
         out.append("")
+    rv = report.get("real_fcw")
+    if rv:
+        from app.eval import real_video_fcw
+
+        out += ["### False warnings on the real recordings (nothing dangerous happens in them)", "",
+                real_video_fcw.markdown(rv, report["preset"]), ""]
     return "\n".join(out)
 
 
@@ -193,17 +199,25 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
 
         names = list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING)
         if mapper is not None:
-            report["fcw"] = mapper(fcw_scenarios.evaluate, [(n, config_path) for n in names], names, "FCW")
+            report["fcw"] = mapper(fcw_scenarios.evaluate, [(n, config_path, preset) for n in names], names, "FCW")
         else:
             report["fcw"] = []
             for name in names:
                 say(f"FCW {name}")
-                report["fcw"].append(fcw_scenarios.evaluate(name, config_path))
+                report["fcw"].append(fcw_scenarios.evaluate(name, config_path, preset))
     if "road_motion" in parts:
         from app.eval import road_motion
 
         say("road homography and track continuity on TME / Udacity")
         report["road_motion"] = road_motion.evaluate(str(data), preset)
+    if "real_fcw" in parts:
+        if (data / "udacity").exists():
+            from app.eval import real_video_fcw
+
+            say("false warnings on the real recordings")
+            report["real_fcw"] = real_video_fcw.evaluate(str(data), preset)
+        else:
+            report["skipped"]["real_fcw"] = f"{data / 'udacity'} not found"
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
     (out / "report.md").write_text(markdown(report) + "\n")
     return report

@@ -20,6 +20,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
+from app import config as configuration
 from app.core import Pipeline
 from app.recording import open_recording
 
@@ -240,6 +241,11 @@ def synthetic_homography(cases=(("empty_road", None), ("empty_road", 0.4), ("ove
     return rows
 
 
+def _core(values: dict) -> dict:
+    """The core's configuration: the defaults with `values` over them (and the shipped cascade model)."""
+    return configuration.core_sections(configuration.load(None, values))
+
+
 def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window: int = 6,
              udacity_max_frames: Optional[int] = None) -> dict:
     """The whole real-data part: TME homography + identity, Udacity homography + continuity per clip."""
@@ -249,7 +255,7 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
     if tme.exists():
         frames, fps = read_tme(tme)
         cam = fit_horizon(tme_camera(data / "tme" / "calibration.ini"), frames)
-        cfg = {"camera": {**cam, "hood_frac": HOOD["tme08"]}, "pipeline": {"preset": preset}}
+        cfg = _core({"camera": {**cam, "hood_frac": HOOD["tme08"]}, "pipeline": {"preset": preset}})
         report["tme08"] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                            "continuity": track_continuity(frames, cfg, fps),
                            "visible_throughout": identity(frames, cfg, fps, visible_throughout("tme08"))}
@@ -262,7 +268,7 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
             continue
         frames, fps = read_video(clip, udacity_max_frames)
         cam = fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
-        cfg = {"camera": {**cam, "hood_frac": HOOD.get(clip.name, 0.0)}, "pipeline": {"preset": preset}}
+        cfg = _core({"camera": {**cam, "hood_frac": HOOD.get(clip.name, 0.0)}, "pipeline": {"preset": preset}})
         report[clip.name] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                              "continuity": track_continuity(frames, cfg, fps)}
         if visible_throughout(clip.name) and udacity_max_frames is None:

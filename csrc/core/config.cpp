@@ -27,6 +27,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("particles", c.particles);
     fn("cascade", c.cascade);
     fn("fuse", c.fuse);
+    fn("merge", c.merge);
     fn("phd", c.phd);
     fn("gmphd", c.phd.phd);
     fn("phd_features", c.phd.features);

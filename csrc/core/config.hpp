@@ -6,6 +6,7 @@
 #include "detect/cascade_detector.hpp"
 #include "detect/detector_parallax.hpp"
 #include "detect/fuse_detections.hpp"
+#include "detect/merge_hypotheses.hpp"
 #include "detect/lane_features.hpp"
 #include "detect/verify.hpp"
 #include "fcw/lead_selection.hpp"
@@ -41,11 +42,14 @@ struct PipelineParams {
               "named composition of detector and tracker parts: thesis (detector shadow: shadow hypotheses + vertical "
               "edges; tracker kalman: Kalman box tracker with ROI search), parallax (detector parallax: road homography "
               "+ aligned difference; tracker particles: joint particle filter, paper 000), phd (detector shadow; tracker "
-              "phd: feature points by a GM-PHD filter and a UKF per vehicle, paper 004), the crossed parallax_kalman "
-              "and shadow_particles, none (lanes only)");
+              "phd: feature points by a GM-PHD filter and a UKF per vehicle, paper 004), cascade (detector cascade: the "
+              "trained Haar cascade; tracker phd: paper 004), fused (detectors cascade, shadow and parallax, their "
+              "hypotheses merged and verified once; tracker kalman), the crossed parallax_kalman and shadow_particles, "
+              "none (lanes only)");
         m.add("detectors", detectors, detector_choices(),
               "detector parts that replace the preset's: a list, or names separated by commas, e.g. [shadow, parallax]; "
-              "empty: the preset's. A part that needs the road's motion (parallax) makes the road-motion stage run");
+              "empty: the preset's. A part that needs the road's motion (parallax) makes the road-motion stage run; "
+              "two or more parts have their hypotheses merged and verified once (section merge)");
         m.add("tracker", tracker, tracker_choices(),
               "tracker part that replaces the preset's (kalman, particles, phd, none); empty: the preset's");
         m.add("queue_capacity", queue_capacity, 1, 1024,
@@ -80,6 +84,7 @@ struct Config {
     ParticleParams particles;         //   joint particle filter
     CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
     FuseParams fuse;                  // fused stage: cascade + shadow detections merged
+    MergeParams merge;                // several detector parts: hypotheses merged, verified once
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
 
     // Parses the JSON text; throws ConfigError naming the key on any problem (a key that moved to

@@ -1,7 +1,9 @@
 #include "core/parts.hpp"
 
 #include "core/config.hpp"
+#include "detect/detector_cascade.hpp"
 #include "detect/detector_parallax.hpp"
+#include "detect/merge_hypotheses.hpp"
 #include "detect/detector_shadow.hpp"
 #include "track/tracker_kalman.hpp"
 #include "track/tracker_particles.hpp"
@@ -22,6 +24,7 @@ const std::map<std::string, Factory<Detector>> &detectors() {
     static const std::map<std::string, Factory<Detector>> r{
         {"shadow", [](const Config &c) { return std::make_unique<ShadowDetector>(c.shadow, c.verify); }},
         {"parallax", [](const Config &c) { return std::make_unique<ParallaxDifferenceDetector>(c.parallax, c.camera); }},
+        {"cascade", [](const Config &c) { return std::make_unique<CascadeDetectorPart>(c.cascade); }},
     };
     return r;
 }
@@ -44,6 +47,8 @@ const std::map<std::string, Composition> &presets() {
         {"parallax_kalman", {{"parallax"}, "kalman"}},
         {"shadow_particles", {{"shadow"}, "particles"}},
         {"phd", {{"shadow"}, "phd"}},
+        {"cascade", {{"cascade"}, "phd"}},
+        {"fused", {{"cascade", "shadow", "parallax"}, "kalman"}},
         {"none", {{}, ""}},
     };
     return r;
@@ -105,6 +110,9 @@ Parts make_parts(const Config &cfg) {
         parts.detectors.parts.push_back(detectors().at(d)(cfg));
         road = road || parts.detectors.parts.back()->needs_road_motion();
     }
+    // Several detectors: their hypotheses are merged and verified once (detect/merge_hypotheses.hpp).
+    if (comp.detectors.size() > 1)
+        parts.detectors.merge = std::make_shared<HypothesisMerge>(cfg.merge, cfg.verify, cfg.shadow.road);
     if (!comp.tracker.empty()) parts.tracker = trackers().at(comp.tracker)(cfg);
     if (road) parts.road = std::make_unique<RoadMotionStage>(cfg.road_features, cfg.homography, cfg.parallax, cfg.camera);
     return parts;

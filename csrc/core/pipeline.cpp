@@ -3,6 +3,7 @@
 #include "base/stopwatch.hpp"
 #include "core/parallax_stage.hpp"
 #include "detect/fuse_detections.hpp"
+#include "detect/merge_hypotheses.hpp"
 #include "detect/shadow.hpp"
 
 #include <stdexcept>
@@ -126,12 +127,21 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
         }
         out.times.add("hypotheses", sw.ms());
     } else if (stage == "detect") {
-        // The composition's single-image detectors (those that need no road motion), each alone.
+        // The composition's single-image detectors (those that need no road motion): each alone, or, in a
+        // composition of several detectors, their hypotheses merged and verified once.
         std::vector<Hypothesis> hyps;
         const RoadContext ctx{gray, 0.0, out.lanes, cfg_.camera, nullptr};
+        const auto &merge = parts_.detectors.merge;
         int ran = 0;
-        for (auto &d : parts_.detectors.parts)
-            if (!d->needs_road_motion()) ran += d->detect(ctx, hyps, out.times) ? 1 : 0;
+        for (auto &d : parts_.detectors.parts) {
+            if (d->needs_road_motion()) continue;
+            ran += (merge ? d->unverified(ctx, hyps, out.times) : d->detect(ctx, hyps, out.times)) ? 1 : 0;
+        }
+        if (merge) {
+            Stopwatch sw;
+            hyps = merge->merge_and_verify(ctx, hyps);
+            out.times.add("merge", sw.ms());
+        }
         if (ran == 0)
             throw std::invalid_argument("stage 'detect' runs the detectors of pipeline.detectors that work on one image, "
                                         "and this composition has none (the parallax detector needs two frames: stage "

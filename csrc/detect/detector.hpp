@@ -33,7 +33,20 @@ struct Hypothesis {
     float score = 0.f;       // 0..1; how sure the detector is (comparable across detectors)
     float strength = 0.f;    // the detector's own measure (edge excess, mean |difference|), orders hypotheses of one source
     const char *source = ""; // the registry name of the detector that made it
+    float road_gray = kNaN;  // gray level of the road where the detector measured the bottom edge (shadow); NaN: not measured
+    float appearance = kNaN; // 0..1; a learned appearance model's score (the cascade's); NaN: the detector has none
 };
+
+// A hypothesis measured at the bottom centre of its box.
+inline Hypothesis hypothesis_of(const cv::Rect2f &box, float score, float strength, const char *source) {
+    Hypothesis h;
+    h.box = box;
+    h.foot = {box.x + 0.5f * box.width, box.y + box.height};
+    h.score = score;
+    h.strength = strength;
+    h.source = source;
+    return h;
+}
 
 class Detector {
 public:
@@ -43,21 +56,28 @@ public:
     // A full detection over the road area. Appends to `out`, adds the wall time of its sub-stages to
     // `times`; returns false when it could not run this frame (e.g. no road motion yet).
     virtual bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) = 0;
+    // The hypotheses before the part's own verification, for a composition of several detectors whose
+    // hypotheses are merged and verified once (detect/merge_hypotheses.hpp); by default those of detect().
+    virtual bool unverified(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+        return detect(ctx, out, times);
+    }
     // Called once per frame after the tracker, whether or not detect() ran (parts with memory of past
     // frames keep it here).
     virtual void end_frame(const RoadContext &) {}
     virtual void reset() {}
 };
 
+class HypothesisMerge;  // detect/merge_hypotheses.hpp
+
 // The composition's detectors, asked together.
 struct DetectorSet {
     std::vector<std::unique_ptr<Detector>> parts;
-    // Every part's hypotheses, in the order of pipeline.detectors; false if none could run.
-    bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
-        bool any = false;
-        for (auto &d : parts) any = d->detect(ctx, out, times) || any;
-        return any;
-    }
+    // Set for a composition of two or more detectors: their unverified hypotheses are merged (one per
+    // vehicle) and verified once. Null: every part's own hypotheses.
+    std::shared_ptr<const HypothesisMerge> merge;
+    // The vehicles: merged and verified once (merge set), else every part's hypotheses in the order of
+    // pipeline.detectors; false if no part could run. Defined in detect/merge_hypotheses.cpp.
+    bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times);
 };
 
 } // namespace hw

@@ -13,15 +13,18 @@ bool ShadowDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &out
     const float verify_ms = sv.ms();
     times.add("hypotheses", hyp_ms);
     times.add("verify", verify_ms);
-    for (const Detection &d : dets) {
-        Hypothesis h;
-        h.box = d.box;
-        h.foot = {d.box.x + 0.5f * d.box.width, d.box.y + d.box.height};
-        h.score = d.score;
-        h.strength = d.score;
-        h.source = "shadow";
+    for (const Detection &d : dets) out.push_back(hypothesis_of(d.box, d.score, d.score, "shadow"));
+    return true;
+}
+
+bool ShadowDetector::unverified(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+    Stopwatch sh;
+    for (const ShadowHypothesis &s : shadow_hypotheses(ctx.gray, ctx.lanes, ctx.camera, shadow_)) {
+        Hypothesis h = hypothesis_of(s.box, s.strength, s.strength, "shadow");
+        h.road_gray = s.road_gray;
         out.push_back(h);
     }
+    times.add("hypotheses", sh.ms());
     return true;
 }
 

@@ -24,7 +24,8 @@ float texture_below(const cv::Mat &gray, float left, float right, float bottom) 
     return float(grad / std::max(1.0, cv::mean(gray(strip))[0]));
 }
 
-// Verifies one hypothesis; false if it is not a vehicle.
+} // namespace
+
 bool verify_one(const cv::Mat &gray, const ShadowHypothesis &h, const VerifyParams &p, Detection &out) {
     const float w_exp = h.expected_width_px;
     const float w_shadow = h.box.width;
@@ -76,8 +77,6 @@ bool verify_one(const cv::Mat &gray, const ShadowHypothesis &h, const VerifyPara
     return true;
 }
 
-} // namespace
-
 float side_threshold(float road_gray, const VerifyParams &p) {
     return float(std::max(p.side_min_gray, p.side_rel * road_gray));
 }
@@ -91,13 +90,20 @@ std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<
         Detection d;
         if (verify_one(gray, h, p, d)) found.push_back(d);
     }
-    std::stable_sort(found.begin(), found.end(),
-                     [](const Detection &a, const Detection &b) { return a.score > b.score; });
     std::vector<Detection> out;
-    for (const Detection &d : found) {
+    for (size_t i : strongest_apart(found, p.nms_iou)) out.push_back(found[i]);
+    return out;
+}
+
+std::vector<size_t> strongest_apart(const std::vector<Detection> &found, double nms_iou) {
+    std::vector<size_t> order(found.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return found[a].score > found[b].score; });
+    std::vector<size_t> out;
+    for (size_t i : order) {
         bool overlapped = false;
-        for (const Detection &k : out) overlapped = overlapped || box_iou(d.box, k.box) > p.nms_iou;
-        if (!overlapped) out.push_back(d);
+        for (size_t k : out) overlapped = overlapped || box_iou(found[i].box, found[k].box) > nms_iou;
+        if (!overlapped) out.push_back(i);
     }
     return out;
 }

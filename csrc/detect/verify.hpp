@@ -87,6 +87,15 @@ std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<
                                          const LaneModel &lanes, const CameraParams &cam,
                                          const VerifyParams &p);
 
+// Verifies one hypothesis (a bottom edge at h.box's bottom row from h.box.x over h.box.width, the vehicle
+// width expected there, the road's gray level): false if it is not a vehicle, else its box and score.
+// The one verification of every detector's hypotheses (detect/merge_hypotheses.hpp merges them first).
+bool verify_one(const cv::Mat &gray, const ShadowHypothesis &h, const VerifyParams &p, Detection &out);
+
+// Indices of the detections kept, strongest first: each is dropped that overlaps a kept stronger one by
+// more than nms_iou.
+std::vector<size_t> strongest_apart(const std::vector<Detection> &found, double nms_iou);
+
 // Side threshold of the verification for a road of gray level road_gray (mean step, gray levels).
 float side_threshold(float road_gray, const VerifyParams &p);
 

@@ -1,0 +1,18 @@
+#include "detect/detector_cascade.hpp"
+
+#include "base/stopwatch.hpp"
+
+namespace hw {
+
+bool CascadeDetectorPart::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+    Stopwatch sw;
+    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera)) {
+        Hypothesis h = hypothesis_of(d.box, d.confidence, d.stage_sum, "cascade");
+        h.appearance = d.confidence;
+        out.push_back(h);
+    }
+    times.add("cascade", sw.ms());
+    return true;
+}
+
+} // namespace hw
