@@ -79,8 +79,15 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                            float(weights[i])});
         }
     }
-    // group: strongest first, every window overlapping a group's seed joins it
-    std::sort(raw.begin(), raw.end(), [](const Raw &a, const Raw &b) { return a.weight > b.weight; });
+    // group: strongest first, every window overlapping a group's seed joins it. OpenCV's detectMultiScale scans in
+    // parallel and returns the windows in a thread-dependent order, and stage sums tie (they are sums of a few
+    // stump values): a total order (sum, then position) makes the groups, hence the tracks, the same on every run.
+    std::sort(raw.begin(), raw.end(), [](const Raw &a, const Raw &b) {
+        if (a.weight != b.weight) return a.weight > b.weight;
+        if (a.box.y != b.box.y) return a.box.y < b.box.y;
+        if (a.box.x != b.box.x) return a.box.x < b.box.x;
+        return a.box.width < b.box.width;
+    });
     std::vector<char> used(raw.size(), 0);
     std::vector<CascadeDetection> out;
     for (size_t i = 0; i < raw.size(); ++i) {
