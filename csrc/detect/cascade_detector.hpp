@@ -55,7 +55,7 @@ struct CascadeParams {
         m.add("verifier", verifier, nullptr,
               "path of the verifier (HOG + neighbours + implied height, one-hidden-layer network) judging every "
               "cascade detection; empty = the "
-              "model shipped with Headway (app/models/vehicle_verifier.yml, recipe in docs/cascade.md); off = "
+              "model shipped with Headway (app/models/vehicle_verifier.yml.gz, recipe in docs/cascade.md); off = "
               "the cascade's neighbour count alone as confidence, which measured worse on the TuSimple validation split");
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
