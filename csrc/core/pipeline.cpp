@@ -66,7 +66,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
     prev_t_s_ = frame.t_s;
     {
         Stopwatch sw;
-        calib_.update(out.lanes, ego.yaw_rate_rps, frame.t_s);
+        calib_.update(out.lanes, ego.speed_mps, ego.yaw_rate_rps, frame.t_s);
         const CalibrationEstimate e = calib_.estimate();
         if (e.active) {
             const CameraParams cam = calib_.camera();
