@@ -53,7 +53,8 @@ def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = N
     mis-configured by its offsets (signs: + pitch, + yaw, + height; default: the issue's 2 deg, 2 deg, 15 %),
     self-calibration on or off. Reports when every estimate got within TOLERANCE for good, the largest
     errors afterwards (also per phase of the drive: straight, curve, hill, lane change) and the range
-    error afterwards. The CAN bus gives the ego speed and the true yaw rate (the curves', the lane changes')."""
+    error afterwards. The CAN bus gives the ego speed and the true yaw rate (the curves', the lane changes'),
+    unless a run says ``can_yaw_rate: False``; a run's ``self_calibration`` mapping overrides that section."""
     from app.sim import load_scenario, render
     from app.sim.frames import scenario_camera
 
@@ -76,8 +77,8 @@ def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = N
         for f in render(sc):
             phase = _phase(f.road)
             truth = [v for v in f.truth if v["longitudinal_m"] <= max_range_m and v["visible_fraction"] >= 0.5]
-            for pipe, st in zip(pipes, states):
-                pipe.set_ego_motion(f.ego_speed_mps, f.yaw_rate_rps)
+            for pipe, st, run in zip(pipes, states, runs):
+                pipe.set_ego_motion(f.ego_speed_mps, f.yaw_rate_rps if run.get("can_yaw_rate", True) else None)
                 r = pipe.process(f.image, f.t_s)
                 st["rows"].append((f.t_s, *_errors(r.calibration, true), r.calibration["pitch_sigma_deg"],
                                    r.calibration["height_sigma_m"], phase))
