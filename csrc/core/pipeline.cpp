@@ -66,13 +66,14 @@ FrameOutput Pipeline::process(const Frame &frame) {
     prev_t_s_ = frame.t_s;
     {
         Stopwatch sw;
-        calib_.update(out.lanes, ego.speed_mps, ego.yaw_rate_rps, frame.t_s);
+        calib_.update(out.lanes, ego.speed_mps, ego.yaw_rate_rps, frame.t_s, out.road);
         const CalibrationEstimate e = calib_.estimate();
         if (e.active) {
             const CameraParams cam = calib_.camera();
             horizon_.set_camera(cam);
             kinematics_.set_camera(cam);
             lead_.set_camera(cam);
+            if (parts_.road) parts_.road->set_camera(cam);
         }
         out.calib_active = e.active;
         out.calib_pitch_deg = float(e.pitch_deg);
@@ -189,7 +190,10 @@ void Pipeline::reset() {
     lanes_.reset();
     if (parts_.tracker) parts_.tracker->reset();
     for (auto &d : parts_.detectors.parts) d->reset();
-    if (parts_.road) parts_.road->reset();
+    if (parts_.road) {
+        parts_.road->reset();
+        parts_.road->set_camera(cfg_.camera);
+    }
     last_tracks_.clear();
     image_stats_.reset();
     calib_.reset();

@@ -1,5 +1,7 @@
 #include "geometry/self_calibration.hpp"
 
+#include "geometry/road_motion_fit.hpp"
+
 #include <algorithm>
 
 namespace hw {
@@ -41,6 +43,11 @@ void SelfCalibrationParams::bind(ParamMap &m) {
           "lanes' straight fits meet k * ~13 m off the road direction (0.07 deg at 1e-4): no measurement");
     m.add("curve_hold_s", curve_hold_s, 0.0, 30.0,
           "s; no measurement for this long after the last frame on a curve (the lane fits look ~15 m ahead)");
+    m.add("road_motion", road_motion, "also measure the yaw from the road plane's motion where it is fitted (parallax "
+                                      "preset): the lateral part of the car's travel against the assumed mounting");
+    m.add("motion_yaw_noise_deg", motion_yaw_noise_deg, 0.01, 30.0,
+          "deg; 1-sigma of one frame's yaw from the road plane's motion (0.12 deg measured with the rest of the "
+          "mounting right, biased by ~0.7 deg while pitch and height are 2 deg / 15 % off)");
     m.add("gate_sigma", gate_sigma, 1.0, 100.0,
           "sigma; a measurement farther from the estimate than this (estimate and measurement sigma together) is "
           "an outlier (a crest, a wrong marking)");
@@ -84,7 +91,10 @@ void SelfCalibration::reset() {
     updates_ = 0;
 }
 
-void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double yaw_rate_rps, double t_s) {
+void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double yaw_rate_rps, double t_s,
+                             const RoadMotion &road) {
+    // the road plane's motion was fitted around this estimate (before this frame's update)
+    const CameraParams assumed = camera();
     if (!p_.enabled) return;
     const double dt = std::isfinite(last_t_) ? std::max(0.0, t_s - last_t_) : 0.0;
     last_t_ = t_s;
@@ -128,6 +138,14 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     const int n = p_.reacquire_after;
     bool used = pitch_.update(pitch, r_ang, p_.gate_sigma, n, prior_ang);
     used |= yaw_.update(yaw, r_ang, p_.gate_sigma, n, prior_ang);
+    if (p_.road_motion && road.state == RoadMotion::State::kAccepted) {
+        const cv::Vec3d t = road_motion_translation(road.H, assumed);  // m, level axes of the assumed mounting
+        if (t[2] > 0.2 && std::isfinite(t[0])) {
+            const double yaw_motion = assumed.yaw_deg - std::atan2(t[0], t[2]) / kDeg;
+            used |= yaw_.update(yaw_motion, p_.motion_yaw_noise_deg * p_.motion_yaw_noise_deg, p_.gate_sigma, n,
+                                prior_ang);
+        }
+    }
     used |= height_.update(h / cfg_.height_m, p_.height_noise * p_.height_noise, p_.gate_sigma, n,
                            p_.prior_sigma_height * p_.prior_sigma_height);
     pitch_.x = std::clamp(pitch_.x, cfg_.pitch_deg - p_.max_pitch_dev_deg, cfg_.pitch_deg + p_.max_pitch_dev_deg);
