@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from .camera import Camera
+from .road_shape import pieces
 
 SHIFT = 4  # fractional bits of the polygon vertices (1/16 px)
 _SCALE = float(1 << SHIFT)
@@ -60,8 +61,6 @@ def _project_bent(camera: Camera, corners, row_offset: float) -> list[np.ndarray
     image row at most twice (its rows rise monotonically with the range up to the view limit), which
     cv2.fillConvexPoly fills exactly; cv2.fillPoly would round its vertices to whole rows (2 px sideways
     on a line that slants 4 px a row)."""
-    from .road_shape import pieces  # road_shape imports camera, not polygons: no cycle, but kept local
-
     outlines = []
     for poly in corners:
         poly = _clip_plane(np.asarray(poly, dtype=np.float64), 2, camera.view_m, keep_below=True)

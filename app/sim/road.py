@@ -17,6 +17,7 @@ import numpy as np
 
 from .camera import Camera
 from .polygons import fill, project_quads, rect_xz
+from .road_shape import pieces
 from .scenario import Scenario
 
 # Beyond this range the road is one haze-blended gray, and markings are not drawn (sub-pixel).
@@ -129,8 +130,6 @@ class Ground:
         ground is (bool). Polygons follow the bend; the texture and the haze take each pixel's road
         coordinates from thin slabs across the road (the road within a slab is planar to well below a
         pixel), drawn far to near so that a crest's far side stays hidden."""
-        from .road_shape import pieces
-
         shape = (camera.height, camera.width)
         z_near = self._nearest_visible_m(camera)
         far = min(FAR_M, camera.view_m)

@@ -72,10 +72,6 @@ class RoadShape:
         self.line = line - self._interp(line, 0.0)  # C(0) = origin
         self.angles = np.stack([self.heading(self.s), self.grade(self.s)], 1)  # piecewise linear: exact at the grid
 
-    @property
-    def bent(self) -> bool:
-        return bool(self.curves or self.hills)
-
     def curvature(self, s) -> np.ndarray:
         """Plan curvature (1/m, > 0 bends right) at arc length s."""
         return _integrate(self.curves, np.asarray(s, float))[0]

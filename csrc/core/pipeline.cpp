@@ -59,10 +59,11 @@ FrameOutput Pipeline::process(const Frame &frame) {
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
         last_tracks_ = out.tracks;
     }
-    // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset)
+    // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset), with
+    // the mounting the road-motion stage fitted it around (self-calibration's estimate before this frame)
     EgoMotion ego{ego_speed_mps_, ego_yaw_rate_rps_};
     if (!std::isfinite(ego.yaw_rate_rps) && out.road.state == RoadMotion::State::kAccepted)
-        ego.yaw_rate_rps = yaw_rate_of_road_motion(out.road.H, cfg_.camera, frame.t_s - prev_t_s_);
+        ego.yaw_rate_rps = yaw_rate_of_road_motion(out.road.H, calib_.camera(), frame.t_s - prev_t_s_);
     prev_t_s_ = frame.t_s;
     {
         Stopwatch sw;

@@ -35,6 +35,9 @@ cv::Matx33d mounting_rotation(const CameraParams &cam);
 // rotation. M's first and third columns are s R''s (n has no x or z part), so s = |M_0|,
 // R' = [M_0, M_2 x M_0, M_2] / s, and t / h = e_y - R'^T M_1 / s. NaNs when H is degenerate.
 cv::Vec3d road_motion_translation(const cv::Matx33d &H, const CameraParams &cam);
+// R' of the same decomposition: the camera's rotation between the frames in level-camera axes (identity
+// when H is degenerate).
+cv::Matx33d road_motion_rotation(const cv::Matx33d &H, const CameraParams &cam);
 
 struct RoadMotionFit {
     bool ok = false;

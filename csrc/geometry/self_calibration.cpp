@@ -48,6 +48,10 @@ void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("motion_yaw_noise_deg", motion_yaw_noise_deg, 0.01, 30.0,
           "deg; 1-sigma of one frame's yaw from the road plane's motion (0.12 deg measured with the rest of the "
           "mounting right, biased by ~0.7 deg while pitch and height are 2 deg / 15 % off)");
+    m.add("yaw_rate_smoothing_s", yaw_rate_smoothing_s, 0.0, 10.0,
+          "s; time constant of the low-pass on the yaw rate the curve gate tests: the road plane's motion measures the "
+          "camera's turn between frames, shake included (0.05 deg of yaw shake at 2.3 Hz is 0.01 rad/s, four times the "
+          "gate at 90 km/h); a bus yaw rate is smooth already");
     m.add("gate_sigma", gate_sigma, 1.0, 100.0,
           "sigma; a measurement farther from the estimate than this (estimate and measurement sigma together) is "
           "an outlier (a crest, a wrong marking)");
@@ -55,10 +59,8 @@ void SelfCalibrationParams::bind(ParamMap &m) {
 
 double yaw_rate_of_road_motion(const cv::Matx33d &H, const CameraParams &cam, double dt_s) {
     if (!(dt_s > 0)) return NAN;
-    const cv::Vec3d p(cam.cx, cam.horizon_row(), 1.0);
-    const cv::Vec3d q = H * p;
-    if (std::abs(q[2]) < 1e-12) return NAN;
-    return std::atan((q[0] / q[2] - p[0]) / cam.fx) / dt_s;
+    const cv::Matx33d R = road_motion_rotation(H, cam);
+    return std::atan2(R(0, 2), R(2, 2)) / dt_s;
 }
 
 bool SelfCalibration::Scalar::update(double z, double r, double gate_sigma, int reacquire, double prior_var) {
@@ -87,7 +89,7 @@ void SelfCalibration::reset() {
     pitch_ = {cfg_.pitch_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
     yaw_ = {cfg_.yaw_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
     height_ = {1.0, p_.prior_sigma_height * p_.prior_sigma_height};
-    last_t_ = last_offset_m_ = last_curve_t_ = NAN;
+    last_t_ = last_offset_m_ = last_curve_t_ = yaw_rate_smooth_ = NAN;
     updates_ = 0;
 }
 
@@ -102,10 +104,17 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     yaw_.predict(p_.angle_drift_deg_s * p_.angle_drift_deg_s * dt);
     height_.predict(p_.height_drift_s * p_.height_drift_s * dt);
 
-    // on a curve (path curvature k = yaw rate / speed), and for curve_hold_s after it
-    const bool turning = std::isfinite(yaw_rate_rps) &&
-                         (std::abs(yaw_rate_rps) > p_.max_yaw_rate_rps ||
-                          (speed_mps > 1.0 && std::abs(yaw_rate_rps) / speed_mps > p_.max_curvature_1pm));
+    // on a curve (path curvature k = yaw rate / speed, the yaw rate low-passed), and for curve_hold_s after it
+    // (a frame without a yaw rate, the road motion not accepted, holds the last value)
+    if (std::isfinite(yaw_rate_rps)) {
+        if (!std::isfinite(yaw_rate_smooth_))
+            yaw_rate_smooth_ = yaw_rate_rps;
+        else
+            yaw_rate_smooth_ += dt / (p_.yaw_rate_smoothing_s + dt) * (yaw_rate_rps - yaw_rate_smooth_);
+    }
+    const double r = yaw_rate_smooth_;
+    const bool turning = std::isfinite(r) && (std::abs(r) > p_.max_yaw_rate_rps ||
+                                              (speed_mps > 1.0 && std::abs(r) / speed_mps > p_.max_curvature_1pm));
     if (turning) last_curve_t_ = t_s;
     const bool straight = !(std::isfinite(last_curve_t_) && t_s - last_curve_t_ <= p_.curve_hold_s);
 

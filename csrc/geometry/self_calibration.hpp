@@ -70,6 +70,7 @@ struct SelfCalibrationParams {
     double max_yaw_rate_rps = 0.02;    // faster turning is a curve: no update (also without a known speed)
     double max_curvature_1pm = 1e-4;   // |yaw rate| / speed above this is a curve: no update (radius < 10 km)
     double curve_hold_s = 1.0;         // ... nor this long after it (the lane fits look ~15 m ahead)
+    double yaw_rate_smoothing_s = 0.5; // time constant of the yaw rate the curve gate sees (camera shake averaged)
     double gate_sigma = 4.0;           // innovations beyond this many sigma are outliers
     int reacquire_after = 15;          // this many gated-out measurements in a row: the estimate is wrong, widen it
     bool road_motion = true;           // also measure the yaw from the road plane's motion (when it is fitted)
@@ -79,8 +80,11 @@ struct SelfCalibrationParams {
 };
 
 // The car's yaw rate (rad/s, left positive) from the road plane's image motion H (pixels, previous ->
-// current) over dt seconds: points of the road's vanishing line (the horizon) move by the camera's
-// rotation alone, u' = u + fx tan(d_psi) for a turn d_psi to the left (the scene shifts right).
+// current) over dt seconds, fitted by the road-motion stage around the mounting `cam`: the rotation R' of
+// road_motion_rotation() about the level camera's vertical axis (y down; a turn d_psi to the left turns
+// the scene right: R'(0,2) = sin d_psi). Separating the rotation from the travel matters: the former
+// reading, the horizon row's points through H, took travel for rotation when the mounting was off (from
+// 2 deg of pitch error it read a yaw rate that kept the curve gate shut: no calibration at all).
 // NaN when dt is not positive.
 double yaw_rate_of_road_motion(const cv::Matx33d &H, const CameraParams &cam, double dt_s);
 
@@ -117,6 +121,7 @@ private:
     Scalar pitch_, yaw_, height_;  // deg, deg, relative to the configured height (1 = as configured)
     double last_t_ = NAN, last_offset_m_ = NAN;
     double last_curve_t_ = NAN;  // time of the last frame on a curve
+    double yaw_rate_smooth_ = NAN;  // rad/s, the yaw rate low-passed over yaw_rate_smoothing_s
     int updates_ = 0;
 };
 
