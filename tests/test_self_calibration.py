@@ -50,3 +50,17 @@ def test_status_shows_the_estimate_with_its_uncertainty():
     assert "calibration: pitch 1.04 +- 0.03 deg, yaw -0.10 +- 0.03 deg, height 1.310 +- 0.006 m (812 frames" in text
     off = format_status({"state": "ok", "written_unix_s": time.time(), "calibration": dict(cal, active=False)}, "/x")
     assert "calibration: off (configured pitch 1.04 deg" in off
+
+
+def test_yaw_from_the_road_planes_motion():
+    """Parallax preset, the yaw 2 deg off and the lanes' angles made nearly uninformative (10 deg a frame):
+    the lateral part of the car's travel in the fitted road motion alone brings the yaw in."""
+    from app.eval.self_calibration import synthetic_runs
+
+    runs = [{"offsets": {"pitch_deg": 0.0, "yaw_deg": 2.0, "height_rel": 0.0},
+             "self_calibration": {"angle_noise_deg": 10.0, "road_motion": on, "motion_yaw_noise_deg": 0.3}}
+            for on in (True, False)]
+    with_motion, without = synthetic_runs("steady_following", runs, preset="parallax")
+    assert with_motion["converged_s"] is not None and with_motion["converged_s"] <= 2.0, with_motion
+    assert abs(with_motion["final"]["yaw_err_deg"]) <= 0.05, with_motion
+    assert without["converged_s"] is None or without["converged_s"] > 4.0, without

@@ -2,7 +2,7 @@
 real TuSimple lane clips, and range on TuSimple train_clip1 from the default mounting against the
 calibrated one.
 
-    python -m app.eval.self_calibration [--data ../shared/data] [--scenario calibration_drive] [--json]
+    python -m app.eval.self_calibration [--data ../shared/data] [--parts synthetic,clips,range] [--scenario NAME]...
 """
 from __future__ import annotations
 
@@ -31,55 +31,115 @@ def _errors(cal: dict, true: dict) -> tuple[float, float, float]:
             cal["height_m"] / true["height_m"] - 1.0)
 
 
-def synthetic(scenario: str = "calibration_drive", offsets: Optional[dict] = None, enabled: bool = True,
-              preset: str = "thesis", max_range_m: float = 60.0) -> dict:
-    """Runs `scenario` with its camera mis-configured by `offsets` (signs: + pitch, + yaw, + height) and
-    reports when every estimate got within TOLERANCE for good, and the range error afterwards."""
+# The starting offsets the synthetic part runs (signs of pitch, yaw, height), and with self-calibration off.
+SIGNS = ((1, 1, 1), (-1, -1, -1), (1, -1, -1), (-1, 1, 1))
+SYNTHETIC_SCENARIOS = ("calibration_drive", "calibration_curves_hills", "calibration_lane_change")
+
+
+def _phase(road: dict) -> str:
+    """What the ego is driving through in this frame (truth of the synthetic world)."""
+    if abs(road.get("heading_deg", 0.0)) > 0.05:  # the ego turned against its lane: changing lanes
+        return "lane_change"
+    if road.get("curvature_1pm", 0.0) != 0.0:
+        return "curve"
+    if road.get("vertical_curvature_1pm", 0.0) != 0.0 or abs(road.get("grade_deg", 0.0)) > 1e-6:
+        return "hill"
+    return "straight"
+
+
+def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = None, preset: str = "thesis",
+                   max_range_m: float = 60.0) -> list[dict]:
+    """Renders `scenario` once and runs one pipeline per run on the same frames: each run's camera is
+    mis-configured by its offsets (signs: + pitch, + yaw, + height; default: the issue's 2 deg, 2 deg, 15 %),
+    self-calibration on or off. Reports when every estimate got within TOLERANCE for good, the largest
+    errors afterwards (also per phase of the drive: straight, curve, hill, lane change) and the range
+    error afterwards. The CAN bus gives the ego speed and the true yaw rate (the curves', the lane changes'),
+    unless a run says ``can_yaw_rate: False``; a run's ``self_calibration`` mapping overrides that section."""
     from app.sim import load_scenario, render
     from app.sim.frames import scenario_camera
 
-    off = dict(OFFSETS, **(offsets or {}))
+    runs = runs or [{"offsets": None, "enabled": True}]
     sc = load_scenario(scenario)
     true = dataclasses.asdict(scenario_camera(sc))
-    cfg = configuration.load(None)
-    cfg["camera"].update(true)
-    cfg["camera"].update(pitch_deg=true["pitch_deg"] + off["pitch_deg"], yaw_deg=true["yaw_deg"] + off["yaw_deg"],
-                         height_m=true["height_m"] * (1.0 + off["height_rel"]))
-    cfg["pipeline"]["preset"] = preset
-    cfg["self_calibration"]["enabled"] = enabled
-    rows, ranges = [], []  # (t, errors...), (t, true range, rel error)
-    with Pipeline(configuration.core_sections(cfg)) as pipe:
+    pipes, states = [], []
+    for run in runs:
+        off = dict(OFFSETS, **(run.get("offsets") or {}))
+        cfg = configuration.load(None)
+        cfg["camera"].update(true)
+        cfg["camera"].update(pitch_deg=true["pitch_deg"] + off["pitch_deg"], yaw_deg=true["yaw_deg"] + off["yaw_deg"],
+                             height_m=true["height_m"] * (1.0 + off["height_rel"]))
+        cfg["pipeline"]["preset"] = preset
+        cfg["self_calibration"]["enabled"] = run.get("enabled", True)
+        cfg["self_calibration"].update(run.get("self_calibration") or {})
+        pipes.append(Pipeline(configuration.core_sections(cfg)))
+        states.append({"off": off, "rows": [], "ranges": []})  # rows: (t, errors..., sigmas, phase)
+    try:
         for f in render(sc):
-            pipe.set_ego_motion(f.ego_speed_mps, 0.0)
-            r = pipe.process(f.image, f.t_s)
-            rows.append((f.t_s, *_errors(r.calibration, true), r.calibration["pitch_sigma_deg"],
-                         r.calibration["height_sigma_m"]))
+            phase = _phase(f.road)
             truth = [v for v in f.truth if v["longitudinal_m"] <= max_range_m and v["visible_fraction"] >= 0.5]
-            tracks = [t for t in r.tracks if t.confirmed and t.range_m is not None]
-            for i, j, _ in match([v["box_clipped"] for v in truth], [t.box for t in tracks]):
-                z = truth[i]["longitudinal_m"]
-                ranges.append((f.t_s, z, (tracks[j].range_m - z) / z))
-    a = np.array(rows)
+            for pipe, st, run in zip(pipes, states, runs):
+                pipe.set_ego_motion(f.ego_speed_mps, f.yaw_rate_rps if run.get("can_yaw_rate", True) else None)
+                r = pipe.process(f.image, f.t_s)
+                st["rows"].append((f.t_s, *_errors(r.calibration, true), r.calibration["pitch_sigma_deg"],
+                                   r.calibration["height_sigma_m"], phase))
+                tracks = [t for t in r.tracks if t.confirmed and t.range_m is not None]
+                for i, j, _ in match([v["box_clipped"] for v in truth], [t.box for t in tracks]):
+                    z = truth[i]["longitudinal_m"]
+                    st["ranges"].append((f.t_s, z, (tracks[j].range_m - z) / z, phase))
+    finally:
+        for pipe in pipes:
+            pipe.close()
+    return [_summary(scenario, run.get("enabled", True), st) for run, st in zip(runs, states)]
+
+
+def _summary(scenario: str, enabled: bool, st: dict) -> dict:
+    rows = st["rows"]
+    a = np.array([r[:6] for r in rows])
+    phases = np.array([r[6] for r in rows])
     inside = (np.abs(a[:, 1]) <= TOLERANCE["angle_deg"]) & (np.abs(a[:, 2]) <= TOLERANCE["angle_deg"]) & \
              (np.abs(a[:, 3]) <= TOLERANCE["height_rel"])
     outside = np.nonzero(~inside)[0]
     converged_t = None if outside.size and outside[-1] == len(a) - 1 else \
         float(a[outside[-1] + 1, 0] if outside.size else a[0, 0])
-    after = [abs(e) for t, _, e in ranges if converged_t is not None and t >= converged_t]
-    before = [abs(e) for t, _, e in ranges if t < 1.0]
+    # first entry into the tolerance (what the issue's "converge within 10 s" asks when a later phase leaves it)
+    first_in = float(a[np.argmax(inside), 0]) if inside.any() else None
+    after = [abs(e) for t, _, e, _ in st["ranges"] if converged_t is not None and t >= converged_t]
+    before = [abs(e) for t, _, e, _ in st["ranges"] if t < 1.0]
     last = a[-1]
-    return {"scenario": scenario, "enabled": enabled, "offsets": off, "frames": len(a),
-            "converged_s": converged_t,
+
+    def worst(mask) -> Optional[dict]:
+        if not mask.any():
+            return None
+        return {"pitch_deg": round(float(np.abs(a[mask, 1]).max()), 3), "yaw_deg": round(float(np.abs(a[mask, 2]).max()), 3),
+                "height_rel": round(float(np.abs(a[mask, 3]).max()), 4)}
+
+    settled = a[:, 0] >= (first_in if first_in is not None else np.inf)
+    per_phase = {}
+    for ph in ("straight", "curve", "hill", "lane_change"):
+        m = settled & (phases == ph)
+        if m.any():
+            errs = [abs(e) for t, _, e, p in st["ranges"] if p == ph and first_in is not None and t >= first_in]
+            per_phase[ph] = {"seconds": round(float(m.sum() * np.median(np.diff(a[:, 0]))), 1),
+                             "max_abs_err": worst(m),
+                             "range_median_rel_error": round(float(np.median(errs)), 4) if errs else None,
+                             "range_n": len(errs)}
+    return {"scenario": scenario, "enabled": enabled, "offsets": st["off"], "frames": len(a),
+            "converged_s": converged_t, "first_within_s": first_in,
             "final": {"pitch_err_deg": round(float(last[1]), 3), "yaw_err_deg": round(float(last[2]), 3),
                       "height_err_rel": round(float(last[3]), 4), "pitch_sigma_deg": round(float(last[4]), 3),
                       "height_sigma_m": round(float(last[5]), 4)},
-            "max_abs_err_after_convergence": None if converged_t is None else {
-                "pitch_deg": round(float(np.abs(a[a[:, 0] >= converged_t, 1]).max()), 3),
-                "yaw_deg": round(float(np.abs(a[a[:, 0] >= converged_t, 2]).max()), 3),
-                "height_rel": round(float(np.abs(a[a[:, 0] >= converged_t, 3]).max()), 4)},
+            "max_abs_err_after_convergence": None if converged_t is None else worst(a[:, 0] >= converged_t),
+            "max_abs_err_after_first_within": worst(settled),
+            "per_phase_after_first_within": per_phase,
             "range_median_rel_error_after": round(float(np.median(after)), 4) if after else None,
             "range_n_after": len(after),
             "range_median_rel_error_first_s": round(float(np.median(before)), 4) if before else None}
+
+
+def synthetic(scenario: str = "calibration_drive", offsets: Optional[dict] = None, enabled: bool = True,
+              preset: str = "thesis", max_range_m: float = 60.0) -> dict:
+    """One run of `synthetic_runs`."""
+    return synthetic_runs(scenario, [{"offsets": offsets, "enabled": enabled}], preset, max_range_m)[0]
 
 
 def lane_clips(data: str) -> dict:
@@ -145,15 +205,19 @@ def range_clip(data: str) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default="../shared/data")
-    ap.add_argument("--scenario", default="calibration_drive")
+    ap.add_argument("--scenario", action="append",
+                    help=f"synthetic scenario (repeatable; default: {', '.join(SYNTHETIC_SCENARIOS)})")
     ap.add_argument("--parts", default="synthetic,clips,range")
     args = ap.parse_args(argv)
     parts = args.parts.split(",")
     out = {}
     if "synthetic" in parts:
-        out["synthetic"] = [synthetic(args.scenario, {"pitch_deg": sp * 2.0, "yaw_deg": sy * 2.0, "height_rel": sh * 0.15})
-                            for sp, sy, sh in ((1, 1, 1), (-1, -1, -1), (1, -1, -1), (-1, 1, 1))]
-        out["synthetic_off"] = synthetic(args.scenario, enabled=False)
+        runs = [{"offsets": {"pitch_deg": sp * 2.0, "yaw_deg": sy * 2.0, "height_rel": sh * 0.15}} for sp, sy, sh in SIGNS]
+        runs.append({"offsets": None, "enabled": False})
+        for name in args.scenario or SYNTHETIC_SCENARIOS:
+            *on, off = synthetic_runs(name, runs)
+            out.setdefault("synthetic", []).extend(on)
+            out.setdefault("synthetic_off", []).append(off)
     if "clips" in parts and (Path(args.data) / "tusimple" / "lane_clips").exists():
         out["lane_clips"] = lane_clips(args.data)
     if "range" in parts and (Path(args.data) / "tusimple" / "train_clip1").exists():

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from .camera import Camera
+from .road_shape import pieces
 
 SHIFT = 4  # fractional bits of the polygon vertices (1/16 px)
 _SCALE = float(1 << SHIFT)
@@ -42,6 +43,8 @@ def project_quads(camera: Camera, corners: np.ndarray, row_offset: float = 0.0) 
     side of a yawed camera), so every returned vertex is a finite projection. ``row_offset``
     is subtracted from the rows (for drawing into a band of the image).
     """
+    if getattr(camera, "bend", None) is not None:
+        return _project_bent(camera, corners, row_offset)
     corners = np.asarray(corners, dtype=np.float64)
     n, k = corners.shape[:2]
     cam = camera.to_camera(corners.reshape(-1, 3)).reshape(n, k, 3)
@@ -49,6 +52,34 @@ def project_quads(camera: Camera, corners: np.ndarray, row_offset: float = 0.0) 
         return list(_to_fixed(camera, cam, row_offset))
     # One output per input (an empty one when all of it is behind the camera): callers zip them.
     return [_to_fixed(camera, _clip_near(poly), row_offset) for poly in cam]
+
+
+def _project_bent(camera: Camera, corners, row_offset: float) -> list[np.ndarray]:
+    """Road-coordinate polygons on a bent road (road_shape.BentCamera): each cut at the camera's view limit
+    (a crest), its edges divided into pieces short enough to follow the road, bent (all polygons in one
+    call), clipped at the near plane. A divided polygon's image is no longer convex but still crosses every
+    image row at most twice (its rows rise monotonically with the range up to the view limit), which
+    cv2.fillConvexPoly fills exactly; cv2.fillPoly would round its vertices to whole rows (2 px sideways
+    on a line that slants 4 px a row)."""
+    outlines = []
+    for poly in corners:
+        poly = _clip_plane(np.asarray(poly, dtype=np.float64), 2, camera.view_m, keep_below=True)
+        points = []
+        for i in range(len(poly)):
+            a, b = poly[i], poly[(i + 1) % len(poly)]
+            points.append(a[None, :])
+            if abs(b[2] - a[2]) > 1e-9:
+                z = pieces(a[2], b[2])[1:-1]
+                points.append(a + ((z - a[2]) / (b[2] - a[2]))[:, None] * (b - a))
+        outline = np.concatenate(points) if points else np.empty((0, 3))
+        outlines.append(outline)
+    sizes = np.cumsum([len(o) for o in outlines])[:-1]
+    cams = np.split(camera.to_camera(np.concatenate(outlines)), sizes) if sizes.size or outlines else []
+    out = []
+    for cam in cams:
+        cam = _clip_near(cam) if len(cam) >= 3 else cam
+        out.append(_to_fixed(camera, cam, row_offset) if len(cam) >= 3 else np.empty((0, 2), np.int32))
+    return out
 
 
 def _to_fixed(camera: Camera, cam: np.ndarray, row_offset: float) -> np.ndarray:
@@ -60,14 +91,19 @@ def _to_fixed(camera: Camera, cam: np.ndarray, row_offset: float) -> np.ndarray:
 
 def _clip_near(poly: np.ndarray) -> np.ndarray:
     """Sutherland-Hodgman against the plane z = _NEAR_CAM_M (camera coordinates)."""
+    return _clip_plane(poly, 2, _NEAR_CAM_M, keep_below=False)
+
+
+def _clip_plane(poly: np.ndarray, axis: int, level: float, keep_below: bool) -> np.ndarray:
+    """Sutherland-Hodgman: the part of a polygon (k, 3) with coordinate ``axis`` >= level (<= when keep_below)."""
     kept = []
     for i in range(len(poly)):
         a, b = poly[i], poly[(i + 1) % len(poly)]
-        a_in, b_in = a[2] >= _NEAR_CAM_M, b[2] >= _NEAR_CAM_M
+        a_in, b_in = (a[axis] <= level, b[axis] <= level) if keep_below else (a[axis] >= level, b[axis] >= level)
         if a_in:
             kept.append(a)
         if a_in != b_in:
-            t = (_NEAR_CAM_M - a[2]) / (b[2] - a[2])
+            t = (level - a[axis]) / (b[axis] - a[axis])
             kept.append(a + t * (b - a))
     return np.array(kept).reshape(-1, 3)
 

@@ -44,13 +44,11 @@ class Renderer:
         r0 = int(np.clip(math.floor(camera.horizon_row) + 1, 0, camera.height))
         vehicles = depth_order(state)
         shadows = self.scenery.shadow(odometer_m) + [self.vehicles.shadow(v, camera.lateral_m) for v in vehicles]
-        image = np.empty((camera.height, camera.width), np.uint8)
-        # Gray levels are >= 0, so convertScaleAbs is a fast rounding, saturating float -> uint8.
-        if r0 > 0:
-            image[:r0] = cv2.convertScaleAbs(self.sky.draw(camera, r0))
-        if r0 < camera.height:
-            image[r0:] = cv2.convertScaleAbs(self.ground.draw(camera, odometer_m, shadows, r0))
-
+        if getattr(camera, "bend", None) is not None:  # a bent road: the ground's outline is not the horizon row
+            ground, where = self.ground.draw_bent(camera, odometer_m, shadows)
+            image = cv2.convertScaleAbs(np.where(where, ground, self.sky.draw(camera.sky_camera(), camera.height)))
+        else:
+            image = self._flat_background(camera, odometer_m, shadows, r0)
         self.scenery.draw_roadside(image, camera, odometer_m)
         items = [(v.z_m, v) for v in vehicles]
         deck_z = self.scenery.deck_z(odometer_m)
@@ -63,6 +61,16 @@ class Renderer:
                 light = self.scenery.light_at(vehicle.z_m, odometer_m)
                 self.vehicles.draw(image, camera, vehicle, light)
         return self._add_noise(image, frame_index)
+
+    def _flat_background(self, camera: Camera, odometer_m: float, shadows: list, r0: int) -> np.ndarray:
+        """Sky above row r0 (below the horizon), the flat road from r0 down."""
+        image = np.empty((camera.height, camera.width), np.uint8)
+        # Gray levels are >= 0, so convertScaleAbs is a fast rounding, saturating float -> uint8.
+        if r0 > 0:
+            image[:r0] = cv2.convertScaleAbs(self.sky.draw(camera, r0))
+        if r0 < camera.height:
+            image[r0:] = cv2.convertScaleAbs(self.ground.draw(camera, odometer_m, shadows, r0))
+        return image
 
     def _add_noise(self, image: np.ndarray, frame_index: int) -> np.ndarray:
         if self.noise is None:

@@ -17,12 +17,14 @@ import numpy as np
 
 from .camera import Camera
 from .polygons import fill, project_quads, rect_xz
+from .road_shape import pieces
 from .scenario import Scenario
 
 # Beyond this range the road is one haze-blended gray, and markings are not drawn (sub-pixel).
 FAR_M = 3000.0
 MARKING_RANGE_M = 220.0
 HAZE_M = 900.0  # e-folding distance of the blend towards the horizon gray
+TEXTURE_HALF_WIDTH_M = 60.0  # a bent road's asphalt texture is sampled within this lateral distance
 FADE_CUT = 2.15  # texel/footprint ratio where a layer's weight exp(-r^2) falls below 1 %
 
 
@@ -122,6 +124,81 @@ class Ground:
         lit *= 1.0 - haze
         lit += haze * np.float32(self.haze_gray)
         return lit
+
+    def draw_bent(self, camera, odometer_m: float, shadows: list[tuple[np.ndarray, float]]) -> tuple[np.ndarray, np.ndarray]:
+        """The road on a bent road (road_shape.BentCamera): gray levels (float32, whole image) and where the
+        ground is (bool). Polygons follow the bend; the texture and the haze take each pixel's road
+        coordinates from thin slabs across the road (the road within a slab is planar to well below a
+        pixel), drawn far to near so that a crest's far side stays hidden."""
+        shape = (camera.height, camera.width)
+        z_near = self._nearest_visible_m(camera)
+        far = min(FAR_M, camera.view_m)
+        x_m, z_m, ground = self._road_coordinates(camera, pieces(z_near, far))
+        albedo = np.full(shape, self.light.grass_gray, np.uint8)
+        fill(albedo, project_quads(camera, [rect_xz(*self.paved_m, z_near, far)]), self.light.asphalt_gray)
+        if self.road.markings == "painted":
+            marking_gray = min(235.0, self.light.asphalt_gray + 105.0)
+            fill(albedo, project_quads(camera, self._markings(odometer_m, z_near)), marking_gray)
+        lit = albedo.astype(np.float32)
+        shadows = [(corners, factor) for corners, factor in shadows if len(corners) >= 3]
+        if shadows:
+            light = np.full(shape, 255, np.uint8)
+            for corners, factor in shadows:
+                fill(light, project_quads(camera, [corners]), 255.0 * factor)
+            lit = cv2.multiply(albedo, light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
+        texture = np.ones(shape, np.float32)
+        for layer in self.layers:
+            # |X| bounded: a slab seen edge-on (a crest's top) maps a few pixels far sideways; the verge there is
+            # texture-free anyway
+            near = ground & (z_m < layer.max_range_m(camera)) & (np.abs(x_m) < TEXTURE_HALF_WIDTH_M)
+            if not near.any():
+                continue
+            x, z = x_m[near], z_m[near]
+            tile, left = layer.sampler(float(np.abs(x).max()), float(z.max()) + layer.period_z_m)
+            phase = (odometer_m % layer.period_z_m) / layer.texel_z_m
+            # cv2.remap takes maps under 32767 columns: the pixels' samples as rows of 1024
+            pad = -len(x) % 1024
+            map_x = np.pad(x / layer.texel_x_m + left, (0, pad)).astype(np.float32).reshape(-1, 1024)
+            map_z = np.pad(z / layer.texel_z_m + phase, (0, pad)).astype(np.float32).reshape(-1, 1024)
+            sample = cv2.remap(tile, map_x, map_z, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT).ravel()[:len(x)]
+            ratio = np.maximum(z / camera.fx / layer.texel_x_m, z * z / (camera.fy * camera.height_m) / layer.texel_z_m)
+            texture[near] += sample * (layer.amplitude * np.exp(-ratio * ratio)).astype(np.float32)
+        lit *= texture
+        haze = np.where(ground, 1.0 - np.exp(-np.clip(z_m, 0.0, None) / HAZE_M), 0.0).astype(np.float32)
+        lit *= 1.0 - haze
+        lit += haze * np.float32(self.haze_gray)
+        return lit, ground
+
+    @staticmethod
+    def _road_coordinates(camera, zs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per pixel: road X and Z (NaN off the ground) and whether the ground is seen there.
+
+        Slab k (zs[k]..zs[k+1], across +-1 km) is filled with k + 1 far to near; within a slab the pixel
+        goes back to the road through the homography of the slab's four corners at +-20 m, exact there."""
+        ids = np.zeros((camera.height, camera.width), np.float32)
+        slabs = np.array([rect_xz(-1000.0, 1000.0, zs[k], zs[k + 1]) for k in range(len(zs) - 1)])
+        order = np.arange(len(slabs))[::-1]
+        for k, polygon in zip(order, project_quads(camera, slabs[order])):
+            fill(ids, [polygon], float(k + 1), antialias=False)
+        corners = np.array([rect_xz(-20.0, 20.0, zs[k], zs[k + 1]) for k in range(len(zs) - 1)])
+        u, v = camera.project(corners.reshape(-1, 3))
+        image_pts = np.stack([u, v], 1).reshape(-1, 4, 2).astype(np.float32)
+        inverse = np.full((len(slabs) + 1, 3, 3), np.nan)
+        for k in range(len(slabs)):
+            if np.isfinite(image_pts[k]).all():
+                inverse[k + 1] = cv2.getPerspectiveTransform(image_pts[k], corners[k][:, [0, 2]].astype(np.float32))
+        index = ids.astype(np.int32)
+        ground = index > 0
+        rows, cols = np.nonzero(ground)
+        h = inverse[index[ground]]
+        pts = np.stack([cols, rows, np.ones(len(rows))], 1).astype(np.float64)
+        mapped = np.einsum("nij,nj->ni", h, pts)
+        x_m = np.full(ids.shape, np.nan)
+        z_m = np.full(ids.shape, np.nan)
+        x_m[ground] = mapped[:, 0] / mapped[:, 2]
+        z_m[ground] = mapped[:, 1] / mapped[:, 2]
+        ground &= np.isfinite(z_m)
+        return x_m, z_m, ground
 
     def _nearest_visible_m(self, camera: Camera) -> float:
         _, z = camera.ground_from_pixel(np.array([0.0, camera.width - 1.0]), np.full(2, camera.height - 1.0))

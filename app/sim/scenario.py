@@ -20,6 +20,10 @@ import yaml
 from .camera import CAMERA_KEYS
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+# Scenarios on curves and hills or with the ego's own lane changes: shipped apart, because the flat, straight
+# scenarios' contract (tests/sim: a box's bottom row is the flat road's row of its range, the camera keeps
+# its lane) does not hold on them; a bare name finds them too.
+ROAD_GEOMETRY_DIR = SCENARIO_DIR / "road_geometry"
 KMH = 1.0 / 3.6  # m/s per km/h
 MAX_TIME_S = 3600.0  # upper bound for any time in a scenario file
 
@@ -56,6 +60,17 @@ class LaneChange:
 
 
 @dataclasses.dataclass(frozen=True)
+class BendSpec:
+    """A constant-curvature stretch of the road (app/sim/road_shape.py): from arc length ``s_m`` (m ahead of
+    the ego's start) over ``length_m``; curves: ``radius_m`` > 0 bends right, < 0 left; hills: > 0 a sag
+    (the road curves up), < 0 a crest."""
+
+    s_m: float
+    length_m: float
+    radius_m: float
+
+
+@dataclasses.dataclass(frozen=True)
 class VehicleSpec:
     id: int
     kind: str
@@ -79,6 +94,7 @@ class EgoSpec:
     front_m: float = 2.0  # front bumper ahead of the camera (TTC reference)
     width_m: float = 1.8  # for deciding what the ego runs into
     length_m: float = 4.6
+    lane_changes: tuple[LaneChange, ...] = ()  # the ego's own, to_lane relative to its starting lane
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,6 +117,8 @@ class RoadSpec:
     dash_gap_m: float = 9.0
     markings: str = "painted"  # "none": bare asphalt, no painted lines (worn roads, lead without lanes)
     overpass: OverpassSpec | None = None
+    curves: tuple[BendSpec, ...] = ()  # plan curvature; none = straight
+    hills: tuple[BendSpec, ...] = ()  # vertical curvature; none = level
 
     @property
     def left_edge_m(self) -> float:
@@ -294,9 +312,43 @@ def _read_road(top: _Reader) -> RoadSpec:
             "z_m": (5.0, 1000.0), "depth_m": (2.0, 60.0), "clearance_m": (4.5, 10.0), "thickness_m": (0.5, 4.0),
             "shadow_offset_m": (-30.0, 30.0)}))
     markings = r.string("markings", RoadSpec.markings, ("painted", "none"))
-    return RoadSpec(lanes=lanes, ego_lane=ego_lane, overpass=overpass, markings=markings, **_numbers(r, RoadSpec, {
+    curves = _read_bends(r, "curves", 200.0)
+    hills = _read_bends(r, "hills", 500.0)
+    return RoadSpec(lanes=lanes, ego_lane=ego_lane, overpass=overpass, markings=markings, curves=curves, hills=hills,
+                    **_numbers(r, RoadSpec, {
         "lane_width_m": (2.5, 5.0), "shoulder_m": (0.2, 4.0), "marking_width_m": (0.08, 0.5),
         "dash_length_m": (0.5, 20.0), "dash_gap_m": (0.5, 30.0)}))
+
+
+def _read_bends(r: _Reader, name: str, min_radius_m: float) -> tuple[BendSpec, ...]:
+    """Constant-curvature stretches, in order and not overlapping; |radius_m| >= min_radius_m."""
+    def read(parent: _Reader, i: int, value: Any) -> BendSpec:
+        b = parent.item(name, i, value, ("s_m", "length_m", "radius_m"))
+        radius = b.number("radius_m", lo=-1e6, hi=1e6)
+        if abs(radius) < min_radius_m:
+            b.fail(b.key("radius_m"), f"|radius_m| must be >= {min_radius_m} (sharper bends are not motorway "
+                                      f"roads and the renderer's pieces assume gentler ones), got {radius}")
+        return BendSpec(b.number("s_m", lo=0.0, hi=10000.0), b.number("length_m", lo=1.0, hi=3000.0), radius)
+
+    bends = r.items(name, read)
+    for i in range(1, len(bends)):
+        if bends[i].s_m < bends[i - 1].s_m + bends[i - 1].length_m:
+            r.fail(f"{r.key(name)}[{i}].s_m", "starts before the previous stretch has ended")
+    return bends
+
+
+def _read_lane_changes(r: _Reader, lane_lo: int, lane_hi: int) -> tuple[LaneChange, ...]:
+    """Lane changes in time order, each starting after the previous one ended."""
+    def read_change(parent: _Reader, i: int, item: Any) -> LaneChange:
+        c = parent.item("lane_changes", i, item, ("t_s", "to_lane", "duration_s"))
+        return LaneChange(c.number("t_s", lo=0.0, hi=MAX_TIME_S), c.integer("to_lane", lo=lane_lo, hi=lane_hi),
+                          c.number("duration_s", 3.0, 0.5, 10.0))
+
+    changes = r.items("lane_changes", read_change)
+    for i in range(1, len(changes)):
+        if changes[i].t_s < changes[i - 1].t_s + changes[i - 1].duration_s:
+            r.fail(f"{r.key('lane_changes')}[{i}].t_s", "starts before the previous lane change has ended")
+    return changes
 
 
 def _read_lighting(top: _Reader) -> LightingSpec:
@@ -312,9 +364,10 @@ def _read_shake(top: _Reader) -> ShakeSpec:
     return ShakeSpec(**_numbers(r, ShakeSpec, {"pitch_deg": (0.0, 2.0), "yaw_deg": (0.0, 2.0)}))
 
 
-def _read_ego(top: _Reader) -> EgoSpec:
+def _read_ego(top: _Reader, road: RoadSpec) -> EgoSpec:
     r = top.sub("ego", tuple(f.name for f in dataclasses.fields(EgoSpec)))
-    return EgoSpec(profile=_read_steps(r, "profile"), **_numbers(r, EgoSpec, {
+    changes = _read_lane_changes(r, -road.ego_lane, road.lanes - 1 - road.ego_lane)
+    return EgoSpec(profile=_read_steps(r, "profile"), lane_changes=changes, **_numbers(r, EgoSpec, {
         "speed_kmh": (0.0, 250.0), "front_m": (0.0, 5.0), "width_m": (1.2, 3.0), "length_m": (2.0, 20.0)}))
 
 
@@ -330,16 +383,7 @@ def _read_vehicle(top: _Reader, index: int, value: Any, road: RoadSpec, seed: in
     drawn = rng.uniform(size=5)
     shade = _read_shade(r, drawn[3], drawn[4])
     lane = r.integer("lane", 0, lane_lo, lane_hi)
-
-    def read_change(parent: _Reader, i: int, item: Any) -> LaneChange:
-        c = parent.item("lane_changes", i, item, ("t_s", "to_lane", "duration_s"))
-        return LaneChange(c.number("t_s", lo=0.0, hi=MAX_TIME_S), c.integer("to_lane", lo=lane_lo, hi=lane_hi),
-                          c.number("duration_s", 3.0, 0.5, 10.0))
-
-    changes = r.items("lane_changes", read_change)
-    for i in range(1, len(changes)):
-        if changes[i].t_s < changes[i - 1].t_s + changes[i - 1].duration_s:
-            r.fail(f"{r.key('lane_changes')}[{i}].t_s", "starts before the previous lane change has ended")
+    changes = _read_lane_changes(r, lane_lo, lane_hi)
     return VehicleSpec(
         id=vid, kind=kind, lane=lane, z_m=r.number("z_m", lo=-80.0, hi=600.0),
         speed_kmh=r.number("speed_kmh", lo=0.0, hi=250.0),
@@ -380,14 +424,16 @@ def parse_scenario(data: Any, where: str, default_name: str = "scenario", source
         duration_s=duration_s, fps=top.number("fps", 30.0, 1.0, 240.0), seed=seed,
         camera=read_camera(where, top.data.get("camera"), "camera"), road=road,
         shake=_read_shake(top),
-        lighting=_read_lighting(top), ego=_read_ego(top), vehicles=vehicles, source=source)
+        lighting=_read_lighting(top), ego=_read_ego(top, road), vehicles=vehicles, source=source)
 
 
 def resolve_path(path_or_name: str | Path) -> Path:
-    """A bare name (``steady_following``) means the shipped file ``scenarios/<name>.yaml``."""
+    """A bare name (``steady_following``) means the shipped file ``scenarios/<name>.yaml`` (or, when only
+    there, ``scenarios/road_geometry/<name>.yaml``)."""
     text = str(path_or_name)
     if "/" not in text and "\\" not in text and not text.endswith((".yaml", ".yml")):
-        return SCENARIO_DIR / f"{text}.yaml"
+        bent = ROAD_GEOMETRY_DIR / f"{text}.yaml"
+        return bent if bent.is_file() and not (SCENARIO_DIR / f"{text}.yaml").is_file() else SCENARIO_DIR / f"{text}.yaml"
     return Path(text)
 
 
@@ -412,7 +458,13 @@ def read_scenario(path_or_name: str | Path) -> Scenario:
 
 
 def list_scenarios() -> list[str]:
+    """The shipped flat, straight-road scenarios."""
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+
+
+def list_road_geometry_scenarios() -> list[str]:
+    """The shipped scenarios with curves, hills or the ego's own lane changes."""
+    return sorted(p.stem for p in ROAD_GEOMETRY_DIR.glob("*.yaml"))
 
 
 def scenario_to_dict(scenario: Scenario) -> dict:
@@ -423,6 +475,11 @@ def scenario_to_dict(scenario: Scenario) -> dict:
     road = dataclasses.asdict(scenario.road)
     if road["overpass"] is None:
         del road["overpass"]
+    for key in ("curves", "hills"):  # straight, level roads' files stay as they were
+        if road[key]:
+            road[key] = [dict(b) for b in road[key]]
+        else:
+            del road[key]
     vehicles = []
     for v in scenario.vehicles:
         d = dataclasses.asdict(v)
@@ -432,6 +489,9 @@ def scenario_to_dict(scenario: Scenario) -> dict:
         vehicles.append(d)
     ego = dataclasses.asdict(scenario.ego)
     ego["profile"] = steps(scenario.ego.profile)
+    ego["lane_changes"] = [dict(c) for c in ego["lane_changes"]]
+    if not ego["lane_changes"]:
+        del ego["lane_changes"]
     return {
         "name": scenario.name, "description": scenario.description, "duration_s": scenario.duration_s,
         "fps": scenario.fps, "seed": scenario.seed, "camera": dict(scenario.camera), "road": road,

@@ -44,6 +44,9 @@ def frame_truth(state: WorldState, camera: Camera, ego_front_m: float, lane_widt
     for index, (polygon, box) in enumerate(zip(project_quads(camera, corners[in_front]), boxes), start=1):
         fill(ids, [polygon], index, antialias=False)
         alone.append(_count(ids, box, index))  # its pixels before nearer vehicles cover some
+    bend = getattr(camera, "bend", None)
+    if bend is not None:  # a bent road: the rear face's bottom centre in the ego's local frame
+        local = bend.apply(np.array([[v.x_m, 0.0, v.z_m] for v in ordered]).reshape(-1, 3))
     records = []
     for index, (vehicle, box, n_alone) in enumerate(zip(ordered, boxes, alone), start=1):
         clipped = _clip(box, camera)
@@ -53,15 +56,15 @@ def frame_truth(state: WorldState, camera: Camera, ego_front_m: float, lane_widt
         in_image = (clipped[2] - clipped[0]) * (clipped[3] - clipped[1]) / full_area
         unoccluded = _count(ids, box, index) / n_alone if n_alone else 1.0
         closing_mps = -vehicle.relative_speed_mps
-        gap_m = vehicle.z_m - ego_front_m
+        gap_m = (vehicle.z_m if bend is None else float(local[index - 1, 2])) - ego_front_m
         records.append({
             "id": vehicle.spec.id,
             "kind": vehicle.spec.kind,
             "box": list(box),
             "box_clipped": list(clipped),
             "visible_fraction": float(min(1.0, in_image * unoccluded)),
-            "lateral_m": vehicle.x_m - camera.lateral_m,
-            "longitudinal_m": vehicle.z_m,
+            "lateral_m": (vehicle.x_m if bend is None else float(local[index - 1, 0])) - camera.lateral_m,
+            "longitudinal_m": vehicle.z_m if bend is None else float(local[index - 1, 2]),
             "relative_speed_mps": vehicle.relative_speed_mps,
             "ttc_s": gap_m / closing_mps if closing_mps > 0 else None,
             "lane": int(np.round(vehicle.x_m / lane_width_m)),

@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .scenario import KMH, Scenario, ScenarioError, SpeedStep, VehicleSpec
+from .scenario import KMH, LaneChange, Scenario, ScenarioError, SpeedStep, VehicleSpec
 
 
 class Motion1D:
@@ -63,13 +63,12 @@ class Motion1D:
 
 
 class LateralMotion:
-    """Lateral position of a vehicle centre (m, world X) through its lane changes."""
+    """Lateral position of a vehicle centre (m, world X) through its lane changes (the ego's too: lane 0)."""
 
-    def __init__(self, spec: VehicleSpec, lane_width_m: float):
-        self.x0 = spec.lane * lane_width_m + spec.lateral_offset_m
+    def __init__(self, lane: int, offset_m: float, changes: Sequence[LaneChange], lane_width_m: float):
+        self.x0 = lane * lane_width_m + offset_m
         self.moves = []
-        lane = spec.lane
-        for change in spec.lane_changes:
+        for change in changes:
             self.moves.append((change.t_s, change.duration_s, (change.to_lane - lane) * lane_width_m))
             lane = change.to_lane
 
@@ -81,6 +80,15 @@ class LateralMotion:
             tau = np.clip((t - t0) / duration, 0.0, 1.0)
             x = x + dx * 0.5 * (1.0 - np.cos(math.pi * tau))
         return x
+
+    def speed(self, t_s: float) -> float:
+        """Lateral speed (m/s) at time t_s: the derivative of the half-cosine blends."""
+        v = 0.0
+        for t0, duration, dx in self.moves:
+            tau = (t_s - t0) / duration
+            if 0.0 < tau < 1.0:
+                v += dx * 0.5 * math.pi / duration * math.sin(math.pi * tau)
+        return v
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,7 +116,9 @@ class World:
         self.scenario = scenario
         self.ego = Motion1D(0.0, scenario.ego.speed_kmh * KMH, scenario.ego.profile)
         self.longitudinal = [Motion1D(v.z_m, v.speed_kmh * KMH, v.profile) for v in scenario.vehicles]
-        self.lateral = [LateralMotion(v, scenario.road.lane_width_m) for v in scenario.vehicles]
+        self.lateral = [LateralMotion(v.lane, v.lateral_offset_m, v.lane_changes, scenario.road.lane_width_m)
+                        for v in scenario.vehicles]
+        self.ego_lateral = LateralMotion(0, 0.0, scenario.ego.lane_changes, scenario.road.lane_width_m)
         nominal = max(1, scenario.n_frames_nominal)
         self.times_s = np.arange(nominal) / scenario.fps
         self.collision_frame = self._check_motion()
@@ -138,13 +148,14 @@ class World:
         t = self.times_s
         ego_odo, _, _ = self.ego.at(t)
         x = [lat.at(t) for lat in self.lateral]
+        ego_x = self.ego_lateral.at(t)  # the ego's own lane changes (0 without)
         z = [lon.at(t)[0] - ego_odo for lon in self.longitudinal]
         where = s.label
         # Ego body: from front_m - length_m to front_m in camera Z, centred on X = 0.
         ego_rear_m = s.ego.front_m - s.ego.length_m
         collision = None
         for i, v in enumerate(s.vehicles):
-            side = np.abs(x[i]) < 0.5 * (v.width_m + s.ego.width_m)
+            side = np.abs(x[i] - ego_x) < 0.5 * (v.width_m + s.ego.width_m)
             touching = side & (z[i] <= s.ego.front_m) & (z[i] + v.length_m > ego_rear_m)
             if touching.any():
                 k = int(np.argmax(touching))

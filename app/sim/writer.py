@@ -51,6 +51,9 @@ def write_scenario(scenario: Scenario, out_dir: str | Path, video: bool = False,
                 record = {"frame": frame.index, "t": round(frame.t_s, 6), "ego_speed_mps": round(frame.ego_speed_mps, 6),
                           "pitch_deg": round(frame.pitch_deg, 6), "yaw_deg": round(frame.yaw_deg, 6),
                           "vehicles": [_rounded(v) for v in frame.truth]}
+                if frame.road:  # a bent road or the ego's own lane change: the road under the ego, its yaw rate
+                    record["road"] = {k: round(v, 9) for k, v in frame.road.items()}
+                    record["yaw_rate_rps"] = round(frame.yaw_rate_rps, 9)
                 truth_file.write(json.dumps(record) + "\n")
                 if progress is not None:
                     progress(frame.index + 1, n)

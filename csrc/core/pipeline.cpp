@@ -59,20 +59,22 @@ FrameOutput Pipeline::process(const Frame &frame) {
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
         last_tracks_ = out.tracks;
     }
-    // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset)
+    // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset), with
+    // the mounting the road-motion stage fitted it around (self-calibration's estimate before this frame)
     EgoMotion ego{ego_speed_mps_, ego_yaw_rate_rps_};
     if (!std::isfinite(ego.yaw_rate_rps) && out.road.state == RoadMotion::State::kAccepted)
-        ego.yaw_rate_rps = yaw_rate_of_road_motion(out.road.H, cfg_.camera, frame.t_s - prev_t_s_);
+        ego.yaw_rate_rps = yaw_rate_of_road_motion(out.road.H, calib_.camera(), frame.t_s - prev_t_s_);
     prev_t_s_ = frame.t_s;
     {
         Stopwatch sw;
-        calib_.update(out.lanes, ego.yaw_rate_rps, frame.t_s);
+        calib_.update(out.lanes, ego.speed_mps, ego.yaw_rate_rps, frame.t_s, out.road);
         const CalibrationEstimate e = calib_.estimate();
         if (e.active) {
             const CameraParams cam = calib_.camera();
             horizon_.set_camera(cam);
             kinematics_.set_camera(cam);
             lead_.set_camera(cam);
+            if (parts_.road) parts_.road->set_camera(cam);
         }
         out.calib_active = e.active;
         out.calib_pitch_deg = float(e.pitch_deg);
@@ -189,7 +191,10 @@ void Pipeline::reset() {
     lanes_.reset();
     if (parts_.tracker) parts_.tracker->reset();
     for (auto &d : parts_.detectors.parts) d->reset();
-    if (parts_.road) parts_.road->reset();
+    if (parts_.road) {
+        parts_.road->reset();
+        parts_.road->set_camera(cfg_.camera);
+    }
     last_tracks_.clear();
     image_stats_.reset();
     calib_.reset();

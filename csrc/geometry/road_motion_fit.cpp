@@ -7,12 +7,50 @@
 
 namespace hw {
 
-cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta) {
+cv::Matx33d mounting_rotation(const CameraParams &cam) {
     const double p = cam.pitch_deg * M_PI / 180.0, b = cam.yaw_deg * M_PI / 180.0;
     // The mounting as in travel_homography(): yaw about y, then pitch about x.
     const cv::Matx33d Ryaw(std::cos(b), 0, -std::sin(b), 0, 1, 0, std::sin(b), 0, std::cos(b));
     const cv::Matx33d Rpitch(1, 0, 0, 0, std::cos(p), -std::sin(p), 0, std::sin(p), std::cos(p));
-    const cv::Matx33d Rc = Rpitch * Ryaw;
+    return Rpitch * Ryaw;
+}
+
+namespace {
+
+// M = R_c^T K^-1 H K R_c = s R' (I - t n^T / h): (s, R', M's middle column); s = 0 when H is degenerate.
+struct LevelMotion {
+    double s = 0.0;
+    cv::Matx33d R = cv::Matx33d::eye();
+    cv::Vec3d m1;
+};
+
+LevelMotion level_motion(const cv::Matx33d &H, const CameraParams &cam) {
+    const cv::Matx33d Rc = mounting_rotation(cam);
+    const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
+    const cv::Matx33d M = Rc.t() * K.inv() * H * K * Rc;
+    const cv::Vec3d m0(M(0, 0), M(1, 0), M(2, 0)), m2(M(0, 2), M(1, 2), M(2, 2));
+    LevelMotion out;
+    out.m1 = cv::Vec3d(M(0, 1), M(1, 1), M(2, 1));
+    const double s = cv::norm(m0);
+    if (!(s > 1e-12)) return out;
+    const cv::Vec3d r0 = m0 / s, r2 = m2 / s, r1 = r2.cross(r0);
+    out.s = s;
+    out.R = cv::Matx33d(r0[0], r1[0], r2[0], r0[1], r1[1], r2[1], r0[2], r1[2], r2[2]);
+    return out;
+}
+
+} // namespace
+
+cv::Vec3d road_motion_translation(const cv::Matx33d &H, const CameraParams &cam) {
+    const LevelMotion m = level_motion(H, cam);
+    if (m.s == 0.0) return {NAN, NAN, NAN};
+    return (cv::Vec3d(0, 1, 0) - m.R.t() * (m.m1 / m.s)) * cam.height_m;
+}
+
+cv::Matx33d road_motion_rotation(const cv::Matx33d &H, const CameraParams &cam) { return level_motion(H, cam).R; }
+
+cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta) {
+    const cv::Matx33d Rc = mounting_rotation(cam);
     cv::Matx33d Rd;
     cv::Rodrigues(cv::Vec3d(theta[0], theta[1], theta[2]), Rd);
     const double h = cam.height_m;

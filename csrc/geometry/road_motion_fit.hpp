@@ -27,6 +27,18 @@ namespace hw {
 // theta = (pitch_d, yaw_d, roll_d [rad], lateral_m, travel_m) -> homography, H(2,2) = 1.
 cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta);
 
+// R_c of the model: the camera's mounting, yaw about y then pitch about x (level-camera -> camera axes).
+cv::Matx33d mounting_rotation(const CameraParams &cam);
+
+// The translation t (m, level-camera axes: x right, y down, z forward) of a road homography of the model's
+// form, for the camera it was fitted with: M = R_c^T K^-1 H K R_c = s R' (I - t n^T / h), n = (0, 1, 0), R' a
+// rotation. M's first and third columns are s R''s (n has no x or z part), so s = |M_0|,
+// R' = [M_0, M_2 x M_0, M_2] / s, and t / h = e_y - R'^T M_1 / s. NaNs when H is degenerate.
+cv::Vec3d road_motion_translation(const cv::Matx33d &H, const CameraParams &cam);
+// R' of the same decomposition: the camera's rotation between the frames in level-camera axes (identity
+// when H is degenerate).
+cv::Matx33d road_motion_rotation(const cv::Matx33d &H, const CameraParams &cam);
+
 struct RoadMotionFit {
     bool ok = false;
     cv::Matx33d H = cv::Matx33d::eye();

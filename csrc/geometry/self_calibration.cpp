@@ -1,5 +1,7 @@
 #include "geometry/self_calibration.hpp"
 
+#include "geometry/road_motion_fit.hpp"
+
 #include <algorithm>
 
 namespace hw {
@@ -33,6 +35,23 @@ void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("max_yaw_rate_rps", max_yaw_rate_rps, 0.0, 1.0,
           "rad/s; turning faster (CAN or road motion) is a curve, where the boundaries' tangents miss the road "
           "direction: no measurement");
+    m.add("reacquire_after", reacquire_after, 1, 10000,
+          "measurements; this many gated out in a row mean the estimate went wrong (a wrong start, stuck at a "
+          "limit): its uncertainty goes back to the prior's so that the measurements are taken again");
+    m.add("max_curvature_1pm", max_curvature_1pm, 0.0, 1.0,
+          "1/m; a path curvature |yaw rate| / speed above this is a curve (1e-4: radius under 10 km), where the "
+          "lanes' straight fits meet k * ~13 m off the road direction (0.07 deg at 1e-4): no measurement");
+    m.add("curve_hold_s", curve_hold_s, 0.0, 30.0,
+          "s; no measurement for this long after the last frame on a curve (the lane fits look ~15 m ahead)");
+    m.add("road_motion", road_motion, "also measure the yaw from the road plane's motion where it is fitted (parallax "
+                                      "preset): the lateral part of the car's travel against the assumed mounting");
+    m.add("motion_yaw_noise_deg", motion_yaw_noise_deg, 0.01, 30.0,
+          "deg; 1-sigma of one frame's yaw from the road plane's motion (0.12 deg measured with the rest of the "
+          "mounting right, biased by ~0.7 deg while pitch and height are 2 deg / 15 % off)");
+    m.add("yaw_rate_smoothing_s", yaw_rate_smoothing_s, 0.0, 10.0,
+          "s; time constant of the low-pass on the yaw rate the curve gate tests: the road plane's motion measures the "
+          "camera's turn between frames, shake included (0.05 deg of yaw shake at 2.3 Hz is 0.01 rad/s, four times the "
+          "gate at 90 km/h); a bus yaw rate is smooth already");
     m.add("gate_sigma", gate_sigma, 1.0, 100.0,
           "sigma; a measurement farther from the estimate than this (estimate and measurement sigma together) is "
           "an outlier (a crest, a wrong marking)");
@@ -40,16 +59,21 @@ void SelfCalibrationParams::bind(ParamMap &m) {
 
 double yaw_rate_of_road_motion(const cv::Matx33d &H, const CameraParams &cam, double dt_s) {
     if (!(dt_s > 0)) return NAN;
-    const cv::Vec3d p(cam.cx, cam.horizon_row(), 1.0);
-    const cv::Vec3d q = H * p;
-    if (std::abs(q[2]) < 1e-12) return NAN;
-    return std::atan((q[0] / q[2] - p[0]) / cam.fx) / dt_s;
+    const cv::Matx33d R = road_motion_rotation(H, cam);
+    return std::atan2(R(0, 2), R(2, 2)) / dt_s;
 }
 
-bool SelfCalibration::Scalar::update(double z, double r, double gate_sigma) {
+bool SelfCalibration::Scalar::update(double z, double r, double gate_sigma, int reacquire, double prior_var) {
     const double s = var + r;  // innovation variance
     const double innov = z - x;
-    if (innov * innov > gate_sigma * gate_sigma * s) return false;
+    if (innov * innov > gate_sigma * gate_sigma * s) {
+        if (++rejected >= reacquire) {  // persistently off: the estimate, not the measurements, is wrong
+            var = std::max(var, prior_var);
+            rejected = 0;
+        }
+        return false;
+    }
+    rejected = 0;
     const double k = var / s;  // x += K (z - x), P = (1 - K) P
     x += k * innov;
     var *= 1.0 - k;
@@ -65,17 +89,34 @@ void SelfCalibration::reset() {
     pitch_ = {cfg_.pitch_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
     yaw_ = {cfg_.yaw_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
     height_ = {1.0, p_.prior_sigma_height * p_.prior_sigma_height};
-    last_t_ = last_offset_m_ = NAN;
+    last_t_ = last_offset_m_ = last_curve_t_ = yaw_rate_smooth_ = NAN;
     updates_ = 0;
 }
 
-void SelfCalibration::update(const LaneModel &lanes, double yaw_rate_rps, double t_s) {
+void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double yaw_rate_rps, double t_s,
+                             const RoadMotion &road) {
+    // the road plane's motion was fitted around this estimate (before this frame's update)
+    const CameraParams assumed = camera();
     if (!p_.enabled) return;
     const double dt = std::isfinite(last_t_) ? std::max(0.0, t_s - last_t_) : 0.0;
     last_t_ = t_s;
     pitch_.predict(p_.angle_drift_deg_s * p_.angle_drift_deg_s * dt);
     yaw_.predict(p_.angle_drift_deg_s * p_.angle_drift_deg_s * dt);
     height_.predict(p_.height_drift_s * p_.height_drift_s * dt);
+
+    // on a curve (path curvature k = yaw rate / speed, the yaw rate low-passed), and for curve_hold_s after it
+    // (a frame without a yaw rate, the road motion not accepted, holds the last value)
+    if (std::isfinite(yaw_rate_rps)) {
+        if (!std::isfinite(yaw_rate_smooth_))
+            yaw_rate_smooth_ = yaw_rate_rps;
+        else
+            yaw_rate_smooth_ += dt / (p_.yaw_rate_smoothing_s + dt) * (yaw_rate_rps - yaw_rate_smooth_);
+    }
+    const double r = yaw_rate_smooth_;
+    const bool turning = std::isfinite(r) && (std::abs(r) > p_.max_yaw_rate_rps ||
+                                              (speed_mps > 1.0 && std::abs(r) / speed_mps > p_.max_curvature_1pm));
+    if (turning) last_curve_t_ = t_s;
+    const bool straight = !(std::isfinite(last_curve_t_) && t_s - last_curve_t_ <= p_.curve_hold_s);
 
     const bool measured = lanes.valid && lanes.ego_left.observed && lanes.ego_right.observed &&
                           std::isfinite(lanes.vanishing_point.x) && std::isfinite(lanes.vanishing_point.y);
@@ -95,7 +136,6 @@ void SelfCalibration::update(const LaneModel &lanes, double yaw_rate_rps, double
     const bool steady_lane = std::isfinite(last_offset_m_) && dt > 0 &&
                              std::abs(offset_m - last_offset_m_) / dt <= p_.max_lateral_rate_mps;
     last_offset_m_ = offset_m;
-    const bool straight = !std::isfinite(yaw_rate_rps) || std::abs(yaw_rate_rps) <= p_.max_yaw_rate_rps;
     if (!steady_lane || !straight) return;
 
     const double pitch = std::atan((cfg_.cy - vh) / cfg_.fy) / kDeg;
@@ -103,9 +143,20 @@ void SelfCalibration::update(const LaneModel &lanes, double yaw_rate_rps, double
     const double a = (w1 - w2) / (v1 - v2);  // px of lane width per row
     const double h = cfg_.fx * p_.road.lane_width_m * std::cos(pitch * kDeg) / (cfg_.fy * a);
     const double r_ang = p_.angle_noise_deg * p_.angle_noise_deg;
-    bool used = pitch_.update(pitch, r_ang, p_.gate_sigma);
-    used |= yaw_.update(yaw, r_ang, p_.gate_sigma);
-    used |= height_.update(h / cfg_.height_m, p_.height_noise * p_.height_noise, p_.gate_sigma);
+    const double prior_ang = p_.prior_sigma_deg * p_.prior_sigma_deg;
+    const int n = p_.reacquire_after;
+    bool used = pitch_.update(pitch, r_ang, p_.gate_sigma, n, prior_ang);
+    used |= yaw_.update(yaw, r_ang, p_.gate_sigma, n, prior_ang);
+    if (p_.road_motion && road.state == RoadMotion::State::kAccepted) {
+        const cv::Vec3d t = road_motion_translation(road.H, assumed);  // m, level axes of the assumed mounting
+        if (t[2] > 0.2 && std::isfinite(t[0])) {
+            const double yaw_motion = assumed.yaw_deg - std::atan2(t[0], t[2]) / kDeg;
+            used |= yaw_.update(yaw_motion, p_.motion_yaw_noise_deg * p_.motion_yaw_noise_deg, p_.gate_sigma, n,
+                                prior_ang);
+        }
+    }
+    used |= height_.update(h / cfg_.height_m, p_.height_noise * p_.height_noise, p_.gate_sigma, n,
+                           p_.prior_sigma_height * p_.prior_sigma_height);
     pitch_.x = std::clamp(pitch_.x, cfg_.pitch_deg - p_.max_pitch_dev_deg, cfg_.pitch_deg + p_.max_pitch_dev_deg);
     yaw_.x = std::clamp(yaw_.x, cfg_.yaw_deg - p_.max_yaw_dev_deg, cfg_.yaw_deg + p_.max_yaw_dev_deg);
     height_.x = std::clamp(height_.x, 1.0 - p_.max_height_dev, 1.0 + p_.max_height_dev);

@@ -56,6 +56,9 @@ public:
     const RoadMotionFrame &update(const cv::Mat &gray, double t_s, const LaneModel &lanes, const EgoMotion &ego,
                                   const std::vector<TrackState> &last_tracks, StageTimes &times);
     void reset();
+    // The mounting (pitch, yaw, height) the stage's road-motion model and feature search assume from now on:
+    // self-calibration's estimate (the Kalman filter's normaliser keeps the camera the stage was built with).
+    void set_camera(const CameraParams &cam) { cam_.pitch_deg = cam.pitch_deg; cam_.yaw_deg = cam.yaw_deg; cam_.height_m = cam.height_m; }
 
     const RoadMotionFrame &frame() const { return out_; }
     const HomographyStep &homography() const { return h_step_; }
