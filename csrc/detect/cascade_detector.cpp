@@ -1,4 +1,5 @@
 #include "detect/cascade_detector.hpp"
+#include "detect/haar_cascade.hpp"
 #include "detect/vehicle_verifier.hpp"
 
 #include <opencv2/imgproc.hpp>
@@ -10,13 +11,19 @@
 
 namespace hw {
 
-CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p), cc_(std::make_unique<cv::CascadeClassifier>()) {
+CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
     if (p_.model.empty())
         throw std::invalid_argument("cascade.model: no cascade XML given (Headway's Python side fills in the shipped one)");
-    if (!cc_->load(p_.model))
-        throw std::invalid_argument("cascade.model: OpenCV cannot load '" + p_.model +
-                                    "' as a cascade XML; train one with `headway train cascade` or leave the key empty");
-    win_ = cc_->getOriginalWindowSize();
+    haar_ = std::make_unique<HaarCascade>(p_.model);
+    win_ = haar_->window();
+    if (p_.opencv_scan) {
+        cc_ = std::make_unique<cv::CascadeClassifier>();
+        if (!cc_->load(p_.model))
+            throw std::invalid_argument("cascade.model: OpenCV cannot load '" + p_.model +
+                                        "' as a cascade XML; train one with `headway train cascade` or leave the key empty");
+        if (p_.step_px != 2)
+            throw std::invalid_argument("cascade.opencv_scan: OpenCV's scan steps 2 px; set cascade.step_px to 2 with it");
+    }
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = std::make_unique<VehicleVerifier>(p_.verifier);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
@@ -38,6 +45,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     CV_Assert(gray.type() == CV_8UC1);
     const RoadPrior prior = make_road_prior(gray.size(), lanes, cam, p_.road);
     std::vector<Raw> raw;
+    std::vector<HaarWindow> wins;
     if (prior.empty()) return {};
     const double yh = prior.horizon_row, hc = cam.height_m;
     const double max_h = p_.max_window_frac * gray.rows;
@@ -71,13 +79,16 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         if (sz.width <= win_.width || sz.height <= win_.height) continue;
         if (f > 1.0) cv::resize(roi, band, sz, 0, 0, cv::INTER_LINEAR);
         else band = roi;
-        rects.clear(); levels.clear(); weights.clear();
-        cc_->detectMultiScale(band, rects, levels, weights, 1.5, 0, 0, win_, win_, true);
-        for (size_t i = 0; i < rects.size(); ++i) {
-            if (p_.step_px > 2 && (rects[i].x % p_.step_px || rects[i].y % p_.step_px)) continue;
-            raw.push_back({cv::Rect2f(float(x0 + rects[i].x * f), float(y0 + rects[i].y * f), float(ws), float(hs)),
-                           float(weights[i])});
+        wins.clear();
+        if (cc_) {  // the reference: OpenCV's own scan at scale 1 (step 2)
+            rects.clear(); levels.clear(); weights.clear();
+            cc_->detectMultiScale(band, rects, levels, weights, 1.5, 0, 0, win_, win_, true);
+            for (size_t i = 0; i < rects.size(); ++i) wins.push_back({rects[i].x, rects[i].y, weights[i]});
+        } else {
+            haar_->scan(band, p_.step_px, wins);
         }
+        for (const HaarWindow &w : wins)
+            raw.push_back({cv::Rect2f(float(x0 + w.x * f), float(y0 + w.y * f), float(ws), float(hs)), float(w.stage_sum)});
     }
     // group: strongest first, every window overlapping a group's seed joins it. OpenCV's detectMultiScale scans in
     // parallel and returns the windows in a thread-dependent order, and stage sums tie (they are sums of a few

@@ -43,6 +43,7 @@ struct CascadeParams {
     double scale_factor = 1.12;         // ratio of successive window sizes
     double max_window_frac = 0.6;       // largest window height as a fraction of the image height
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
+    bool opencv_scan = false;           // scan with cv::CascadeClassifier (the reference) instead of HaarCascade
     double group_iou = 0.45;            // raw windows overlapping the group's strongest this much join it
     int min_neighbors = 2;              // groups of fewer raw windows are dropped
     double neighbors_half = 6.0;        // a group of this many windows gets confidence 0.5
@@ -68,6 +69,9 @@ struct CascadeParams {
         m.add("max_window_frac", max_window_frac, 0.05, 1.0,
               "fraction of the image height; largest window scanned (a car at 5 m is about a third of the image wide)");
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
+        m.add("opencv_scan", opencv_scan,
+              "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
+              "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
         m.add("group_iou", group_iou, 0.05, 0.95,
               "IoU; raw windows overlapping a group's strongest window at least this much belong to it");
         m.add("min_neighbors", min_neighbors, 1, 100, "raw windows; groups with fewer are dropped");
@@ -88,6 +92,7 @@ struct CascadeDetection {
 };
 
 class VehicleVerifier;
+class HaarCascade;
 
 class CascadeDetector {
 public:
@@ -98,7 +103,8 @@ public:
 
 private:
     CascadeParams p_;
-    std::unique_ptr<cv::CascadeClassifier> cc_;
+    std::unique_ptr<HaarCascade> haar_;
+    std::unique_ptr<cv::CascadeClassifier> cc_;  // only with opencv_scan
     std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
     cv::Size win_;
 };

@@ -1,0 +1,73 @@
+// haar_cascade.hpp - a stump-based Haar cascade (OpenCV's cascade XML, `stageType BOOST`, `featureType HAAR`,
+// upright features) evaluated at every window of one image, with exactly the arithmetic of OpenCV 4's
+// HaarEvaluator and predictOrderedStump, so that it accepts the windows cv::CascadeClassifier accepts, with the
+// same last-stage sums (tests/test_cascade_scan.py compares them on real images):
+//  - the integral image I and the integral of squares Q of the image (32-bit; the window sums are exact);
+//  - per window at (x, y), over the window less a one-pixel border (A = (W-2)(H-2) pixels):
+//        nf = A * sum(Q) - sum(I)^2,  n = (float)(1 / sqrt(nf)),
+//    and the window is never classified when nf <= 0 or A * n >= 0.1 (grey-level standard deviation <= 10);
+//  - feature response in single precision, in this order:  f = (w0 S(r0) + w1 S(r1) [+ w2 S(r2)]) * n,
+//    S(r) the rectangle's pixel sum (four lookups), the third term only when w2 != 0;
+//  - stump: leaf `left` when f < threshold, else `right`; stage: the double-precision sum of its leaves must
+//    reach (float)stageThreshold - 1e-5f (OpenCV's THRESHOLD_EPS), else the window is rejected there.
+// Scan (OpenCV's CascadeClassifierInvoker at one scale): rows y = 0, step, 2 step ...; along a row x = 0, step ...,
+// and after a window that the *first* stage rejects the next position is skipped (OpenCV's `x += yStep`). With
+// step 2 these are exactly the windows OpenCV's detectMultiScale scans at scale 1.
+//
+// Why not cv::CascadeClassifier: its scan step is fixed (2 px below scale 2), and each call clones the
+// evaluator and computes the integral with a per-call set-up; here the step is a parameter, the cascade is laid
+// out once as flat arrays with the corner offsets of the current image, and nothing is allocated per window.
+#pragma once
+
+#include <opencv2/core.hpp>
+
+#include <string>
+#include <vector>
+
+namespace hw {
+
+struct HaarWindow {
+    int x = 0, y = 0;    // px, top-left corner of the window in the scanned image
+    double stage_sum = 0;  // the last stage's sum of leaves (OpenCV's levelWeights)
+};
+
+class HaarCascade {
+public:
+    // Reads an OpenCV cascade XML (new format, stumps, upright Haar features). Throws std::invalid_argument
+    // naming what is missing or unsupported.
+    explicit HaarCascade(const std::string &path);
+
+    cv::Size window() const { return win_; }
+    int stages() const { return int(stages_.size()); }
+
+    // Every window of `img` (CV_8UC1) on the grid of `step` px that all stages accept, appended to `out` in
+    // row-major order. Not thread-safe (the integral buffers are members).
+    void scan(const cv::Mat &img, int step, std::vector<HaarWindow> &out) const;
+
+private:
+    struct Rect { int x, y, w, h; float weight; };
+    struct Feature { Rect r[3]; int n; };
+    struct Stump { int feature; float threshold, left, right; };
+    struct Stage { int first, count; float threshold; };
+    // One stump laid out for an integral image of a given row step: corner offsets of its three rectangles
+    // (p0 - p1 - p2 + p3 = the rectangle's sum), weights, threshold and leaves.
+    struct Node {
+        int ofs[3][4];
+        float w[3];
+        float threshold, left, right;
+    };
+
+    void layout(int step) const;
+    int classify(const int *sum, const unsigned *sq, double &stage_sum) const;
+
+    cv::Size win_;
+    std::vector<Feature> features_;
+    std::vector<Stump> stumps_;
+    std::vector<Stage> stages_;
+    mutable std::vector<Node> nodes_;  // stumps_ laid out for laid_step_
+    mutable int laid_step_ = -1;
+    mutable int norm_ofs_[4] = {0, 0, 0, 0};
+    mutable cv::Mat sum_, sqsum_;  // integral images (CV_32S), reused between calls
+};
+
+} // namespace hw
