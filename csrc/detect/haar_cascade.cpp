@@ -2,6 +2,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include <emmintrin.h>
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -72,11 +74,15 @@ HaarCascade::HaarCascade(const std::string &path) {
     if (stages_.empty()) bad(path, "has no stages");
 }
 
-void HaarCascade::layout(int step) const {
-    if (step == laid_step_) return;
-    // corner offsets of rectangle (x, y, w, h): p0 = (x, y), p1 = (x + w, y), p2 = (x, y + h), p3 = (x + w, y + h)
-    auto corners = [step](int x, int y, int w, int h, int *o) {
-        o[0] = y * step + x; o[1] = y * step + x + w; o[2] = (y + h) * step + x; o[3] = (y + h) * step + x + w;
+void HaarCascade::layout(int step, int plane_len) const {
+    if (step == laid_step_ && plane_len == laid_len_) return;
+    // Corner (cx, cy) of a window whose top-left integral entry is (x, y) = (step j, y) lies in plane cx % step at
+    // column j + cx / step of integral row y + cy: offset cy * step * L + (cx % step) * L + cx / step from the
+    // window's entry (plane 0, row y, column j). Rectangle (x, y, w, h): corners p0 = (x, y), p1 = (x + w, y),
+    // p2 = (x, y + h), p3 = (x + w, y + h), its sum p0 - p1 - p2 + p3.
+    auto corner = [step, plane_len](int cx, int cy) { return (cy * step + cx % step) * plane_len + cx / step; };
+    auto corners = [&](int x, int y, int w, int h, int *o) {
+        o[0] = corner(x, y); o[1] = corner(x + w, y); o[2] = corner(x, y + h); o[3] = corner(x + w, y + h);
     };
     nodes_.resize(stumps_.size());
     for (size_t i = 0; i < stumps_.size(); ++i) {
@@ -91,45 +97,61 @@ void HaarCascade::layout(int step) const {
         n.left = stumps_[i].left;
         n.right = stumps_[i].right;
     }
-    corners(1, 1, win_.width - 2, win_.height - 2, norm_ofs_);  // OpenCV's normrect
     laid_step_ = step;
+    laid_len_ = plane_len;
 }
 
-// OpenCV's runAt for one window: 1 = accepted by every stage, -s = rejected by stage s (0 for the first),
-// -1 = not classified (flat window). `sum`, `sq`: the integrals at the window's top-left corner.
-int HaarCascade::classify(const int *sum, const unsigned *sq, double &stage_sum) const {
-    const int *o = norm_ofs_;
-    const int valsum = sum[o[0]] - sum[o[1]] - sum[o[2]] + sum[o[3]];
-    const unsigned valsq = sq[o[0]] - sq[o[1]] - sq[o[2]] + sq[o[3]];
+// Variance normalisation of the window whose top-left integral entries are `sum`, `sq` (row step `stride`):
+// false when OpenCV does not classify it (flat window).
+bool HaarCascade::norm_factor(const int *sum, const unsigned *sq, int stride, float &norm) const {
+    const int o0 = stride + 1, o1 = stride + win_.width - 1, o2 = (win_.height - 1) * stride + 1,
+              o3 = (win_.height - 1) * stride + win_.width - 1;  // OpenCV's normrect (1, 1, W - 2, H - 2)
+    const int valsum = sum[o0] - sum[o1] - sum[o2] + sum[o3];
+    const unsigned valsq = sq[o0] - sq[o1] - sq[o2] + sq[o3];
     const double area = double(win_.width - 2) * (win_.height - 2);
     double nf = area * valsq - double(valsum) * valsum;
-    if (!(nf > 0.)) return -1;
+    if (!(nf > 0.)) return false;
     nf = std::sqrt(nf);
-    const float norm = float(1. / nf);
-    if (!(area * norm < 1e-1)) return -1;
+    norm = float(1. / nf);
+    return area * norm < 1e-1;
+}
+
+// OpenCV's predictOrderedStump on four windows at once (SSE2, the x86-64 baseline): lane k is the window whose
+// plane entry is p + k. The same single-precision operations in the same order per lane, and each lane's stage sum
+// accumulated in double in stump order, so every lane decides exactly as the scalar code does. `alive`: lanes to
+// classify (bit k). Returns the lanes every stage accepts; `rejected_first`: lanes the first stage rejects;
+// `sums`: the last stage's sum per accepted lane.
+int HaarCascade::classify4(const int *p, const float *norm, int alive, int &rejected_first, double *sums) const {
+    const __m128 nv = _mm_loadu_ps(norm);
+    auto rect_sum = [p](const int *o) {
+        __m128i s = _mm_sub_epi32(_mm_loadu_si128((const __m128i *)(p + o[0])), _mm_loadu_si128((const __m128i *)(p + o[1])));
+        s = _mm_sub_epi32(s, _mm_loadu_si128((const __m128i *)(p + o[2])));
+        s = _mm_add_epi32(s, _mm_loadu_si128((const __m128i *)(p + o[3])));
+        return _mm_cvtepi32_ps(s);
+    };
     const Node *node = nodes_.data();
-    double t = 0;
-    for (size_t s = 0; s < stages_.size(); ++s) {
+    __m128d lo = _mm_setzero_pd(), hi = _mm_setzero_pd();
+    rejected_first = 0;
+    for (size_t s = 0; s < stages_.size() && alive; ++s) {
         const Stage &st = stages_[s];
-        t = 0;
+        lo = _mm_setzero_pd(); hi = _mm_setzero_pd();
         for (const Node *end = node + st.count; node != end; ++node) {
-            const int *a = node->ofs[0], *b = node->ofs[1];
-            float r = node->w[0] * float(sum[a[0]] - sum[a[1]] - sum[a[2]] + sum[a[3]]) +
-                      node->w[1] * float(sum[b[0]] - sum[b[1]] - sum[b[2]] + sum[b[3]]);
-            if (node->w[2] != 0.f) {
-                const int *c = node->ofs[2];
-                r += node->w[2] * float(sum[c[0]] - sum[c[1]] - sum[c[2]] + sum[c[3]]);
-            }
-            const double v = r * norm;
-            t += v < node->threshold ? node->left : node->right;
+            __m128 r = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(node->w[0]), rect_sum(node->ofs[0])),
+                                  _mm_mul_ps(_mm_set1_ps(node->w[1]), rect_sum(node->ofs[1])));
+            if (node->w[2] != 0.f) r = _mm_add_ps(r, _mm_mul_ps(_mm_set1_ps(node->w[2]), rect_sum(node->ofs[2])));
+            const __m128 m = _mm_cmplt_ps(_mm_mul_ps(r, nv), _mm_set1_ps(node->threshold));  // f < threshold: left
+            const __m128 leaf = _mm_or_ps(_mm_and_ps(m, _mm_set1_ps(node->left)), _mm_andnot_ps(m, _mm_set1_ps(node->right)));
+            lo = _mm_add_pd(lo, _mm_cvtps_pd(leaf));
+            hi = _mm_add_pd(hi, _mm_cvtps_pd(_mm_movehl_ps(leaf, leaf)));
         }
-        if (t < st.threshold) {
-            stage_sum = t;
-            return -int(s);
-        }
+        const __m128d th = _mm_set1_pd(double(st.threshold));
+        const int rej = _mm_movemask_pd(_mm_cmplt_pd(lo, th)) | (_mm_movemask_pd(_mm_cmplt_pd(hi, th)) << 2);
+        if (s == 0) rejected_first = rej & alive;
+        alive &= ~rej;
     }
-    stage_sum = t;
-    return 1;
+    _mm_storeu_pd(sums, lo);
+    _mm_storeu_pd(sums + 2, hi);
+    return alive;
 }
 
 void HaarCascade::scan(const cv::Mat &img, int step, std::vector<HaarWindow> &out) const {
@@ -137,21 +159,44 @@ void HaarCascade::scan(const cv::Mat &img, int step, std::vector<HaarWindow> &ou
     if (img.cols <= win_.width || img.rows <= win_.height) return;
     cv::integral(img, sum_, sqsum_, CV_32S, CV_32S);
     CV_Assert(sum_.isContinuous() && sqsum_.isContinuous() && sum_.step == sqsum_.step);
-    layout(sum_.cols);
+    const int stride = sum_.cols;
+    // The integral split by column into `step` planes, plane m holding columns m, m + step, m + 2 step ...: the
+    // windows x = step j, step (j + 1) ... of a row then read each corner from four consecutive entries.
+    const int plane_len = (stride + step - 1) / step + 4;  // + 4: the last block of a row reads past its end
+    planes_.assign(size_t(sum_.rows) * step * plane_len, 0);
+    for (int r = 0; r < sum_.rows; ++r) {
+        const int *src = sum_.ptr<int>(r);
+        int *dst = planes_.data() + size_t(r) * step * plane_len;
+        for (int c = 0; c < stride; ++c) dst[(c % step) * plane_len + c / step] = src[c];
+    }
+    layout(step, plane_len);
     // OpenCV's rows: its working size is (cols + 1 - W, rows + 1 - H), cut into ceil(width / 32) stripes of whole
     // steps, ((height / step + stripes - 1) / stripes) steps each (integer division): the last row of the working
     // size is left out when the stripes do not reach it. Reproduced so that step 2 scans OpenCV's windows.
     const int ww = img.cols + 1 - win_.width, wh = img.rows + 1 - win_.height;
     const int stripes = (ww + 31) / 32, stripe = std::max((wh / step + stripes - 1) / stripes, 1) * step;
     const int yend = std::min(stripes * stripe, wh);
+    const int nx = (ww + step - 1) / step;  // windows x = step j < ww of a row
+    float norm[4];
+    double sums[4];
     for (int y = 0; y < yend; y += step) {
         const int *srow = sum_.ptr<int>(y);
         const unsigned *qrow = sqsum_.ptr<unsigned>(y);
-        for (int x = 0; x < ww; x += step) {
-            double s = 0;
-            const int r = classify(srow + x, qrow + x, s);
-            if (r == 1) out.push_back({x, y, s});
-            else if (r == 0) x += step;  // OpenCV: the next window after a first-stage rejection is skipped
+        const int *prow = planes_.data() + size_t(y) * step * plane_len;
+        bool skip = false;  // OpenCV skips the next window after one the first stage rejects
+        for (int j0 = 0; j0 < nx; j0 += 4) {
+            int ok = 0;
+            for (int k = 0; k < 4; ++k) {
+                norm[k] = 1.f;
+                if (j0 + k < nx && norm_factor(srow + step * (j0 + k), qrow + step * (j0 + k), stride, norm[k])) ok |= 1 << k;
+            }
+            int first = 0;
+            const int accepted = ok ? classify4(prow + j0, norm, ok, first, sums) : 0;
+            for (int k = 0; k < 4 && j0 + k < nx; ++k) {
+                if (skip) { skip = false; continue; }  // not scanned by OpenCV
+                if (first >> k & 1) skip = true;
+                else if (accepted >> k & 1) out.push_back({step * (j0 + k), y, sums[k]});
+            }
         }
     }
 }

@@ -57,17 +57,18 @@ private:
         float threshold, left, right;
     };
 
-    void layout(int step) const;
-    int classify(const int *sum, const unsigned *sq, double &stage_sum) const;
+    void layout(int step, int plane_len) const;
+    bool norm_factor(const int *sum, const unsigned *sq, int stride, float &norm) const;
+    int classify4(const int *p, const float *norm, int alive, int &rejected_first, double *sums) const;
 
     cv::Size win_;
     std::vector<Feature> features_;
     std::vector<Stump> stumps_;
     std::vector<Stage> stages_;
-    mutable std::vector<Node> nodes_;  // stumps_ laid out for laid_step_
-    mutable int laid_step_ = -1;
-    mutable int norm_ofs_[4] = {0, 0, 0, 0};
-    mutable cv::Mat sum_, sqsum_;  // integral images (CV_32S), reused between calls
+    mutable std::vector<Node> nodes_;  // stumps_ laid out for planes of laid_step_ x laid_len_
+    mutable int laid_step_ = -1, laid_len_ = -1;
+    mutable cv::Mat sum_, sqsum_;      // integral images (CV_32S), reused between calls
+    mutable std::vector<int> planes_;  // sum_ split by column into `step` planes (scan())
 };
 
 } // namespace hw
