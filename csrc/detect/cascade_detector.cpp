@@ -36,6 +36,7 @@ namespace {
 struct Raw {
     cv::Rect2f box;
     float weight;
+    int scale;  // index of the window size
 };
 
 } // namespace
@@ -53,6 +54,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     std::vector<int> levels;
     std::vector<double> weights;
     cv::Mat band;
+    int nscales = 0;  // window sizes that produced windows so far
     for (double f = 1.0; win_.height * f <= max_h; f *= p_.scale_factor) {
         const double hs = win_.height * f, ws = win_.width * f;
         // rows where the window's bottom may lie (flat road, vehicle heights H_min..H_max)
@@ -88,7 +90,9 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             haar_->scan(band, p_.step_px, wins);
         }
         for (const HaarWindow &w : wins)
-            raw.push_back({cv::Rect2f(float(x0 + w.x * f), float(y0 + w.y * f), float(ws), float(hs)), float(w.stage_sum)});
+            raw.push_back({cv::Rect2f(float(x0 + w.x * f), float(y0 + w.y * f), float(ws), float(hs)), float(w.stage_sum),
+                           nscales});
+        ++nscales;
     }
     // group: strongest first, every window overlapping a group's seed joins it. OpenCV's detectMultiScale scans in
     // parallel and returns the windows in a thread-dependent order, and stage sums tie (they are sums of a few
@@ -99,17 +103,35 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         if (a.box.x != b.box.x) return a.box.x < b.box.x;
         return a.box.width < b.box.width;
     });
+    // The windows of each scale sorted by x: a window can reach IoU >= group_iou > 0 with the seed only if it
+    // overlaps it, x in (x_seed - w, x_seed + w_seed), and its area is within a factor group_iou of the seed's;
+    // only those are tested (the same windows the test of every pair finds, summed in the same order).
+    std::vector<std::vector<std::pair<float, int>>> by_x(nscales);
+    for (size_t i = 0; i < raw.size(); ++i) by_x[size_t(raw[i].scale)].push_back({raw[i].box.x, int(i)});
+    for (auto &v : by_x) std::sort(v.begin(), v.end());
     std::vector<char> used(raw.size(), 0);
+    std::vector<int> members;
     std::vector<CascadeDetection> out;
     for (size_t i = 0; i < raw.size(); ++i) {
         if (used[i]) continue;
+        const cv::Rect2f &seed = raw[i].box;
+        members.clear();
+        for (const auto &v : by_x) {
+            if (v.empty()) continue;
+            const cv::Rect2f &other = raw[size_t(v.front().second)].box;  // every window of a scale has one size
+            const float ratio = other.area() / seed.area();
+            if (ratio < p_.group_iou || ratio * p_.group_iou > 1.f) continue;
+            auto it = std::lower_bound(v.begin(), v.end(), std::make_pair(seed.x - other.width - 1.f, -1));
+            for (; it != v.end() && it->first <= seed.x + seed.width + 1.f; ++it)
+                if (!used[size_t(it->second)] && box_iou(seed, raw[size_t(it->second)].box) >= p_.group_iou)
+                    members.push_back(it->second);
+        }
+        std::sort(members.begin(), members.end());
         double l = 0, t = 0, r = 0, b = 0;
-        int n = 0;
-        for (size_t j = i; j < raw.size(); ++j) {
-            if (used[j] || box_iou(raw[i].box, raw[j].box) < p_.group_iou) continue;
-            used[j] = 1;
-            ++n;
-            l += raw[j].box.x; t += raw[j].box.y; r += raw[j].box.br().x; b += raw[j].box.br().y;
+        const int n = int(members.size());
+        for (const int j : members) {
+            used[size_t(j)] = 1;
+            l += raw[size_t(j)].box.x; t += raw[size_t(j)].box.y; r += raw[size_t(j)].box.br().x; b += raw[size_t(j)].box.br().y;
         }
         if (n < p_.min_neighbors) continue;
         CascadeDetection d;
