@@ -138,8 +138,9 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n));
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
-        d.confidence = verifier_ ? verifier_->probability(gray, d.box, n, cam.horizon_row(), hc)
-                                 : float(n / (n + p_.neighbors_half));
+        d.confidence = verifier_ && n >= p_.verify_min_neighbors
+                           ? verifier_->probability(gray, d.box, n, cam.horizon_row(), hc)
+                           : float(n / (n + p_.neighbors_half));
         out.push_back(d);
     }
     if (p_.nms_iou >= 1.0) return out;

@@ -47,6 +47,7 @@ struct CascadeParams {
     double group_iou = 0.45;            // raw windows overlapping the group's strongest this much join it
     int min_neighbors = 2;              // groups of fewer raw windows are dropped
     double neighbors_half = 6.0;        // a group of this many windows gets confidence 0.5
+    int verify_min_neighbors = 0;       // groups of fewer raw windows skip the verifier (confidence from n)
     double nms_iou = 0.3;               // a detection overlapping a more confident one this much is dropped (1 = none)
 
     void bind(ParamMap &m) {
@@ -77,6 +78,9 @@ struct CascadeParams {
         m.add("min_neighbors", min_neighbors, 1, 100, "raw windows; groups with fewer are dropped");
         m.add("neighbors_half", neighbors_half, 0.5, 100.0,
               "raw windows; a group of n windows has confidence n / (n + neighbors_half)");
+        m.add("verify_min_neighbors", verify_min_neighbors, 0, 100,
+              "raw windows; groups of fewer are not judged by the verifier and keep the confidence n / (n + "
+              "neighbors_half); 0 = every group verified");
         m.add("nms_iou", nms_iou, 0.05, 1.0,
               "IoU; after scoring, a detection overlapping a more confident one at least this much is dropped (a "
               "second group on the same vehicle); 0.3 measured best at high precision on the TuSimple validation "

@@ -2,7 +2,7 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include <emmintrin.h>
+#include <immintrin.h>
 
 #include <algorithm>
 #include <cmath>
@@ -72,6 +72,7 @@ HaarCascade::HaarCascade(const std::string &path) {
         stages_.push_back(st);
     }
     if (stages_.empty()) bad(path, "has no stages");
+    avx2_ = __builtin_cpu_supports("avx2");
 }
 
 void HaarCascade::layout(int step, int plane_len) const {
@@ -88,14 +89,16 @@ void HaarCascade::layout(int step, int plane_len) const {
     for (size_t i = 0; i < stumps_.size(); ++i) {
         const Feature &f = features_[size_t(stumps_[i].feature)];
         Node &n = nodes_[i];
+        auto fill = [](float *v, float x) { std::fill(v, v + 4, x); };
         for (int k = 0; k < 3; ++k) {
             const Rect r = k < f.n ? f.r[k] : Rect{0, 0, 0, 0, 0.f};
             corners(r.x, r.y, r.w, r.h, n.ofs[k]);
-            n.w[k] = r.weight;
+            fill(n.w[k], r.weight);
         }
-        n.threshold = stumps_[i].threshold;
-        n.left = stumps_[i].left;
-        n.right = stumps_[i].right;
+        n.three = f.n == 3 && f.r[2].weight != 0.f;  // OpenCV adds the third rectangle only when its weight is not 0
+        fill(n.threshold, stumps_[i].threshold);
+        fill(n.left, stumps_[i].left);
+        fill(n.right, stumps_[i].right);
     }
     laid_step_ = step;
     laid_len_ = plane_len;
@@ -136,11 +139,11 @@ int HaarCascade::classify4(const int *p, const float *norm, int alive, int &reje
         const Stage &st = stages_[s];
         lo = _mm_setzero_pd(); hi = _mm_setzero_pd();
         for (const Node *end = node + st.count; node != end; ++node) {
-            __m128 r = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(node->w[0]), rect_sum(node->ofs[0])),
-                                  _mm_mul_ps(_mm_set1_ps(node->w[1]), rect_sum(node->ofs[1])));
-            if (node->w[2] != 0.f) r = _mm_add_ps(r, _mm_mul_ps(_mm_set1_ps(node->w[2]), rect_sum(node->ofs[2])));
-            const __m128 m = _mm_cmplt_ps(_mm_mul_ps(r, nv), _mm_set1_ps(node->threshold));  // f < threshold: left
-            const __m128 leaf = _mm_or_ps(_mm_and_ps(m, _mm_set1_ps(node->left)), _mm_andnot_ps(m, _mm_set1_ps(node->right)));
+            __m128 r = _mm_add_ps(_mm_mul_ps(_mm_load_ps(node->w[0]), rect_sum(node->ofs[0])),
+                                  _mm_mul_ps(_mm_load_ps(node->w[1]), rect_sum(node->ofs[1])));
+            if (node->three) r = _mm_add_ps(r, _mm_mul_ps(_mm_load_ps(node->w[2]), rect_sum(node->ofs[2])));
+            const __m128 m = _mm_cmplt_ps(_mm_mul_ps(r, nv), _mm_load_ps(node->threshold));  // f < threshold: left
+            const __m128 leaf = _mm_or_ps(_mm_and_ps(m, _mm_load_ps(node->left)), _mm_andnot_ps(m, _mm_load_ps(node->right)));
             lo = _mm_add_pd(lo, _mm_cvtps_pd(leaf));
             hi = _mm_add_pd(hi, _mm_cvtps_pd(_mm_movehl_ps(leaf, leaf)));
         }
@@ -154,6 +157,43 @@ int HaarCascade::classify4(const int *p, const float *norm, int alive, int &reje
     return alive;
 }
 
+// classify4 on eight windows at once with AVX2 (used when the CPU has it; the same operations per lane, no FMA).
+__attribute__((target("avx2"))) int HaarCascade::classify8(const int *p, const float *norm, int alive,
+                                                           int &rejected_first, double *sums) const {
+    const __m256 nv = _mm256_loadu_ps(norm);
+    auto rect_sum = [p](const int *o) __attribute__((target("avx2"))) {
+        __m256i s = _mm256_sub_epi32(_mm256_loadu_si256((const __m256i *)(p + o[0])),
+                                     _mm256_loadu_si256((const __m256i *)(p + o[1])));
+        s = _mm256_sub_epi32(s, _mm256_loadu_si256((const __m256i *)(p + o[2])));
+        s = _mm256_add_epi32(s, _mm256_loadu_si256((const __m256i *)(p + o[3])));
+        return _mm256_cvtepi32_ps(s);
+    };
+    const Node *node = nodes_.data();
+    __m256d lo = _mm256_setzero_pd(), hi = _mm256_setzero_pd();
+    rejected_first = 0;
+    for (size_t s = 0; s < stages_.size() && alive; ++s) {
+        const Stage &st = stages_[s];
+        lo = _mm256_setzero_pd(); hi = _mm256_setzero_pd();
+        for (const Node *end = node + st.count; node != end; ++node) {
+            __m256 r = _mm256_add_ps(_mm256_mul_ps(_mm256_broadcast_ss(node->w[0]), rect_sum(node->ofs[0])),
+                                     _mm256_mul_ps(_mm256_broadcast_ss(node->w[1]), rect_sum(node->ofs[1])));
+            if (node->three) r = _mm256_add_ps(r, _mm256_mul_ps(_mm256_broadcast_ss(node->w[2]), rect_sum(node->ofs[2])));
+            const __m256 m = _mm256_cmp_ps(_mm256_mul_ps(r, nv), _mm256_broadcast_ss(node->threshold), _CMP_LT_OQ);
+            const __m256 leaf = _mm256_blendv_ps(_mm256_broadcast_ss(node->right), _mm256_broadcast_ss(node->left), m);
+            lo = _mm256_add_pd(lo, _mm256_cvtps_pd(_mm256_castps256_ps128(leaf)));
+            hi = _mm256_add_pd(hi, _mm256_cvtps_pd(_mm256_extractf128_ps(leaf, 1)));
+        }
+        const __m256d th = _mm256_set1_pd(double(st.threshold));
+        const int rej = _mm256_movemask_pd(_mm256_cmp_pd(lo, th, _CMP_LT_OQ)) |
+                        (_mm256_movemask_pd(_mm256_cmp_pd(hi, th, _CMP_LT_OQ)) << 4);
+        if (s == 0) rejected_first = rej & alive;
+        alive &= ~rej;
+    }
+    _mm256_storeu_pd(sums, lo);
+    _mm256_storeu_pd(sums + 4, hi);
+    return alive;
+}
+
 void HaarCascade::scan(const cv::Mat &img, int step, std::vector<HaarWindow> &out) const {
     CV_Assert(img.type() == CV_8UC1 && step >= 1);
     if (img.cols <= win_.width || img.rows <= win_.height) return;
@@ -162,7 +202,7 @@ void HaarCascade::scan(const cv::Mat &img, int step, std::vector<HaarWindow> &ou
     const int stride = sum_.cols;
     // The integral split by column into `step` planes, plane m holding columns m, m + step, m + 2 step ...: the
     // windows x = step j, step (j + 1) ... of a row then read each corner from four consecutive entries.
-    const int plane_len = (stride + step - 1) / step + 4;  // + 4: the last block of a row reads past its end
+    const int plane_len = (stride + step - 1) / step + 8;  // + 8: the last block of a row reads past its end
     planes_.assign(size_t(sum_.rows) * step * plane_len, 0);
     for (int r = 0; r < sum_.rows; ++r) {
         const int *src = sum_.ptr<int>(r);
@@ -177,22 +217,23 @@ void HaarCascade::scan(const cv::Mat &img, int step, std::vector<HaarWindow> &ou
     const int stripes = (ww + 31) / 32, stripe = std::max((wh / step + stripes - 1) / stripes, 1) * step;
     const int yend = std::min(stripes * stripe, wh);
     const int nx = (ww + step - 1) / step;  // windows x = step j < ww of a row
-    float norm[4];
-    double sums[4];
+    const int lanes = avx2_ ? 8 : 4;
+    float norm[8];
+    double sums[8];
     for (int y = 0; y < yend; y += step) {
         const int *srow = sum_.ptr<int>(y);
         const unsigned *qrow = sqsum_.ptr<unsigned>(y);
         const int *prow = planes_.data() + size_t(y) * step * plane_len;
         bool skip = false;  // OpenCV skips the next window after one the first stage rejects
-        for (int j0 = 0; j0 < nx; j0 += 4) {
+        for (int j0 = 0; j0 < nx; j0 += lanes) {
             int ok = 0;
-            for (int k = 0; k < 4; ++k) {
+            for (int k = 0; k < lanes; ++k) {
                 norm[k] = 1.f;
                 if (j0 + k < nx && norm_factor(srow + step * (j0 + k), qrow + step * (j0 + k), stride, norm[k])) ok |= 1 << k;
             }
-            int first = 0;
-            const int accepted = ok ? classify4(prow + j0, norm, ok, first, sums) : 0;
-            for (int k = 0; k < 4 && j0 + k < nx; ++k) {
+            int first = 0, accepted = 0;
+            if (ok) accepted = avx2_ ? classify8(prow + j0, norm, ok, first, sums) : classify4(prow + j0, norm, ok, first, sums);
+            for (int k = 0; k < lanes && j0 + k < nx; ++k) {
                 if (skip) { skip = false; continue; }  // not scanned by OpenCV
                 if (first >> k & 1) skip = true;
                 else if (accepted >> k & 1) out.push_back({step * (j0 + k), y, sums[k]});

@@ -49,19 +49,22 @@ private:
     struct Feature { Rect r[3]; int n; };
     struct Stump { int feature; float threshold, left, right; };
     struct Stage { int first, count; float threshold; };
-    // One stump laid out for an integral image of a given row step: corner offsets of its three rectangles
-    // (p0 - p1 - p2 + p3 = the rectangle's sum), weights, threshold and leaves.
-    struct Node {
+    // One stump laid out for the column planes of an integral image (scan()): corner offsets of its three
+    // rectangles (sum = p0 - p1 - p2 + p3), and its weights, threshold and leaves repeated for the four lanes.
+    struct alignas(16) Node {
+        float w[3][4];
+        float threshold[4], left[4], right[4];
         int ofs[3][4];
-        float w[3];
-        float threshold, left, right;
+        bool three;  // the third rectangle counts (weight not 0)
     };
 
     void layout(int step, int plane_len) const;
     bool norm_factor(const int *sum, const unsigned *sq, int stride, float &norm) const;
     int classify4(const int *p, const float *norm, int alive, int &rejected_first, double *sums) const;
+    int classify8(const int *p, const float *norm, int alive, int &rejected_first, double *sums) const;
 
     cv::Size win_;
+    bool avx2_ = false;  // eight windows at once (classify8) where the CPU has AVX2
     std::vector<Feature> features_;
     std::vector<Stump> stumps_;
     std::vector<Stage> stages_;
