@@ -57,6 +57,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     int nscales = 0;  // window sizes that produced windows so far
     for (double f = 1.0; win_.height * f <= max_h; f *= p_.scale_factor) {
         const double hs = win_.height * f, ws = win_.width * f;
+        if (hs < p_.min_window_px) continue;
         // rows where the window's bottom may lie (flat road, vehicle heights H_min..H_max)
         const double yb0 = std::max<double>(prior.y_top, yh + hs * hc / p_.max_vehicle_height_m);
         const double yb1 = std::min<double>(gray.rows, yh + hs * hc / p_.min_vehicle_height_m);

@@ -42,6 +42,7 @@ struct CascadeParams {
     double max_vehicle_height_m = 4.5;  // m; highest vehicle box (a truck)
     double scale_factor = 1.12;         // ratio of successive window sizes
     double max_window_frac = 0.6;       // largest window height as a fraction of the image height
+    double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
     bool opencv_scan = false;           // scan with cv::CascadeClassifier (the reference) instead of HaarCascade
     double group_iou = 0.45;            // raw windows overlapping the group's strongest this much join it
@@ -69,6 +70,9 @@ struct CascadeParams {
               "ratio between successive window sizes; smaller finds more sizes at more cost");
         m.add("max_window_frac", max_window_frac, 0.05, 1.0,
               "fraction of the image height; largest window scanned (a car at 5 m is about a third of the image wide)");
+        m.add("min_window_px", min_window_px, 0.0, 1000.0,
+              "px of the image; window sizes below this height are not scanned (0 = all, from the model's own "
+              "20 px): smaller vehicles are not wanted, and the smallest sizes are the costliest to scan");
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
         m.add("opencv_scan", opencv_scan,
               "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
