@@ -203,11 +203,15 @@ void HaarCascade::scan(const cv::Mat &img, int step, std::vector<HaarWindow> &ou
     // The integral split by column into `step` planes, plane m holding columns m, m + step, m + 2 step ...: the
     // windows x = step j, step (j + 1) ... of a row then read each corner from four consecutive entries.
     const int plane_len = (stride + step - 1) / step + 8;  // + 8: the last block of a row reads past its end
-    planes_.assign(size_t(sum_.rows) * step * plane_len, 0);
+    planes_.resize(size_t(sum_.rows) * step * plane_len);
     for (int r = 0; r < sum_.rows; ++r) {
         const int *src = sum_.ptr<int>(r);
-        int *dst = planes_.data() + size_t(r) * step * plane_len;
-        for (int c = 0; c < stride; ++c) dst[(c % step) * plane_len + c / step] = src[c];
+        for (int m = 0; m < step; ++m) {
+            int *dst = planes_.data() + (size_t(r) * step + m) * plane_len;
+            int j = 0;
+            for (int c = m; c < stride; c += step) dst[j++] = src[c];
+            std::fill(dst + j, dst + plane_len, 0);
+        }
     }
     layout(step, plane_len);
     // OpenCV's rows: its working size is (cols + 1 - W, rows + 1 - H), cut into ceil(width / 32) stripes of whole
