@@ -202,7 +202,9 @@ void HaarCascade::scan(const cv::Mat &img, int step, std::vector<HaarWindow> &ou
     const int stride = sum_.cols;
     // The integral split by column into `step` planes, plane m holding columns m, m + step, m + 2 step ...: the
     // windows x = step j, step (j + 1) ... of a row then read each corner from four consecutive entries.
-    const int plane_len = (stride + step - 1) / step + 8;  // + 8: the last block of a row reads past its end
+    // + 8: the last block of a row reads past its end; never shorter than before, so that the stumps are laid out
+    // again only when a wider band comes (once or twice a run)
+    const int plane_len = step == laid_step_ ? std::max(laid_len_, (stride + step - 1) / step + 8) : (stride + step - 1) / step + 8;
     planes_.resize(size_t(sum_.rows) * step * plane_len);
     for (int r = 0; r < sum_.rows; ++r) {
         const int *src = sum_.ptr<int>(r);
