@@ -14,15 +14,17 @@ namespace hw {
 CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
     if (p_.model.empty())
         throw std::invalid_argument("cascade.model: no cascade XML given (Headway's Python side fills in the shipped one)");
-    haar_ = std::make_unique<HaarCascade>(p_.model);
-    win_ = haar_->window();
-    if (p_.opencv_scan) {
+    if (p_.opencv_scan) {  // OpenCV's scan: also runs what HaarCascade does not read (tilted features)
         cc_ = std::make_unique<cv::CascadeClassifier>();
         if (!cc_->load(p_.model))
             throw std::invalid_argument("cascade.model: OpenCV cannot load '" + p_.model +
                                         "' as a cascade XML; train one with `headway train cascade` or leave the key empty");
         if (p_.step_px != 2)
             throw std::invalid_argument("cascade.opencv_scan: OpenCV's scan steps 2 px; set cascade.step_px to 2 with it");
+        win_ = cc_->getOriginalWindowSize();
+    } else {
+        haar_ = std::make_unique<HaarCascade>(p_.model);
+        win_ = haar_->window();
     }
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = std::make_unique<VehicleVerifier>(p_.verifier);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
@@ -88,7 +90,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             cc_->detectMultiScale(band, rects, levels, weights, 1.5, 0, 0, win_, win_, true);
             for (size_t i = 0; i < rects.size(); ++i) wins.push_back({rects[i].x, rects[i].y, weights[i]});
         } else {
-            haar_->scan(band, p_.step_px, wins);
+            haar_->scan(band, p_.step_px, wins);  // the same windows, faster (haar_cascade.hpp)
         }
         for (const HaarWindow &w : wins)
             raw.push_back({cv::Rect2f(float(x0 + w.x * f), float(y0 + w.y * f), float(ws), float(hs)), float(w.stage_sum),

@@ -1,7 +1,7 @@
 // cascade_detector.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/cascade.md).
 //
-// cv::CascadeClassifier runs the shipped OpenCV cascade XML (trained by `headway train cascade`) only
-// where a vehicle can stand. The cascade's window W x H (30 x 20) was trained on windows of the
+// The shipped OpenCV cascade XML (trained by `headway train cascade`) is run by HaarCascade
+// (haar_cascade.hpp: OpenCV's evaluation and scan, window for window, faster) only where a vehicle can stand. The cascade's window W x H (30 x 20) was trained on windows of the
 // annotated box's height, so a window of height h_s is a vehicle whose box is h_s pixels high. On a
 // flat road a vehicle of height H_v (m) whose bottom is at row y_b has
 //     h_s = H_v * (y_b - y_h) / h_cam        (pinhole: h_s = fy H_v / Z, Z = fy h_cam / (y_b - y_h))
@@ -111,7 +111,7 @@ public:
 
 private:
     CascadeParams p_;
-    std::unique_ptr<HaarCascade> haar_;
+    std::unique_ptr<HaarCascade> haar_;          // the scan, unless opencv_scan
     std::unique_ptr<cv::CascadeClassifier> cc_;  // only with opencv_scan
     std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
     cv::Size win_;

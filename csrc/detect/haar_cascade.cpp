@@ -48,7 +48,8 @@ HaarCascade::HaarCascade(const std::string &path) {
     win_ = cv::Size(int(root["width"]), int(root["height"]));
     if (win_.width < 3 || win_.height < 3) bad(path, "has no window size");
     for (const auto &fn : root["features"]) {
-        if (!fn["tilted"].empty() && int(fn["tilted"]) != 0) bad(path, "has tilted features (not supported)");
+        if (!fn["tilted"].empty() && int(fn["tilted"]) != 0)
+            bad(path, "has tilted features, which only OpenCV's scan runs (cascade.opencv_scan: true)");
         Feature f{};
         for (const auto &rn : fn["rects"]) {
             const std::vector<float> v = numbers(rn);

@@ -1,7 +1,7 @@
 // haar_cascade.hpp - a stump-based Haar cascade (OpenCV's cascade XML, `stageType BOOST`, `featureType HAAR`,
 // upright features) evaluated at every window of one image, with exactly the arithmetic of OpenCV 4's
 // HaarEvaluator and predictOrderedStump, so that it accepts the windows cv::CascadeClassifier accepts, with the
-// same last-stage sums (tests/test_cascade_scan.py compares them on real images):
+// same last-stage sums (tests/test_cascade_detect.py compares the detections on real and rendered images):
 //  - the integral image I and the integral of squares Q of the image (32-bit; the window sums are exact);
 //  - per window at (x, y), over the window less a one-pixel border (A = (W-2)(H-2) pixels):
 //        nf = A * sum(Q) - sum(I)^2,  n = (float)(1 / sqrt(nf)),
@@ -10,13 +10,16 @@
 //    S(r) the rectangle's pixel sum (four lookups), the third term only when w2 != 0;
 //  - stump: leaf `left` when f < threshold, else `right`; stage: the double-precision sum of its leaves must
 //    reach (float)stageThreshold - 1e-5f (OpenCV's THRESHOLD_EPS), else the window is rejected there.
-// Scan (OpenCV's CascadeClassifierInvoker at one scale): rows y = 0, step, 2 step ...; along a row x = 0, step ...,
-// and after a window that the *first* stage rejects the next position is skipped (OpenCV's `x += yStep`). With
-// step 2 these are exactly the windows OpenCV's detectMultiScale scans at scale 1.
+// Scan (OpenCV's CascadeClassifierInvoker at one scale): rows y = 0, step, 2 step ... (OpenCV's row stripes can
+// leave out the last row: reproduced, see scan()); along a row x = 0, step ..., and after a window that the
+// *first* stage rejects the next position is skipped (OpenCV's `x += yStep`). With step 2 these are exactly the
+// windows OpenCV's detectMultiScale scans at scale 1.
 //
-// Why not cv::CascadeClassifier: its scan step is fixed (2 px below scale 2), and each call clones the
-// evaluator and computes the integral with a per-call set-up; here the step is a parameter, the cascade is laid
-// out once as flat arrays with the corner offsets of the current image, and nothing is allocated per window.
+// Why not cv::CascadeClassifier (measured, docs/cascade.md "Session 3"): the same windows cost 4x less here.
+// OpenCV picks each stump's leaf by a branch that is mispredicted about every other stump, and evaluates one
+// window at a time; here the leaf is selected without a branch and four (SSE2) or eight (AVX2, where the CPU
+// has it) consecutive windows of a row are evaluated together, from the integral split into column planes so
+// that each rectangle corner of the eight windows is one load. The scan step is a parameter (OpenCV's is 2).
 #pragma once
 
 #include <opencv2/core.hpp>
