@@ -16,8 +16,8 @@
 // windows OpenCV's detectMultiScale scans at scale 1.
 //
 // Why not cv::CascadeClassifier (measured, docs/cascade.md "Session 3"): the same windows cost 4x less here.
-// OpenCV picks each stump's leaf by a branch that is mispredicted about every other stump, and evaluates one
-// window at a time; here the leaf is selected without a branch and four (SSE2) or eight (AVX2, where the CPU
+// OpenCV picks each stump's leaf by a branch on a comparison that goes either way from window to window, and
+// evaluates one window at a time; here the leaf is selected without a branch and four (SSE2) or eight (AVX2, where the CPU
 // has it) consecutive windows of a row are evaluated together, from the integral split into column planes so
 // that each rectangle corner of the eight windows is one load. The scan step is a parameter (OpenCV's is 2).
 #pragma once
