@@ -111,10 +111,12 @@ def _cascade_tracks(cfg: dict, images: list, stage: str = "cascade") -> list:
 EVERY_GROUP = {"verifier": "off", "nms_iou": 1.0, "min_neighbors": 1}
 
 
-def test_own_scanner_reports_what_opencv_reports_on_rendered_frames():
+@pytest.mark.parametrize("lanes", [0, 4])
+def test_own_scanner_reports_what_opencv_reports_on_rendered_frames(lanes):
     """The core scans with its own Haar evaluator (csrc/detect/haar_cascade.hpp: four or eight windows at once,
     any step); at OpenCV's step it must find exactly the windows cv::CascadeClassifier finds, with the same stage
-    sums: the same groups, boxes and confidences, bit for bit (dense_traffic, where the cascade fires often)."""
+    sums: the same groups, boxes and confidences, bit for bit (dense_traffic, where the cascade fires often).
+    lanes 0: the widest this CPU has (AVX2 here); 4: the SSE2 code every x86-64 runs."""
     from app.sim import load_scenario, render
     from app.sim.frames import scenario_camera
 
@@ -123,7 +125,7 @@ def test_own_scanner_reports_what_opencv_reports_on_rendered_frames():
     for over in (EVERY_GROUP, {}):
         cfgs = []
         for opencv in (True, False):
-            cfg = configuration.load(None, {"cascade": {**over, "opencv_scan": opencv}})
+            cfg = configuration.load(None, {"cascade": {**over, "opencv_scan": opencv, "scan_lanes": lanes}})
             cfg["camera"].update(scenario_camera(sc).to_dict())
             cfgs.append(cfg)
         ref, own = (_cascade_tracks(c, frames) for c in cfgs)
@@ -141,6 +143,13 @@ def test_own_scanner_reports_what_opencv_reports_on_real_images():
                                 images) for o in (True, False))
     assert sum(map(len, ref)) > 30 * len(images)
     assert own == ref
+
+
+def test_scan_lanes_other_than_0_4_8_are_refused():
+    cfg = configuration.load(None, {"cascade": {"scan_lanes": 5}})
+    with pytest.raises(Exception, match="scan_lanes"):
+        with Pipeline(configuration.core_sections(cfg)) as pipe:
+            pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))
 
 
 def test_opencv_scan_takes_only_opencvs_step():

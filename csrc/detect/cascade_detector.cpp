@@ -23,7 +23,7 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
             throw std::invalid_argument("cascade.opencv_scan: OpenCV's scan steps 2 px; set cascade.step_px to 2 with it");
         win_ = cc_->getOriginalWindowSize();
     } else {
-        haar_ = std::make_unique<HaarCascade>(p_.model);
+        haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
         win_ = haar_->window();
     }
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = std::make_unique<VehicleVerifier>(p_.verifier);

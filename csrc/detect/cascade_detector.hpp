@@ -45,6 +45,7 @@ struct CascadeParams {
     double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
     bool opencv_scan = false;           // scan with cv::CascadeClassifier (the reference) instead of HaarCascade
+    int scan_lanes = 0;                 // windows HaarCascade evaluates at once: 0 = the widest the CPU has, 4, 8
     double group_iou = 0.45;            // raw windows overlapping the group's strongest this much join it
     int min_neighbors = 2;              // groups of fewer raw windows are dropped
     double neighbors_half = 6.0;        // a group of this many windows gets confidence 0.5
@@ -74,6 +75,9 @@ struct CascadeParams {
               "px of the image; window sizes below this height are not scanned (0 = all, from the model's own "
               "20 px): smaller vehicles are not wanted, and the smallest sizes are the costliest to scan");
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
+        m.add("scan_lanes", scan_lanes, 0, 8,
+              "windows the own scanner evaluates at once: 0 = the widest this CPU has (8 with AVX2, else 4), 4 = "
+              "SSE2, 8 = AVX2; the same detections either way (for tests and CPUs without AVX2)");
         m.add("opencv_scan", opencv_scan,
               "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
               "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");

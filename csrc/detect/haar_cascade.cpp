@@ -34,7 +34,7 @@ std::vector<float> numbers(const cv::FileNode &n) {
 
 } // namespace
 
-HaarCascade::HaarCascade(const std::string &path) {
+HaarCascade::HaarCascade(const std::string &path, int lanes) {
     cv::FileStorage fs;
     try {
         fs.open(path, cv::FileStorage::READ);
@@ -73,7 +73,12 @@ HaarCascade::HaarCascade(const std::string &path) {
         stages_.push_back(st);
     }
     if (stages_.empty()) bad(path, "has no stages");
-    avx2_ = __builtin_cpu_supports("avx2");
+    const bool has_avx2 = __builtin_cpu_supports("avx2");
+    if (lanes != 0 && lanes != 4 && lanes != 8)
+        throw std::invalid_argument("cascade.scan_lanes: " + std::to_string(lanes) + " is not 0 (the widest), 4 or 8");
+    if (lanes == 8 && !has_avx2)
+        throw std::invalid_argument("cascade.scan_lanes: 8 needs a CPU with AVX2, which this one lacks; use 0 or 4");
+    avx2_ = lanes == 8 || (lanes == 0 && has_avx2);
 }
 
 void HaarCascade::layout(int step, int plane_len) const {

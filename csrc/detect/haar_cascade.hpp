@@ -36,9 +36,10 @@ struct HaarWindow {
 
 class HaarCascade {
 public:
-    // Reads an OpenCV cascade XML (new format, stumps, upright Haar features). Throws std::invalid_argument
-    // naming what is missing or unsupported.
-    explicit HaarCascade(const std::string &path);
+    // Reads an OpenCV cascade XML (new format, stumps, upright Haar features). `lanes`: windows evaluated at once,
+    // 4 (SSE2), 8 (AVX2) or 0 = the widest the CPU has. Throws std::invalid_argument naming what is missing or
+    // unsupported.
+    explicit HaarCascade(const std::string &path, int lanes = 0);
 
     cv::Size window() const { return win_; }
     int stages() const { return int(stages_.size()); }
