@@ -100,3 +100,60 @@ def test_core_confidence_is_the_verifier_probability_the_trainer_computes():
     x = np.c_[box_features(hog(), gray, boxes), geometry_features(boxes, n, r.horizon_row, cfg["camera"]["height_m"])]
     p = model.probability(x)
     assert np.abs(p - np.array([t.confidence for t in tracks])).max() < 0.02
+
+
+def _cascade_tracks(cfg: dict, images: list, stage: str = "cascade") -> list:
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        return [[(*t.box, t.confidence) for t in pipe.run_stage(stage, g).tracks] for g in images]
+
+
+# every raw group kept and scored by its window count: any window found or missed changes the output
+EVERY_GROUP = {"verifier": "off", "nms_iou": 1.0, "min_neighbors": 1}
+
+
+@pytest.mark.parametrize("lanes", [0, 4])
+def test_own_scanner_reports_what_opencv_reports_on_rendered_frames(lanes):
+    """The core scans with its own Haar evaluator (csrc/detect/haar_cascade.hpp: four or eight windows at once,
+    any step); at OpenCV's step it must find exactly the windows cv::CascadeClassifier finds, with the same stage
+    sums: the same groups, boxes and confidences, bit for bit (dense_traffic, where the cascade fires often).
+    lanes 0: the widest this CPU has (AVX2 here); 4: the SSE2 code every x86-64 runs."""
+    from app.sim import load_scenario, render
+    from app.sim.frames import scenario_camera
+
+    sc = load_scenario("dense_traffic")
+    frames = [f.image for f in list(render(sc))[:12]]
+    for over in (EVERY_GROUP, {}):
+        cfgs = []
+        for opencv in (True, False):
+            cfg = configuration.load(None, {"cascade": {**over, "opencv_scan": opencv, "scan_lanes": lanes}})
+            cfg["camera"].update(scenario_camera(sc).to_dict())
+            cfgs.append(cfg)
+        ref, own = (_cascade_tracks(c, frames) for c in cfgs)
+        assert sum(map(len, ref)) > (20 if over else 1) * len(frames)
+        assert own == ref
+
+
+def test_own_scanner_reports_what_opencv_reports_on_real_images():
+    from app.eval.tusimple_boxes import tusimple_config
+
+    supp = data_path("tusimple", "supp")
+    entries = json.loads((supp / "annotation.json").read_text())[:12]
+    images = [cv2.imread(str(supp / e["file_name"]), cv2.IMREAD_GRAYSCALE) for e in entries]
+    ref, own = (_cascade_tracks(tusimple_config(configuration.load(None, {"cascade": {**EVERY_GROUP, "opencv_scan": o}})),
+                                images) for o in (True, False))
+    assert sum(map(len, ref)) > 30 * len(images)
+    assert own == ref
+
+
+def test_scan_lanes_other_than_0_4_8_are_refused():
+    cfg = configuration.load(None, {"cascade": {"scan_lanes": 5}})
+    with pytest.raises(Exception, match="scan_lanes"):
+        with Pipeline(configuration.core_sections(cfg)) as pipe:
+            pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))
+
+
+def test_opencv_scan_takes_only_opencvs_step():
+    cfg = configuration.load(None, {"cascade": {"opencv_scan": True, "step_px": 3}})
+    with pytest.raises(Exception, match="step_px"):
+        with Pipeline(configuration.core_sections(cfg)) as pipe:
+            pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))

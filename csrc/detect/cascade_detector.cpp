@@ -1,4 +1,5 @@
 #include "detect/cascade_detector.hpp"
+#include "detect/haar_cascade.hpp"
 #include "detect/vehicle_verifier.hpp"
 
 #include <opencv2/imgproc.hpp>
@@ -10,13 +11,21 @@
 
 namespace hw {
 
-CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p), cc_(std::make_unique<cv::CascadeClassifier>()) {
+CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
     if (p_.model.empty())
         throw std::invalid_argument("cascade.model: no cascade XML given (Headway's Python side fills in the shipped one)");
-    if (!cc_->load(p_.model))
-        throw std::invalid_argument("cascade.model: OpenCV cannot load '" + p_.model +
-                                    "' as a cascade XML; train one with `headway train cascade` or leave the key empty");
-    win_ = cc_->getOriginalWindowSize();
+    if (p_.opencv_scan) {  // OpenCV's scan: also runs what HaarCascade does not read (tilted features)
+        cc_ = std::make_unique<cv::CascadeClassifier>();
+        if (!cc_->load(p_.model))
+            throw std::invalid_argument("cascade.model: OpenCV cannot load '" + p_.model +
+                                        "' as a cascade XML; train one with `headway train cascade` or leave the key empty");
+        if (p_.step_px != 2)
+            throw std::invalid_argument("cascade.opencv_scan: OpenCV's scan steps 2 px; set cascade.step_px to 2 with it");
+        win_ = cc_->getOriginalWindowSize();
+    } else {
+        haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
+        win_ = haar_->window();
+    }
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = std::make_unique<VehicleVerifier>(p_.verifier);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
@@ -29,6 +38,7 @@ namespace {
 struct Raw {
     cv::Rect2f box;
     float weight;
+    int scale;  // index of the window size
 };
 
 } // namespace
@@ -38,6 +48,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     CV_Assert(gray.type() == CV_8UC1);
     const RoadPrior prior = make_road_prior(gray.size(), lanes, cam, p_.road);
     std::vector<Raw> raw;
+    std::vector<HaarWindow> wins;
     if (prior.empty()) return {};
     const double yh = prior.horizon_row, hc = cam.height_m;
     const double max_h = p_.max_window_frac * gray.rows;
@@ -45,8 +56,10 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     std::vector<int> levels;
     std::vector<double> weights;
     cv::Mat band;
+    int nscales = 0;  // window sizes that produced windows so far
     for (double f = 1.0; win_.height * f <= max_h; f *= p_.scale_factor) {
         const double hs = win_.height * f, ws = win_.width * f;
+        if (hs < p_.min_window_px) continue;
         // rows where the window's bottom may lie (flat road, vehicle heights H_min..H_max)
         const double yb0 = std::max<double>(prior.y_top, yh + hs * hc / p_.max_vehicle_height_m);
         const double yb1 = std::min<double>(gray.rows, yh + hs * hc / p_.min_vehicle_height_m);
@@ -71,13 +84,18 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         if (sz.width <= win_.width || sz.height <= win_.height) continue;
         if (f > 1.0) cv::resize(roi, band, sz, 0, 0, cv::INTER_LINEAR);
         else band = roi;
-        rects.clear(); levels.clear(); weights.clear();
-        cc_->detectMultiScale(band, rects, levels, weights, 1.5, 0, 0, win_, win_, true);
-        for (size_t i = 0; i < rects.size(); ++i) {
-            if (p_.step_px > 2 && (rects[i].x % p_.step_px || rects[i].y % p_.step_px)) continue;
-            raw.push_back({cv::Rect2f(float(x0 + rects[i].x * f), float(y0 + rects[i].y * f), float(ws), float(hs)),
-                           float(weights[i])});
+        wins.clear();
+        if (cc_) {  // the reference: OpenCV's own scan at scale 1 (step 2)
+            rects.clear(); levels.clear(); weights.clear();
+            cc_->detectMultiScale(band, rects, levels, weights, 1.5, 0, 0, win_, win_, true);
+            for (size_t i = 0; i < rects.size(); ++i) wins.push_back({rects[i].x, rects[i].y, weights[i]});
+        } else {
+            haar_->scan(band, p_.step_px, wins);  // the same windows, faster (haar_cascade.hpp)
         }
+        for (const HaarWindow &w : wins)
+            raw.push_back({cv::Rect2f(float(x0 + w.x * f), float(y0 + w.y * f), float(ws), float(hs)), float(w.stage_sum),
+                           nscales});
+        ++nscales;
     }
     // group: strongest first, every window overlapping a group's seed joins it. OpenCV's detectMultiScale scans in
     // parallel and returns the windows in a thread-dependent order, and stage sums tie (they are sums of a few
@@ -88,25 +106,44 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         if (a.box.x != b.box.x) return a.box.x < b.box.x;
         return a.box.width < b.box.width;
     });
+    // The windows of each scale sorted by x: a window can reach IoU >= group_iou > 0 with the seed only if it
+    // overlaps it, x in (x_seed - w, x_seed + w_seed), and its area is within a factor group_iou of the seed's;
+    // only those are tested (the same windows the test of every pair finds, summed in the same order).
+    std::vector<std::vector<std::pair<float, int>>> by_x(nscales);
+    for (size_t i = 0; i < raw.size(); ++i) by_x[size_t(raw[i].scale)].push_back({raw[i].box.x, int(i)});
+    for (auto &v : by_x) std::sort(v.begin(), v.end());
     std::vector<char> used(raw.size(), 0);
+    std::vector<int> members;
     std::vector<CascadeDetection> out;
     for (size_t i = 0; i < raw.size(); ++i) {
         if (used[i]) continue;
+        const cv::Rect2f &seed = raw[i].box;
+        members.clear();
+        for (const auto &v : by_x) {
+            if (v.empty()) continue;
+            const cv::Rect2f &other = raw[size_t(v.front().second)].box;  // every window of a scale has one size
+            const float ratio = other.area() / seed.area();
+            if (ratio < p_.group_iou || ratio * p_.group_iou > 1.f) continue;
+            auto it = std::lower_bound(v.begin(), v.end(), std::make_pair(seed.x - other.width - 1.f, -1));
+            for (; it != v.end() && it->first <= seed.x + seed.width + 1.f; ++it)
+                if (!used[size_t(it->second)] && box_iou(seed, raw[size_t(it->second)].box) >= p_.group_iou)
+                    members.push_back(it->second);
+        }
+        std::sort(members.begin(), members.end());
         double l = 0, t = 0, r = 0, b = 0;
-        int n = 0;
-        for (size_t j = i; j < raw.size(); ++j) {
-            if (used[j] || box_iou(raw[i].box, raw[j].box) < p_.group_iou) continue;
-            used[j] = 1;
-            ++n;
-            l += raw[j].box.x; t += raw[j].box.y; r += raw[j].box.br().x; b += raw[j].box.br().y;
+        const int n = int(members.size());
+        for (const int j : members) {
+            used[size_t(j)] = 1;
+            l += raw[size_t(j)].box.x; t += raw[size_t(j)].box.y; r += raw[size_t(j)].box.br().x; b += raw[size_t(j)].box.br().y;
         }
         if (n < p_.min_neighbors) continue;
         CascadeDetection d;
         d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n));
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
-        d.confidence = verifier_ ? verifier_->probability(gray, d.box, n, cam.horizon_row(), hc)
-                                 : float(n / (n + p_.neighbors_half));
+        d.confidence = verifier_ && n >= p_.verify_min_neighbors
+                           ? verifier_->probability(gray, d.box, n, cam.horizon_row(), hc)
+                           : float(n / (n + p_.neighbors_half));
         out.push_back(d);
     }
     if (p_.nms_iou >= 1.0) return out;

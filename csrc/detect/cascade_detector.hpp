@@ -1,7 +1,7 @@
 // cascade_detector.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/cascade.md).
 //
-// cv::CascadeClassifier runs the shipped OpenCV cascade XML (trained by `headway train cascade`) only
-// where a vehicle can stand. The cascade's window W x H (30 x 20) was trained on windows of the
+// The shipped OpenCV cascade XML (trained by `headway train cascade`) is run by HaarCascade
+// (haar_cascade.hpp: OpenCV's evaluation and scan, window for window, faster) only where a vehicle can stand. The cascade's window W x H (30 x 20) was trained on windows of the
 // annotated box's height, so a window of height h_s is a vehicle whose box is h_s pixels high. On a
 // flat road a vehicle of height H_v (m) whose bottom is at row y_b has
 //     h_s = H_v * (y_b - y_h) / h_cam        (pinhole: h_s = fy H_v / Z, Z = fy h_cam / (y_b - y_h))
@@ -42,10 +42,14 @@ struct CascadeParams {
     double max_vehicle_height_m = 4.5;  // m; highest vehicle box (a truck)
     double scale_factor = 1.12;         // ratio of successive window sizes
     double max_window_frac = 0.6;       // largest window height as a fraction of the image height
+    double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
+    bool opencv_scan = false;           // scan with cv::CascadeClassifier (the reference) instead of HaarCascade
+    int scan_lanes = 0;                 // windows HaarCascade evaluates at once: 0 = the widest the CPU has, 4, 8
     double group_iou = 0.45;            // raw windows overlapping the group's strongest this much join it
     int min_neighbors = 2;              // groups of fewer raw windows are dropped
     double neighbors_half = 6.0;        // a group of this many windows gets confidence 0.5
+    int verify_min_neighbors = 0;       // groups of fewer raw windows skip the verifier (confidence from n)
     double nms_iou = 0.3;               // a detection overlapping a more confident one this much is dropped (1 = none)
 
     void bind(ParamMap &m) {
@@ -67,12 +71,24 @@ struct CascadeParams {
               "ratio between successive window sizes; smaller finds more sizes at more cost");
         m.add("max_window_frac", max_window_frac, 0.05, 1.0,
               "fraction of the image height; largest window scanned (a car at 5 m is about a third of the image wide)");
+        m.add("min_window_px", min_window_px, 0.0, 1000.0,
+              "px of the image; window sizes below this height are not scanned (0 = all, from the model's own "
+              "20 px): smaller vehicles are not wanted, and the smallest sizes are the costliest to scan");
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
+        m.add("scan_lanes", scan_lanes, 0, 8,
+              "windows the own scanner evaluates at once: 0 = the widest this CPU has (8 with AVX2, else 4), 4 = "
+              "SSE2, 8 = AVX2; the same detections either way (for tests and CPUs without AVX2)");
+        m.add("opencv_scan", opencv_scan,
+              "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
+              "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
         m.add("group_iou", group_iou, 0.05, 0.95,
               "IoU; raw windows overlapping a group's strongest window at least this much belong to it");
         m.add("min_neighbors", min_neighbors, 1, 100, "raw windows; groups with fewer are dropped");
         m.add("neighbors_half", neighbors_half, 0.5, 100.0,
               "raw windows; a group of n windows has confidence n / (n + neighbors_half)");
+        m.add("verify_min_neighbors", verify_min_neighbors, 0, 100,
+              "raw windows; groups of fewer are not judged by the verifier and keep the confidence n / (n + "
+              "neighbors_half); 0 = every group verified");
         m.add("nms_iou", nms_iou, 0.05, 1.0,
               "IoU; after scoring, a detection overlapping a more confident one at least this much is dropped (a "
               "second group on the same vehicle); 0.3 measured best at high precision on the TuSimple validation "
@@ -88,6 +104,7 @@ struct CascadeDetection {
 };
 
 class VehicleVerifier;
+class HaarCascade;
 
 class CascadeDetector {
 public:
@@ -98,7 +115,8 @@ public:
 
 private:
     CascadeParams p_;
-    std::unique_ptr<cv::CascadeClassifier> cc_;
+    std::unique_ptr<HaarCascade> haar_;          // the scan, unless opencv_scan
+    std::unique_ptr<cv::CascadeClassifier> cc_;  // only with opencv_scan
     std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
     cv::Size win_;
 };
