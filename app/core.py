@@ -113,7 +113,7 @@ class Lane:
     y_bottom: float
     x_top: float
     y_top: float
-    position: int  # -2 outer left, -1 ego left, +1 ego right, +2 outer right
+    position: int  # -1 ego left, +1 ego right, -2/+2 adjacent lanes' outer, -3/+3 one further (lanes.outer_lanes)
     observed: bool
     # the boundary as it bends with the road: image points (x, y) from the bottom point to the top point,
     # straight lines between them

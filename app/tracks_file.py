@@ -5,8 +5,8 @@
 "observed", "points": [[x, y], ...]}]}, "calibration": {"pitch_deg", "yaw_deg", "height_m", "pitch_sigma_deg",
 "yaw_sigma_deg", "height_sigma_m", "updates", "active"}} with null where a value is not available. Only
 confirmed tracks are written: they are what the rest of the system acts on. Lanes are written for every frame:
-the boundaries the lane model holds (position -2 outer left, -1 ego left, +1 ego right, +2 outer right;
-observed false when carried over by lane tracking) as image points from the bottom up (straight lines between
+the boundaries the lane model holds (position -1 ego left, +1 ego right, -2 / +2 the adjacent lanes' outer
+boundaries, -3 / +3 one lane further out with lanes.outer_lanes; observed false when carried over by lane tracking) as image points from the bottom up (straight lines between
 them), the ego-lane width and the car's lateral offset from the ego lane's centre (m, right positive). The
 calibration is the camera as self-calibration has it, when it runs.
 """

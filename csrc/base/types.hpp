@@ -75,8 +75,10 @@ struct LaneBoundary {
 // The road as the lane stage sees it in one frame.
 struct LaneModel {
     bool valid = false;  // both ego boundaries known
+    bool certain = false;  // valid, and both ego boundaries have paint along the road (lanes/lane_evidence.hpp)
     LaneBoundary ego_left, ego_right;
     LaneBoundary adj_left, adj_right;  // outer boundaries of the adjacent lanes, where visible
+    LaneBoundary out_left, out_right;  // one lane further out: outer boundaries of the lanes beyond, where visible
     cv::Point2f vanishing_point{kNaN, kNaN};
     int frames_since_observed = 0;     // frames since both ego boundaries were last measured
     float far_row = kNaN;   // px; row the reported boundaries reach (curve extrapolated), NaN = their top

@@ -146,10 +146,12 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
         hw::sample_boundary(b, o.lanes.far_row, HW_LANE_POINTS, l.px, l.py);
         l.n_points = HW_LANE_POINTS;
     };
+    add_lane(o.lanes.out_left, -3);
     add_lane(o.lanes.adj_left, -2);
     add_lane(o.lanes.ego_left, -1);
     add_lane(o.lanes.ego_right, +1);
     add_lane(o.lanes.adj_right, +2);
+    add_lane(o.lanes.out_right, +3);
     r->n_lanes = n;
     r->vanishing_x = o.lanes.vanishing_point.x;
     r->vanishing_y = o.lanes.vanishing_point.y;

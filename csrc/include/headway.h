@@ -91,7 +91,8 @@ typedef struct {
 typedef struct {
     /* a lane boundary as a segment in the image: bottom point and top point, px */
     float x_bottom, y_bottom, x_top, y_top;
-    int32_t position;      /* -2 left of left boundary, -1 ego left, +1 ego right, +2 right of it */
+    int32_t position;      /* -1 ego left, +1 ego right; -2 / +2 the adjacent lanes' outer boundaries;
+                            * -3 / +3 one lane further out (only with lanes.outer_lanes) */
     int32_t observed;      /* 1 measured in this frame, 0 carried over by lane tracking */
     /* the boundary as it bends with the road: n_points image points from the bottom point up to
      * lanes.curve_far_range_m (beyond the top point the fitted curve is extrapolated), spaced evenly in

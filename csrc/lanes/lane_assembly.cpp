@@ -131,15 +131,25 @@ LaneAssignment assign_lanes(const std::vector<LaneCandidate> &c, const CameraPar
         (is_left[size_t(pick)] ? a.ego_left : a.ego_right) = pick;
     }
 
-    // Adjacent boundaries: lines one lane outside the ego lane, n = (X - X_left) / width ~ -1 or 2.
+    // Adjacent boundaries: lines one lane outside the ego lane, n = (X - X_left) / width ~ -1 or 2; the
+    // outer ones one lane beyond, n ~ -2 or 3 (the grid from the ego lane's width: lanes of a road are alike).
     const float x_left = a.ego_left >= 0 ? X[size_t(a.ego_left)] : X[size_t(a.ego_right)] - width_m;
-    float best_l = 0.f, best_r = 0.f;
+    const float grid[4] = {-1.f, 2.f, -2.f, 3.f};
+    int *slot[4] = {&a.adj_left, &a.adj_right, &a.out_left, &a.out_right};
+    float best_w[4] = {0.f, 0.f, 0.f, 0.f};
     for (size_t i = 0; i < c.size(); ++i) {
         if (int(i) == a.ego_left || int(i) == a.ego_right) continue;
         const float n = (X[i] - x_left) / width_m;
-        if (std::fabs(n + 1.f) < float(p.grid_tolerance) && c[i].weight > best_l) { best_l = c[i].weight; a.adj_left = int(i); }
-        if (std::fabs(n - 2.f) < float(p.grid_tolerance) && c[i].weight > best_r) { best_r = c[i].weight; a.adj_right = int(i); }
+        for (int g = 0; g < (p.outer_lanes ? 4 : 2); ++g)
+            if (std::fabs(n - grid[g]) < float(p.grid_tolerance) && c[i].weight > best_w[g]) {
+                best_w[g] = c[i].weight;
+                *slot[g] = int(i);
+            }
     }
+    // The grid continues only from a found adjacent boundary (a line two lanes out with nothing between
+    // is as likely a shoulder or a barrier).
+    if (a.adj_left < 0) a.out_left = -1;
+    if (a.adj_right < 0) a.out_right = -1;
     return a;
 }
 
@@ -169,6 +179,8 @@ void build_lane_model(const std::vector<LaneCandidate> &c, const LaneAssignment 
     fill(a.ego_right, out.ego_right);
     fill(a.adj_left, out.adj_left);
     fill(a.adj_right, out.adj_right);
+    fill(a.out_left, out.out_left);
+    fill(a.out_right, out.out_right);
     out.valid = out.ego_left.valid && out.ego_right.valid;
     out.vanishing_point = v;
     out.road_polygon = road_polygon(out, a.width_k, size, cam, hp, p);

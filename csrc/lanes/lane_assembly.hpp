@@ -8,7 +8,8 @@
 // miss it are dropped. Each remaining line's slope gives its lateral offset on a flat road
 // (road_geometry.hpp), and the ego lane is the pair of lines either side of the camera whose spacing
 // is a plausible lane width, which lets a spurious line inside the lane (tar seam, arrow, vehicle
-// edge) lose against the real boundary. Adjacent boundaries are the lines one lane further out.
+// edge) lose against the real boundary. Adjacent boundaries are the lines one lane further out, and the
+// outer ones the lines one lane beyond those (TuSimple labels up to two lanes each side).
 #pragma once
 
 #include "base/params.hpp"
@@ -30,6 +31,7 @@ struct LaneAssemblyParams {
     double road_range_m = 80.0;          // m; top of the boundaries and of the road polygon
     double grid_tolerance = 0.3;         // lane widths; an adjacent boundary's offset from one lane out
     double hysteresis_m = 0.15;          // m; a boundary crossing under the camera changes side past this
+    bool outer_lanes = false;            // report the boundaries two lanes out each side (where a line is there)
 
     void bind(ParamMap &m) {
         m.add("min_lane_width_frac", min_lane_width_frac, 0.1, 1.0,
@@ -51,6 +53,9 @@ struct LaneAssemblyParams {
         m.add("hysteresis_m", hysteresis_m, 0.0, 1.0,
               "m; during a lane change an ego boundary changes side (left <-> right) only once it is this "
               "far past the camera, so the model does not flicker while the car straddles it");
+        m.add("outer_lanes", outer_lanes,
+              "report the boundaries two lanes out each side too (ABI positions -3 and +3) where a measured or tracked "
+              "line lies one lane beyond an adjacent boundary (within grid_tolerance); false: ego and adjacent only");
     }
 };
 
@@ -66,6 +71,7 @@ struct LaneCandidate {
 // Indices into the candidates (-1 = none) and the ego-lane width as a slope difference.
 struct LaneAssignment {
     int ego_left = -1, ego_right = -1, adj_left = -1, adj_right = -1;
+    int out_left = -1, out_right = -1;  // two lanes out (n = -2 and 3 lane widths from the ego left boundary)
     float width_k = kNaN;  // k_right - k_left of the ego lane (measured or expected)
 };
 

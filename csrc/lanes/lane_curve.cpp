@@ -12,7 +12,7 @@ namespace hw {
 
 namespace {
 
-constexpr int kMaxBoundaries = 4;
+constexpr int kMaxBoundaries = 6;
 
 // Boundary i as x(d) = a + b d + e d^2 + c / d, d = y - y_h.
 struct Curve {
@@ -55,7 +55,7 @@ bool solve(const std::vector<MarkingPoint> &pts, const std::vector<int> &owner, 
 
 void fit_lane_curves(const std::vector<MarkingPoint> &pts, float y_h, const CameraParams &cam, float lane_width_m,
                      const LaneCurveParams &p, LaneCurveState &state, LaneModel &m) {
-    LaneBoundary *all[kMaxBoundaries] = {&m.adj_left, &m.ego_left, &m.ego_right, &m.adj_right};
+    LaneBoundary *all[kMaxBoundaries] = {&m.out_left, &m.adj_left, &m.ego_left, &m.ego_right, &m.adj_right, &m.out_right};
     std::array<LaneBoundary *, kMaxBoundaries> bs{};
     int n = 0;
     for (auto *b : all)

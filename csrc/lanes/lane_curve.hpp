@@ -29,7 +29,7 @@ struct LaneCurveParams {
     // the bent boundaries cut the tracked share of the car ahead from 0.92 to 0.81; with lanes.reject_in_vehicles
     // it is 0.91, but that pair costs the same scenario precision (0.976 -> 0.861) and, with the one hood line of
     // every stage, the real clips' FP (0.326 against 0.306 straight) (docs/RESULTS.md, lanes).
-    bool enabled = false;              // bend the boundaries (false: straight lines)
+    bool enabled = true;               // bend the boundaries (false: straight lines)
     double near_range_m = 25.0;        // m; first pass uses rows nearer than this (curve small there)
     double corridor_lanes = 0.12;      // lane widths; a point farther than this from a boundary is not its
     double min_corridor_px = 3.0;      // px; corridor never narrower (far rows, marking noise)
@@ -43,12 +43,12 @@ struct LaneCurveParams {
     void bind(ParamMap &m) {
         m.add("curve_enabled", enabled,
               "bend the lane boundaries to the road's curvature (x = a + b d + c / d below the horizon); "
-              "true: measured on TuSimple's lane clips 0.848 / 0.250 / 0.264 (accuracy / FP / FN) against "
-              "0.836 / 0.306 / 0.312 straight, on the 10-image sample 0.819 / 0.242 / 0.292 against "
-              "0.798 / 0.250 / 0.300, but on unmarked roads the lines found on vehicle sides bend too "
-              "(congestion_no_markings: car ahead tracked 0.81 of the frames instead of 0.92; 0.91 with "
-              "reject_in_vehicles, which then costs that scenario precision 0.976 -> 0.861 and the clips FP); "
-              "false (default) keeps straight lines");
+              "true (default): measured on TuSimple's lane clips 0.848 / 0.250 / 0.264 (accuracy / FP / FN) against "
+              "0.836 / 0.306 / 0.312 straight, on the 10-image sample 0.819 / 0.242 / 0.292 against 0.798 / 0.250 / "
+              "0.300; on unmarked roads the lines found on vehicle sides bend too, but the lane evidence check "
+              "(evidence_min) keeps such a model from the road prior and the lead (congestion_no_markings: the car "
+              "ahead is the lead in all frames from 40 m, 0.81 without the check; docs/RESULTS.md, lanes); false "
+              "keeps straight lines");
         m.add("curve_near_range_m", near_range_m, 5.0, 200.0,
               "m; the first pass of the curve fit takes the marking points nearer than this around the "
               "tracked straight lines; 25 m, where a 250 m radius bends a marking by a quarter lane");

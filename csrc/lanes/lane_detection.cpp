@@ -104,6 +104,13 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     fit_lane_curves(m.points, std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row, cam,
                     float(p.assembly.road.lane_width_m), p.curve, curve, out);
     ego_lane_metrics(cam, out);
+    // One image: outer boundaries need paint along the road in this frame. The ego pair's evidence is
+    // judged over frames (lane_tracker.cpp): one image has no confirmed vehicles to mask and no smoothing over
+    // dash gaps (a dashed line can miss two of the three range bins), so a single image's model is believed.
+    const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
+    const float y_near = float(scan_band(gray.size(), cam, hp, p.filter).y_bottom);
+    drop_unsupported_outer(out, m.points, {}, y_h, y_near, cam, p.evidence);
+    out.certain = out.valid;
     return out;
 }
 

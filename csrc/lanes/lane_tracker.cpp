@@ -184,6 +184,36 @@ void LaneTracker::carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignm
     ++width_age_;
 }
 
+// Each measured track's support (its share of range bins with paint outside the confirmed vehicles'
+// boxes), smoothed; a track not measured this frame keeps its value (a hidden marking is still one).
+// The ego boundaries are judged by their curves; the model is certain when both are believed.
+void LaneTracker::update_support(const LaneMeasurement &m, const std::vector<TrackState> &vehicles, float y_h,
+                                 float y_near, LaneModel &out) {
+    std::vector<cv::Rect2f> boxes;
+    for (const auto &v : vehicles)
+        if (v.confirmed) boxes.push_back(v.box);
+    const float a = float(p_.evidence.alpha);
+    float ego_support[2] = {0.f, 0.f};
+    for (auto &t : tracks_) {
+        const int side = t.id == ego_left_id_ ? 0 : t.id == ego_right_id_ ? 1 : -1;
+        if (t.missing == 0) {
+            LaneBoundary b = side == 0 ? out.ego_left : side == 1 ? out.ego_right : LaneBoundary();
+            if (side < 0) {
+                const ImageLine l = line_of(t);
+                b.valid = true;
+                b.bottom = {l.x_at(yb_), yb_};
+                b.top = {l.x_at(yr_), yr_};
+            }
+            const float s = boundary_support(b, m.points, boxes, y_h, y_near, cam_, p_.evidence);
+            t.support = std::isfinite(t.support) ? t.support + a * (s - t.support) : s;
+        }
+        if (side >= 0 && std::isfinite(t.support)) ego_support[side] = t.support;
+    }
+    const float need = float(p_.evidence.min_support);
+    out.certain = out.valid && ego_support[0] >= need && ego_support[1] >= need;
+    drop_unsupported_outer(out, m.points, boxes, y_h, y_near, cam_, p_.evidence);
+}
+
 void LaneTracker::update(const cv::Mat &gray, LaneModel &out, const std::vector<TrackState> &vehicles) {
     const HorizonPrior hp = search_prior();
     const bool have_vp = std::isfinite(vp_.x) && std::isfinite(vp_.y);
@@ -224,6 +254,7 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out, const std::vector<
     const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
     fit_lane_curves(m.points, y_h, cam_, float(p_.assembly.road.lane_width_m), p_.curve, curve_, out);
     ego_lane_metrics(cam_, out);
+    update_support(m, vehicles, y_h, float(scan_band(gray.size(), cam_, hp, p_.filter).y_bottom), out);
 }
 
 } // namespace hw

@@ -19,6 +19,7 @@
 #include "lanes/hough_lines.hpp"
 #include "lanes/lane_assembly.hpp"
 #include "lanes/lane_curve.hpp"
+#include "lanes/lane_evidence.hpp"
 #include "lanes/marking_filter.hpp"
 
 #include <vector>
@@ -30,6 +31,7 @@ struct LaneParams {
     HoughLinesParams hough;
     LaneAssemblyParams assembly;
     LaneCurveParams curve;
+    LaneEvidenceParams evidence;
     int max_missing_frames = 15;         // frames a boundary is carried after it was last measured
     double marking_sigma_px = 1.0;       // px; noise of one marking point (measurement model)
     double process_accel_frac = 0.0015;  // fraction of width per frame^2; how fast a boundary may move
@@ -44,6 +46,7 @@ struct LaneParams {
         hough.bind(m);
         assembly.bind(m);
         curve.bind(m);
+        evidence.bind(m);
         m.add("max_missing_frames", max_missing_frames, 0, 1000,
               "frames; how long a boundary that is no longer measured is kept by lane tracking; 15 "
               "(0.5 s at 30 fps) bridges dash gaps, worn paint and a vehicle passing over the marking");
@@ -115,6 +118,7 @@ private:
         int id = -1;
         RowFilter b, r;  // columns at rows yb_ and yr_
         int hits = 0, missing = 0;
+        float support = kNaN;  // smoothed share of range bins with paint on it (lane_evidence.hpp)
     };
     ImageLine line_of(const Track &t) const;
     void set_line(Track &t, const ImageLine &l) const;
@@ -122,6 +126,8 @@ private:
     void associate(const LaneMeasurement &m, const HorizonPrior &hp);
     std::vector<LaneCandidate> candidates() const;
     void carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignment &a, cv::Point2f vp);
+    void update_support(const LaneMeasurement &m, const std::vector<TrackState> &vehicles, float y_h,
+                        float y_near, LaneModel &out);
 
     LaneParams p_;
     CameraParams cam_;

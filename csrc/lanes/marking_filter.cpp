@@ -138,6 +138,7 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
         const float ppm_hi = px_per_m(cam, hp.row - hp.tol_px, float(y));
         const float w_min = std::max(1.f, 0.7f * float(p.marking_min_m) * ppm_lo / scale);
         const float w_max = (1.2f * float(p.marking_max_m) * ppm_hi + 2.f) / scale;
+        const float w_cross = (1.2f * float(p.cross_max_m) * ppm_hi + 2.f) / scale;
         const float dy_vp = std::max(1.f, float(y) - (hp.row + hp.tol_px));
 
         // Pair each dark-to-bright edge with the nearest bright-to-dark edge after it that closes a
@@ -182,6 +183,9 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
                     inner_weak = rising_g[q] < own;
                 const bool crosses = j > j0 || (i + 1 < rising.size() && rising[i + 1] < f);
                 if (crosses && (!p.cross_inner_edges || !inner_weak || float(lowest) <= side)) continue;
+                // ... and be one painted line wide: a wide bright patch with texture inside (concrete between
+                // two seams, a tyre-polished strip) is not worn paint.
+                if (crosses && f - r > w_cross * std::sqrt(1.f + k * k)) continue;
                 out.push_back({full_x(0.5f * (r + f)), float(y), contrast});
                 bar_end = f;
                 break;

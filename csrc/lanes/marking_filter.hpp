@@ -31,6 +31,7 @@ struct MarkingFilterParams {
     int min_run_rows = 2;            // scanned rows; a marking point needs neighbours to make a run this long
     int work_width_px = 640;         // px; wider rows are block-averaged down to about this width
     bool cross_inner_edges = false;  // a bar may contain weaker inner edges (worn, textured paint)
+    double cross_max_m = 0.20;       // m; widest bar that may contain inner edges (one painted line)
 
     void bind(ParamMap &m) {
         m.add("min_edge_contrast", min_edge_contrast, 1.0, 255.0,
@@ -65,12 +66,18 @@ struct MarkingFilterParams {
               "masks would see JPEG noise inside it) and the filter costs half");
         m.add("cross_inner_edges", cross_inner_edges,
               "a marking's bar may contain inner edges weaker than its own two edges, if it stays brighter than "
-              "both sides everywhere (worn or textured paint, common on concrete; without this the bar ends at "
-              "the first inner edge and fails the contrast test); false (default): a bar is a rising edge and the "
-              "next falling edge with no other edge between. Measured (docs/RESULTS.md, lanes): TuSimple's lane "
-              "clips 0.887 / 0.201 / 0.201 (accuracy / FP / FN) against 0.836 / 0.306 / 0.312, but the 10-image "
-              "sample (512 px wide, one image each) 0.765 / 0.267 / 0.317 against 0.798 / 0.250 / 0.300, and on "
-              "the unmarked congestion scenario the car ahead is the lead in 0.83 of the frames against 0.91");
+              "both sides everywhere and is at most cross_max_m wide (worn or textured paint, common on concrete; "
+              "without this the bar ends at the first inner edge and fails the contrast test). Measured with "
+              "curve_enabled (docs/RESULTS.md, lanes): TuSimple's lane clips 0.893 / 0.181 / 0.160 (accuracy / FP / "
+              "FN) and the 10-image sample 0.811 / 0.225 / 0.275, against 0.848 / 0.250 / 0.264 and 0.819 / 0.242 / "
+              "0.292 without, and the unmarked congestion scenario's lead holds (lane evidence); but it costs three "
+              "real-video and tracking checks (the parallax preset on Udacity's black car and on solidWhiteRight, "
+              "the phd preset's lead range), so false (default) until those are understood");
+        m.add("cross_max_m", cross_max_m, 0.01, 2.0,
+              "m; with cross_inner_edges, the widest bar that may contain inner edges: one worn painted line "
+              "(0.10-0.15 m plus blur); a wider bright patch with texture inside (concrete between two seams) is "
+              "not paint; 0.20 tuned on TuSimple's lane clips and lane sample (0.12-0.27 m tried: 0.18 and below "
+              "lose clip accuracy with straight boundaries, 0.27 the sample; docs/RESULTS.md)");
     }
 };
 

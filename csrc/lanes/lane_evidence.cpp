@@ -1,0 +1,55 @@
+#include "lanes/lane_evidence.hpp"
+
+#include "lanes/road_geometry.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace hw {
+
+float boundary_support(const LaneBoundary &b, const std::vector<MarkingPoint> &pts,
+                       const std::vector<cv::Rect2f> &hidden, float y_h, float y_near, const CameraParams &cam,
+                       const LaneEvidenceParams &p, bool visible_only) {
+    if (!b.valid || !std::isfinite(y_h) || p.bins < 1 || !(y_near > y_h + 1.f)) return 0.f;
+    // Range of a row on the flat road: Z = fy h / (y - y_h); the bins split [Z_near, Z_far] in log range.
+    const float z_near = float(cam.fy * cam.height_m) / (y_near - y_h);
+    const float z_far = float(p.far_m);
+    if (!(z_far > z_near)) return 0.f;
+    const float log_span = std::log(z_far / z_near);
+    const float y_far = row_at_range(cam, y_h, z_far);
+    std::vector<char> hit(size_t(p.bins), 0);
+    for (const auto &q : pts) {
+        if (q.y < y_far || q.y > y_near) continue;
+        const float tol = std::max(float(p.min_tolerance_px), float(p.tolerance_m) * px_per_m(cam, y_h, q.y));
+        if (!(std::fabs(q.x - b.curve_x(q.y)) <= tol)) continue;
+        bool inside = false;
+        for (const auto &r : hidden)
+            if (r.contains(cv::Point2f(q.x, q.y))) { inside = true; break; }
+        if (inside) continue;
+        const float z = float(cam.fy * cam.height_m) / std::max(1e-3f, q.y - y_h);
+        const int bin = std::clamp(int(float(p.bins) * std::log(z / z_near) / log_span), 0, p.bins - 1);
+        hit[size_t(bin)] = 1;
+    }
+    // visible_only: share of the bins where the boundary is in the image at all (a line two lanes out
+    // leaves the image near the car), a bin counting when the boundary's column at its middle range is
+    // inside the frame. Else of all bins: an ego boundary is in view near the car.
+    int n = 0, visible = 0;
+    for (int k = 0; k < p.bins; ++k) {
+        const float z_mid = z_near * std::exp(log_span * (float(k) + 0.5f) / float(p.bins));
+        const float x = b.curve_x(row_at_range(cam, y_h, z_mid));
+        if (!visible_only || (x >= 0.f && x < float(cam.width))) {
+            ++visible;
+            n += hit[size_t(k)];
+        }
+    }
+    return visible > 0 ? float(n) / float(visible) : 0.f;
+}
+
+void drop_unsupported_outer(LaneModel &m, const std::vector<MarkingPoint> &pts, const std::vector<cv::Rect2f> &hidden,
+                            float y_h, float y_near, const CameraParams &cam, const LaneEvidenceParams &p) {
+    const float need = float(p.min_outer_support);
+    for (LaneBoundary *b : {&m.out_left, &m.out_right})
+        if (b->valid && boundary_support(*b, pts, hidden, y_h, y_near, cam, p, true) < need) *b = LaneBoundary();
+}
+
+} // namespace hw
