@@ -17,7 +17,7 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p), cc_(std::make_
         throw std::invalid_argument("cascade.model: OpenCV cannot load '" + p_.model +
                                     "' as a cascade XML; train one with `headway train cascade` or leave the key empty");
     win_ = cc_->getOriginalWindowSize();
-    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = std::make_unique<VehicleVerifier>(p_.verifier);
+    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }
@@ -105,9 +105,15 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n));
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
-        d.confidence = verifier_ ? verifier_->probability(gray, d.box, n, cam.horizon_row(), hc)
-                                 : float(n / (n + p_.neighbors_half));
+        d.confidence = float(n / (n + p_.neighbors_half));
         out.push_back(d);
+    }
+    if (verifier_) {  // every group of the frame at once (the CNN verifier runs them as one batch)
+        std::vector<cv::Rect2f> boxes;
+        std::vector<int> ns;
+        for (const auto &d : out) { boxes.push_back(d.box); ns.push_back(d.neighbors); }
+        const std::vector<float> p = verifier_->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
+        for (size_t i = 0; i < out.size(); ++i) out[i].confidence = p[i];
     }
     if (p_.nms_iou >= 1.0) return out;
     // non-maximum suppression by confidence: most confident first, drop what overlaps a kept one
