@@ -15,7 +15,7 @@ from app.core import Pipeline
 from app.train import verifier_onnx as vo
 from tests.conftest import data_path
 
-SHIPPED_CNN = configuration.SHIPPED_VERIFIER.parent / "vehicle_verifier.onnx"
+SHIPPED_CNN = configuration.SHIPPED_VERIFIER   # the default verifier (app/models/vehicle_verifier.onnx)
 
 
 def _dnn_probability(path, z, extra):

@@ -57,7 +57,7 @@ def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: di
     window kept), the core configured by `cfg` (a validated configuration: its camera must be the images'
     camera). Yields (image index k, gray image, boxes (n, 4) left, top, right, bottom, raw windows per box,
     label per box: 1 = vehicle (IoU >= 0.5 with an annotated box), -1 = other (IoU < 0.3 with every box),
-    0 = left out, the image's horizon row)."""
+    0 = left out, the image's horizon row, each box's largest IoU with an annotated box)."""
     from app import config as configuration
     from app.core import Pipeline
 
@@ -73,7 +73,7 @@ def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: di
             conf = np.array([t.confidence for t in r.tracks], float)
             n = np.rint(half * conf / np.maximum(1 - conf, 1e-6))   # confidence n / (n + half) without verifier
             m = iou(det, it.boxes).max(1) if len(it.boxes) else np.zeros(len(det))
-            yield k, g, det, n, np.where(m >= 0.5, 1, np.where(m < 0.3, -1, 0)), r.horizon_row
+            yield k, g, det, n, np.where(m >= 0.5, 1, np.where(m < 0.3, -1, 0)), r.horizon_row, m
             if progress:
                 progress(1)
 
@@ -85,7 +85,7 @@ def candidates(folders: list[str], cascade_xml: str, every: int, cfg: dict, prog
     h = hog()
     xs, ys, img = [], [], []
     used = 0
-    for k, g, det, n, lab, horizon in cascade_detections(folders, cascade_xml, every, cfg, progress):
+    for k, g, det, n, lab, horizon, _ in cascade_detections(folders, cascade_xml, every, cfg, progress):
         used += 1
         gm = g[:, ::-1].copy()
         for label in (1.0, -1.0):

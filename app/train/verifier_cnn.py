@@ -2,9 +2,11 @@
 written as ONNX for cv::dnn in the core (`headway train verifier --out X.onnx`).
 
 Samples are the HOG verifier's (verifier.cascade_detections): the core's own cascade detections on the
-training images, every group kept (min_neighbors 1, no suppression), a detection with IoU >= 0.5 with an
-annotated box is a vehicle, IoU < 0.3 with every box is not, the rest are left out. Each is cropped as the
-core crops it (verifier_onnx.crop_boxes) and mirrored at random while training.
+training images, every group kept (min_neighbors 1, no suppression). A detection with IoU >= 0.5 with an
+annotated box is a vehicle; unlike the HOG verifier's samples (IoU 0.3-0.5 left out), every other detection
+is not: the verifier learns to tell a well placed box (what the scoring counts) from one beside the vehicle,
+which would otherwise win the suppression of overlapping detections. Each is cropped as the core crops it
+(verifier_onnx.crop_boxes) and mirrored at random while training.
 
 Fit: Adam (beta 0.9, 0.999; the learning rate falls linearly to 0) on the class-balanced cross-entropy
     L = sum_i s_i softplus(-y_i f(x_i)) / sum_i s_i + decay |W|^2 / 2,   s_i = 1 / n_class(y_i),
@@ -47,9 +49,9 @@ def require_train_extra():
 def samples(folders: list[str], cascade_xml: str, every: int, cfg: dict, cache: str | None = None,
             progress=None) -> dict:
     """Crops (n, H, W) uint8, extra features (n, 2), labels (n,) +1/-1, image index in the folders (n,),
-    boxes (n, 4) of the cascade's labelled detections; read from / written to `cache` (.npz) when given and
+    boxes (n, 4) and largest IoU with an annotated box (n,) of the cascade's detections; read from / written to `cache` (.npz) when given and
     made from the same cascade, images and crop geometry."""
-    key = hashlib.sha256(json.dumps([hashlib.sha256(Path(cascade_xml).read_bytes()).hexdigest(),
+    key = hashlib.sha256(json.dumps(["labels: IoU >= 0.5 vs the rest", hashlib.sha256(Path(cascade_xml).read_bytes()).hexdigest(),
                                      [str(Path(f).resolve()) for f in folders], every, vo.CROP_W, vo.CROP_H,
                                      vo.MARGIN, cfg["camera"], cfg["cascade"]], default=str).encode()).hexdigest()[:16]
     if cache and Path(cache).is_file():
@@ -58,16 +60,16 @@ def samples(folders: list[str], cascade_xml: str, every: int, cfg: dict, cache: 
             return d
     cfg["cascade"]["nms_iou"] = 1.0   # every group: the verifier judges them all before suppression
     cam_h = cfg["camera"]["height_m"]
-    crops, extra, label, image, boxes = [], [], [], [], []
-    for k, g, det, n, lab, horizon in cascade_detections(folders, cascade_xml, every, cfg, progress):
-        sel = lab != 0
-        crops.append(vo.crop_boxes(g, det[sel]))
-        extra.append(geometry_features(det[sel], n[sel], horizon, cam_h))
-        label.append(lab[sel].astype(np.int8))
-        image.append(np.full(int(sel.sum()), k * every, np.int32))
-        boxes.append(det[sel].astype(np.float32))
+    crops, extra, label, image, boxes, overlap = [], [], [], [], [], []
+    for k, g, det, n, lab, horizon, m in cascade_detections(folders, cascade_xml, every, cfg, progress):
+        crops.append(vo.crop_boxes(g, det))
+        extra.append(geometry_features(det, n, horizon, cam_h))
+        label.append(np.where(m >= 0.5, 1, -1).astype(np.int8))
+        image.append(np.full(len(det), k * every, np.int32))
+        boxes.append(det.astype(np.float32))
+        overlap.append(m.astype(np.float32))
     d = dict(crops=np.concatenate(crops), extra=np.concatenate(extra), label=np.concatenate(label),
-             image=np.concatenate(image), boxes=np.concatenate(boxes), key=np.array(key))
+             image=np.concatenate(image), boxes=np.concatenate(boxes), iou=np.concatenate(overlap), key=np.array(key))
     if cache:
         Path(cache).parent.mkdir(parents=True, exist_ok=True)
         np.savez(cache, **d)
@@ -180,6 +182,7 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
         d = samples(folders, cascade_xml, every, cfg, cache, progress=bar.update)
     held = d["image"] % HELD_OUT[0] == HELD_OUT[1]
     y = d["label"]
+    clear = (d["iou"][held] >= 0.5) | (d["iou"][held] < 0.3)   # the HOG verifier's samples
     log(f"verifier (cnn): {n_items} images (every {every}), {int((y > 0).sum())} vehicle and {int((y < 0).sum())} "
         f"other boxes (before mirroring), {int(held.sum())} of them on {len(np.unique(d['image'][held]))} held-out "
         f"images; crop {vo.CROP_W}x{vo.CROP_H} gray, margin {vo.MARGIN}; conv {'/'.join(map(str, channels))}, "
@@ -187,27 +190,30 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
     if compare_hog:
         t1 = time.perf_counter()
         ph = hog_baseline(folders, d, held, seed)
-        log(f"HOG verifier (verifier.py's recipe) fitted on the same images, held-out others passed at "
-            f"{'/'.join(map(str, KEEP))} of vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held]))
+        log(f"HOG verifier (verifier.py's recipe) fitted on the same images, held-out others with IoU < 0.3 passed at "
+            f"{'/'.join(map(str, KEEP))} of vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held][clear]))
             + f"; {(time.perf_counter() - t1) / 60:.1f} min")
     t1 = time.perf_counter()
 
-    def on_epoch(ep, params, loss, secs):
+    def on_epoch(ep, params, loss, secs):   # the ONNX after every epoch: a stopped run leaves the last one
+        vo.save_onnx(params, out, doc=f"headway train verifier --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
         ph = predict(params, d["crops"][held], d["extra"][held])
         log(f"epoch {ep + 1}/{epochs}: loss {loss:.4f}, held-out others passed at {'/'.join(map(str, KEEP))} of "
-            f"vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held])) + f", {secs:.0f} s")
+            f"vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held])) + "; of those with IoU < 0.3 "
+            "(the HOG verifier's others): " + " / ".join(f"{v:.3f}" for v in passed_at(ph[clear], y[held][clear]))
+            + f", {secs:.0f} s")
 
     params = fit(d["crops"][~held], d["extra"][~held], y[~held], channels, hidden, epochs, decay=decay, seed=seed,
                  on_epoch=on_epoch)
-    vo.save_onnx(params, out, doc=f"headway train verifier --out {Path(out).name}, seed {seed}")
     log(f"fit {(time.perf_counter() - t1) / 60:.1f} min, total {(time.perf_counter() - t0) / 60:.1f} min -> {out} "
         f"({Path(out).stat().st_size / 1024:.0f} KiB)")
     return params
 
 
 def hog_baseline(folders: list[str], d: dict, held: np.ndarray, seed: int) -> np.ndarray:
-    """The HOG verifier (verifier.py, its shipped recipe: 64 hidden units, 12 epochs, decay 1e-4, mirrors)
-    fitted on the same samples less the held-out images; its probabilities for the held-out samples."""
+    """The HOG verifier (verifier.py, its shipped recipe: IoU 0.3-0.5 left out, 64 hidden units, 12 epochs,
+    decay 1e-4, mirrors) fitted on the same images less the held-out ones; its probabilities for the held-out
+    samples with IoU >= 0.5 or < 0.3."""
     from app.train.cascade.samples import read_gray
     from app.train.verifier import box_features, fit_mlp, hog
 
@@ -223,5 +229,7 @@ def hog_baseline(folders: list[str], d: dict, held: np.ndarray, seed: int) -> np
         xm[j] = box_features(h, g[:, ::-1].copy(), np.c_[g.shape[1] - b[:, 2], b[:, 1], g.shape[1] - b[:, 0], b[:, 3]])
     x, xm = np.c_[x, d["extra"]], np.c_[xm, d["extra"]]
     y = np.where(d["label"] > 0, 1.0, -1.0)
-    m = fit_mlp(np.r_[x[~held], xm[~held]], np.r_[y[~held], y[~held]], 64, 12, 1e-4, seed)
-    return m.probability(x[held])
+    clear = (d["iou"] >= 0.5) | (d["iou"] < 0.3)
+    fit_on = ~held & clear
+    m = fit_mlp(np.r_[x[fit_on], xm[fit_on]], np.r_[y[fit_on], y[fit_on]], 64, 12, 1e-4, seed)
+    return m.probability(x[held & clear])

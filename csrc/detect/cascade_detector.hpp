@@ -57,7 +57,8 @@ struct CascadeParams {
               "path of the verifier judging every cascade detection: *.onnx = a small CNN on the box's crop run by "
               "cv::dnn (`headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
               "through a one-hidden-layer network; empty = the "
-              "model shipped with Headway (app/models/vehicle_verifier.yml.gz, recipe in docs/cascade.md); off = "
+              "model shipped with Headway (app/models/vehicle_verifier.onnx, the CNN; the HOG one is "
+              "app/models/vehicle_verifier.yml.gz; recipes in docs/cascade.md); off = "
               "the cascade's neighbour count alone as confidence, which measured worse on the TuSimple validation split");
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
