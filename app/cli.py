@@ -91,8 +91,25 @@ def _cmd_train(args) -> int:
         from app.train import verifier
 
         cfg = configuration.load(args.config) if args.config else tusimple_config(configuration.load(None))
-        verifier.train(args.data, args.cascade, args.out, cfg, every=args.every, hidden=args.hidden,
-                       epochs=args.epochs, decay=args.decay, seed=args.seed)
+        if args.out.endswith(".onnx"):   # the convolutional verifier, run by cv::dnn in the core
+            from app.train import verifier_cnn
+
+            try:
+                channels = tuple(int(c) for c in args.channels.split("/"))
+            except ValueError:
+                channels = ()
+            if len(channels) != 3 or min(channels) < 1:
+                raise ValueError(f"--channels {args.channels!r}: give three conv widths, e.g. 8/16/32")
+            log = _line_logger(args.log)
+            try:
+                verifier_cnn.train(args.data, args.cascade, args.out, cfg, every=args.every or 1, channels=channels,
+                                   hidden=args.hidden, epochs=args.epochs or 6, decay=args.decay, seed=args.seed,
+                                   cache=args.cache, compare_hog=args.compare_hog, log=log)
+            finally:
+                log.close()
+            return 0
+        verifier.train(args.data, args.cascade, args.out, cfg, every=args.every or 4, hidden=args.hidden,
+                       epochs=args.epochs or 12, decay=args.decay, seed=args.seed)
         return 0
     # `headway train cascade`: the Viola-Jones trainer (app/train/cascade, independent of the rest of app)
     from app.train.cascade import TrainParams, train
@@ -106,20 +123,29 @@ def _cmd_train(args) -> int:
     p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
                     features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
                     seed=args.seed, max_minutes=args.max_minutes, resume=args.resume or "")
-    log_fh = open(args.log, "w") if args.log else None
-
-    def log(line: str) -> None:
-        print(line, flush=True)
-        if log_fh:
-            log_fh.write(line + "\n")
-            log_fh.flush()
-
+    log = _line_logger(args.log)
     try:
         train(args.data, args.out, p, log=log)
     finally:
-        if log_fh:
-            log_fh.close()
+        log.close()
     return 0
+
+
+class _line_logger:
+    """Prints a training log line and, with a path, also appends it to that file as it comes."""
+
+    def __init__(self, path: str | None):
+        self.fh = open(path, "w") if path else None
+
+    def __call__(self, line: str) -> None:
+        print(line, flush=True)
+        if self.fh:
+            self.fh.write(line + "\n")
+            self.fh.flush()
+
+    def close(self) -> None:
+        if self.fh:
+            self.fh.close()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -230,13 +256,19 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-minutes", type=float, default=55.0, help="no stage starts after this (default 55)")
     t.add_argument("--resume", help="a cascade XML written by this trainer: keep its stages and train more")
     t.add_argument("--log", help="also write the per-stage log here")
-    t = ts.add_parser("verifier", help="HOG + a one-hidden-layer network judging the cascade's detections")
+    t = ts.add_parser("verifier", help="a network judging the cascade's detections: a small CNN on the box's crop "
+                      "(--out X.onnx, needs pip install '.[train]') or HOG + one hidden layer (--out X.yml[.gz])")
     t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, as for the cascade)")
     t.add_argument("--cascade", required=True, help="the cascade XML whose detections are judged")
-    t.add_argument("--out", required=True, help="verifier model (.yml)")
-    t.add_argument("--every", type=int, default=4, help="use every N-th image (default 4)")
+    t.add_argument("--out", required=True, help="verifier model: .onnx = the CNN, .yml or .yml.gz = HOG network")
+    t.add_argument("--every", type=int, help="use every N-th image (default: 1 for the CNN, 4 for HOG)")
     t.add_argument("--hidden", type=int, default=64, help="hidden units (default 64)")
-    t.add_argument("--epochs", type=int, default=12, help="passes over the samples (default 12)")
+    t.add_argument("--epochs", type=int, help="passes over the samples (default: 6 for the CNN, 12 for HOG)")
+    t.add_argument("--channels", default="8/16/32", help="CNN: widths of its three conv layers (default 8/16/32)")
+    t.add_argument("--cache", help="CNN: .npz keeping the cascade's labelled crops between runs (made if absent)")
+    t.add_argument("--compare-hog", action="store_true",
+                   help="CNN: also fit the HOG verifier on the same images and log both on the same held-out boxes")
+    t.add_argument("--log", help="CNN: also write the training log here")
     t.add_argument("--decay", type=float, default=1e-4, help="L2 weight decay (default 1e-4)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")

@@ -52,40 +52,52 @@ def geometry_features(boxes, neighbors, horizon_row: float, cam_height_m: float)
     return np.c_[np.log1p(np.asarray(neighbors, float)), np.clip(hv, 0, 10)].astype(np.float32)
 
 
-def candidates(folders: list[str], cascade_xml: str, every: int, cfg: dict, progress=None):
-    """(features, labels, image index per sample, images used) from the cascade stage's detections on
-    every `every`-th training image, the core configured by `cfg` (a validated configuration: its camera
-    must be the images' camera)."""
+def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: dict, progress=None):
+    """Per every `every`-th training image, the core's "cascade" stage detections (verifier off, groups of one
+    window kept), the core configured by `cfg` (a validated configuration: its camera must be the images'
+    camera). Yields (image index k, gray image, boxes (n, 4) left, top, right, bottom, raw windows per box,
+    label per box: 1 = vehicle (IoU >= 0.5 with an annotated box), -1 = other (IoU < 0.3 with every box),
+    0 = left out, the image's horizon row, each box's largest IoU with an annotated box)."""
     from app import config as configuration
     from app.core import Pipeline
 
     cfg["cascade"]["model"] = cascade_xml
     cfg["cascade"]["verifier"] = "off"
     cfg["cascade"]["min_neighbors"] = 1
-    half, cam_h = cfg["cascade"]["neighbors_half"], cfg["camera"]["height_m"]
-    items = load_folders(folders)[::every]
-    h = hog()
-    xs, ys, img = [], [], []
+    half = cfg["cascade"]["neighbors_half"]
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        for k, it in enumerate(items):
+        for k, it in enumerate(load_folders(folders)[::every]):
             g = read_gray(it.path)
             r = pipe.run_stage("cascade", g)
             det = np.array([t.box for t in r.tracks], float).reshape(-1, 4)
             conf = np.array([t.confidence for t in r.tracks], float)
             n = np.rint(half * conf / np.maximum(1 - conf, 1e-6))   # confidence n / (n + half) without verifier
             m = iou(det, it.boxes).max(1) if len(it.boxes) else np.zeros(len(det))
-            gm = g[:, ::-1].copy()
-            for sel, label in ((m >= 0.5, 1.0), (m < 0.3, -1.0)):
-                geo = geometry_features(det[sel], n[sel], r.horizon_row, cam_h)
-                mirrored = [(g.shape[1] - r_, t, g.shape[1] - l, b) for l, t, r_, b in det[sel]]
-                for f in (box_features(h, g, det[sel]), box_features(h, gm, mirrored)):
-                    f = np.c_[f, geo]
-                    xs.append(f)
-                    ys.append(np.full(len(f), label))
-                    img.append(np.full(len(f), k))
+            yield k, g, det, n, np.where(m >= 0.5, 1, np.where(m < 0.3, -1, 0)), r.horizon_row, m
             if progress:
                 progress(1)
-    return np.concatenate(xs), np.concatenate(ys), np.concatenate(img), len(items)
+
+
+def candidates(folders: list[str], cascade_xml: str, every: int, cfg: dict, progress=None):
+    """(features, labels, image index per sample, images used) from the cascade stage's detections on
+    every `every`-th training image (`cascade_detections`), every sample also mirrored."""
+    cam_h = cfg["camera"]["height_m"]
+    h = hog()
+    xs, ys, img = [], [], []
+    used = 0
+    for k, g, det, n, lab, horizon, _ in cascade_detections(folders, cascade_xml, every, cfg, progress):
+        used += 1
+        gm = g[:, ::-1].copy()
+        for label in (1.0, -1.0):
+            sel = lab == label
+            geo = geometry_features(det[sel], n[sel], horizon, cam_h)
+            mirrored = [(g.shape[1] - r_, t, g.shape[1] - l, b) for l, t, r_, b in det[sel]]
+            for f in (box_features(h, g, det[sel]), box_features(h, gm, mirrored)):
+                f = np.c_[f, geo]
+                xs.append(f)
+                ys.append(np.full(len(f), label))
+                img.append(np.full(len(f), k))
+    return np.concatenate(xs), np.concatenate(ys), np.concatenate(img), used
 
 
 @dataclass

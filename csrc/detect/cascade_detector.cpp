@@ -26,7 +26,7 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
         haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
         win_ = haar_->window();
     }
-    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = std::make_unique<VehicleVerifier>(p_.verifier);
+    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }
@@ -141,10 +141,21 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n));
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
-        d.confidence = verifier_ && n >= p_.verify_min_neighbors
-                           ? verifier_->probability(gray, d.box, n, cam.horizon_row(), hc)
-                           : float(n / (n + p_.neighbors_half));
+        d.confidence = float(n / (n + p_.neighbors_half));
         out.push_back(d);
+    }
+    if (verifier_) {  // every group of the frame at once (the CNN verifier runs them as one batch)
+        std::vector<cv::Rect2f> boxes;
+        std::vector<int> ns;
+        std::vector<size_t> judged;  // groups of fewer than verify_min_neighbors windows keep n / (n + half)
+        for (size_t i = 0; i < out.size(); ++i) {
+            if (out[i].neighbors < p_.verify_min_neighbors) continue;
+            judged.push_back(i);
+            boxes.push_back(out[i].box);
+            ns.push_back(out[i].neighbors);
+        }
+        const std::vector<float> p = verifier_->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
+        for (size_t k = 0; k < judged.size(); ++k) out[judged[k]].confidence = p[k];
     }
     if (p_.nms_iou >= 1.0) return out;
     // non-maximum suppression by confidence: most confident first, drop what overlaps a kept one

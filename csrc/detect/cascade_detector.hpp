@@ -13,9 +13,10 @@
 // `scale_factor` from the model's own up to `max_window_frac` of the image height.
 // Raw windows accepted by every stage are grouped (IoU >= group_iou with the group's strongest
 // window, box = mean of the group); a group of n windows gets confidence n / (n + neighbors_half),
-// and groups of fewer than min_neighbors windows are dropped. With a verifier (vehicle_verifier.hpp:
-// HOG of the box, log(1 + n) and the vehicle height the box implies, through a small trained network)
-// the confidence is instead its probability that the group's box holds a vehicle. Last, a detection
+// and groups of fewer than min_neighbors windows are dropped. With a verifier (vehicle_verifier.hpp: a
+// small CNN on the box's crop, or the HOG of the box, with log(1 + n) and the vehicle height the box
+// implies, through a trained network) the confidence is instead its probability that the group's box
+// holds a vehicle (all the groups of a frame judged at once). Last, a detection
 // overlapping a more confident one at IoU >= nms_iou is dropped (two groups on one vehicle).
 #pragma once
 
@@ -57,9 +58,11 @@ struct CascadeParams {
               "path of the OpenCV cascade XML; empty = the model shipped with Headway "
               "(app/models/vehicle_cascade.xml, recipe in docs/cascade.md)");
         m.add("verifier", verifier, nullptr,
-              "path of the verifier (HOG + neighbours + implied height, one-hidden-layer network) judging every "
-              "cascade detection; empty = the "
-              "model shipped with Headway (app/models/vehicle_verifier.yml.gz, recipe in docs/cascade.md); off = "
+              "path of the verifier judging every cascade detection: *.onnx = a small CNN on the box's crop run by "
+              "cv::dnn (`headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
+              "through a one-hidden-layer network; empty = the "
+              "model shipped with Headway (app/models/vehicle_verifier.onnx, the CNN; the HOG one is "
+              "app/models/vehicle_verifier.yml.gz; recipes in docs/cascade.md); off = "
               "the cascade's neighbour count alone as confidence, which measured worse on the TuSimple validation split");
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,

@@ -1,4 +1,5 @@
 #include "detect/vehicle_verifier.hpp"
+#include "detect/vehicle_verifier_cnn.hpp"
 
 #include <opencv2/imgproc.hpp>
 
@@ -9,7 +10,20 @@
 
 namespace hw {
 
-VehicleVerifier::VehicleVerifier(const std::string &path) {
+float implied_vehicle_height(const cv::Rect2f &box, double horizon_row, double cam_height_m) {
+    const double below = box.br().y - horizon_row;
+    const double hv = below > 0 ? cam_height_m * box.height / below : 10.0;
+    return float(std::clamp(hv, 0.0, 10.0));
+}
+
+std::unique_ptr<VehicleVerifier> make_vehicle_verifier(const std::string &path) {
+    const std::string ext = ".onnx";
+    if (path.size() > ext.size() && path.compare(path.size() - ext.size(), ext.size(), ext) == 0)
+        return std::make_unique<CnnVerifier>(path);
+    return std::make_unique<HogVerifier>(path);
+}
+
+HogVerifier::HogVerifier(const std::string &path) {
     cv::FileStorage fs;
     try {
         fs.open(path, cv::FileStorage::READ);
@@ -41,7 +55,16 @@ VehicleVerifier::VehicleVerifier(const std::string &path) {
     w2_ = w2_.reshape(1, 1);
 }
 
-float VehicleVerifier::probability(const cv::Mat &gray, const cv::Rect2f &box, int neighbors, double horizon_row,
+std::vector<float> HogVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
+                                             const std::vector<int> &neighbors, double horizon_row,
+                                             double cam_height_m) const {
+    std::vector<float> p(boxes.size());
+    for (size_t i = 0; i < boxes.size(); ++i)
+        p[i] = probability(gray, boxes[i], neighbors[i], horizon_row, cam_height_m);
+    return p;
+}
+
+float HogVerifier::probability(const cv::Mat &gray, const cv::Rect2f &box, int neighbors, double horizon_row,
                                    double cam_height_m) const {
     const cv::Rect r = cv::Rect(cv::Point(int(std::lround(box.x)), int(std::lround(box.y))),
                                 cv::Point(int(std::lround(box.br().x)), int(std::lround(box.br().y)))) &
@@ -51,10 +74,8 @@ float VehicleVerifier::probability(const cv::Mat &gray, const cv::Rect2f &box, i
     cv::resize(gray(r), crop, hog_.winSize, 0, 0, cv::INTER_AREA);
     std::vector<float> x;
     hog_.compute(crop, x);
-    const double below = box.br().y - horizon_row;
-    const double hv = below > 0 ? cam_height_m * box.height / below : 10.0;
     x.push_back(float(std::log1p(double(neighbors))));
-    x.push_back(float(std::clamp(hv, 0.0, 10.0)));
+    x.push_back(implied_vehicle_height(box, horizon_row, cam_height_m));
     const cv::Mat z = (cv::Mat(1, int(x.size()), CV_32F, x.data()) - mean_).mul(scale_);
     cv::Mat hidden = z * w1_ + b1_;
     hidden = cv::max(hidden, 0.f);

@@ -1,10 +1,15 @@
 // vehicle_verifier.hpp - the second learned stage: is a detected box a vehicle?
 //
-// Features x: the HOG of the box resized to the model's window (cv::HOGDescriptor, 16 px blocks, 8 px
-// cells and stride, 9 bins), then log(1 + n) of the n raw cascade windows grouped, then the vehicle
-// height the box implies on a flat road, H = h_cam * h / (y_b - y_h) (m; 10 when the bottom is not below
-// the horizon; clipped to 0..10). Standardised, they go through a one-hidden-layer network trained by
-// `headway train verifier` (app/train/verifier.py) on the cascade's own detections in training images:
+// Two kinds, chosen by the model file's name (make_vehicle_verifier):
+// - *.onnx: a small convolutional network on the box's crop, run by cv::dnn (vehicle_verifier_cnn.hpp);
+// - otherwise (*.yml, *.yml.gz): HogVerifier below.
+// Both take, besides the image, log(1 + n) of the n raw cascade windows grouped and the vehicle height the
+// box implies on a flat road (implied_vehicle_height).
+//
+// HogVerifier. Features x: the HOG of the box resized to the model's window (cv::HOGDescriptor, 16 px
+// blocks, 8 px cells and stride, 9 bins), then log(1 + n), then the implied height. Standardised, they go
+// through a one-hidden-layer network trained by `headway train verifier` (app/train/verifier.py) on the
+// cascade's own detections in training images:
 //     z = (x - mean) .* scale,   p = sigmoid(w2 . relu(W1^T z + b1) + b2)
 // The model file is written with cv::FileStorage (hog_width, hog_height, mean, scale, w1, b1, w2, b2).
 #pragma once
@@ -12,15 +17,35 @@
 #include <opencv2/core.hpp>
 #include <opencv2/objdetect.hpp>
 
+#include <memory>
 #include <string>
+#include <vector>
 
 namespace hw {
 
+// The vehicle height (m) a box implies on a flat road, H = h_cam h / (y_b - y_h); 10 when its bottom is not
+// below the horizon; clipped to 0..10.
+float implied_vehicle_height(const cv::Rect2f &box, double horizon_row, double cam_height_m);
+
 class VehicleVerifier {
 public:
-    explicit VehicleVerifier(const std::string &path);  // throws std::invalid_argument naming the file
-    // Probability that `box` (px, clipped to the image), a group of `neighbors` raw cascade windows,
+    virtual ~VehicleVerifier() = default;
+    // Probability that each box (px, clipped to the image), a group of neighbors[i] raw cascade windows,
     // holds a vehicle; the camera's horizon row (px) and height (m) give the implied vehicle height.
+    virtual std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
+                                             const std::vector<int> &neighbors, double horizon_row,
+                                             double cam_height_m) const = 0;
+};
+
+// The verifier the file holds (.onnx: CnnVerifier, else HogVerifier); throws std::invalid_argument naming it.
+std::unique_ptr<VehicleVerifier> make_vehicle_verifier(const std::string &path);
+
+class HogVerifier : public VehicleVerifier {
+public:
+    explicit HogVerifier(const std::string &path);  // throws std::invalid_argument naming the file
+    std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
+                                     const std::vector<int> &neighbors, double horizon_row,
+                                     double cam_height_m) const override;
     float probability(const cv::Mat &gray, const cv::Rect2f &box, int neighbors, double horizon_row,
                       double cam_height_m) const;
 

@@ -1,0 +1,235 @@
+"""The convolutional verifier: a small CNN on each cascade detection's crop, trained here with JAX (CPU) and
+written as ONNX for cv::dnn in the core (`headway train verifier --out X.onnx`).
+
+Samples are the HOG verifier's (verifier.cascade_detections): the core's own cascade detections on the
+training images, every group kept (min_neighbors 1, no suppression). A detection with IoU >= 0.5 with an
+annotated box is a vehicle; unlike the HOG verifier's samples (IoU 0.3-0.5 left out), every other detection
+is not: the verifier learns to tell a well placed box (what the scoring counts) from one beside the vehicle,
+which would otherwise win the suppression of overlapping detections. Each is cropped as the core crops it
+(verifier_onnx.crop_boxes) and mirrored at random while training.
+
+Fit: Adam (beta 0.9, 0.999; the learning rate falls linearly to 0) on the class-balanced cross-entropy
+    L = sum_i s_i softplus(-y_i f(x_i)) / sum_i s_i + decay |W|^2 / 2,   s_i = 1 / n_class(y_i),
+batches of `batch`, weights He-initialised from the seed: the same command gives the same file.
+The images the HOG verifier held out (every 15th from the 13th of the training folders: the 5th of each
+five of its every-3rd images) are held out here too, and the share of other boxes passed at the
+thresholds keeping 0.8 / 0.9 / 0.95 of their vehicles is logged, for both verifiers on the same boxes.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from tqdm import tqdm
+
+from app.train import verifier_onnx as vo
+from app.train.cascade.samples import load_folders
+from app.train.verifier import cascade_detections, geometry_features
+
+HELD_OUT = (15, 12)   # image i (in the training folders' order) is held out when i % 15 == 12
+KEEP = (0.8, 0.9, 0.95)   # shares of held-out vehicles at which the others passed are reported
+
+
+def require_train_extra():
+    """jax and onnx, or a clear error naming the extra that brings them."""
+    try:
+        import jax  # noqa: F401
+        import onnx  # noqa: F401
+    except ImportError as e:
+        raise SystemExit(f"headway train verifier --out X.onnx (the CNN) needs the training packages ({e.name} is missing): "
+                         "pip install '.[train]' (jax[cpu] and onnx)") from None
+
+
+def samples(folders: list[str], cascade_xml: str, every: int, cfg: dict, cache: str | None = None,
+            progress=None) -> dict:
+    """Crops (n, H, W) uint8, extra features (n, 2), labels (n,) +1/-1, image index in the folders (n,),
+    boxes (n, 4) and largest IoU with an annotated box (n,) of the cascade's detections; read from / written to `cache` (.npz) when given and
+    made from the same cascade, images and crop geometry."""
+    key = hashlib.sha256(json.dumps(["labels: IoU >= 0.5 vs the rest", hashlib.sha256(Path(cascade_xml).read_bytes()).hexdigest(),
+                                     [str(Path(f).resolve()) for f in folders], every, vo.CROP_W, vo.CROP_H,
+                                     vo.MARGIN, cfg["camera"], cfg["cascade"]], default=str).encode()).hexdigest()[:16]
+    if cache and Path(cache).is_file():
+        d = dict(np.load(cache))
+        if str(d.get("key")) == key:
+            return d
+    cfg["cascade"]["nms_iou"] = 1.0   # every group: the verifier judges them all before suppression
+    cam_h = cfg["camera"]["height_m"]
+    crops, extra, label, image, boxes, overlap = [], [], [], [], [], []
+    for k, g, det, n, lab, horizon, m in cascade_detections(folders, cascade_xml, every, cfg, progress):
+        crops.append(vo.crop_boxes(g, det))
+        extra.append(geometry_features(det, n, horizon, cam_h))
+        label.append(np.where(m >= 0.5, 1, -1).astype(np.int8))
+        image.append(np.full(len(det), k * every, np.int32))
+        boxes.append(det.astype(np.float32))
+        overlap.append(m.astype(np.float32))
+    d = dict(crops=np.concatenate(crops), extra=np.concatenate(extra), label=np.concatenate(label),
+             image=np.concatenate(image), boxes=np.concatenate(boxes), iou=np.concatenate(overlap), key=np.array(key))
+    if cache:
+        Path(cache).parent.mkdir(parents=True, exist_ok=True)
+        np.savez(cache, **d)
+    return d
+
+
+def passed_at(p: np.ndarray, y: np.ndarray, keep=KEEP) -> list[float]:
+    """Share of others (y < 0) scoring at least the threshold that keeps `keep` of the vehicles (y > 0)."""
+    pos = np.sort(p[y > 0])[::-1]
+    return [float((p[y < 0] >= pos[max(0, int(np.ceil(k * len(pos))) - 1)]).mean()) for k in keep]
+
+
+def fit(crops, extra, y, channels=(8, 16, 32), hidden=64, epochs=6, lr=2e-3, decay=1e-4, seed=0, batch=128,
+        on_epoch: Callable[[int, dict, float], None] | None = None) -> dict:
+    """Parameters (numpy, verifier_onnx.forward's names) fitted by Adam on the class-balanced cross-entropy."""
+    import jax
+    import jax.numpy as jnp
+    from jax import lax
+
+    rng = np.random.default_rng(seed)
+    c_in = (1, *channels)
+    p: dict = {}
+    for k in range(3):   # He-normal weights, zero biases
+        p[f"conv{k}_w"] = rng.normal(0, np.sqrt(2 / (9 * c_in[k])), (c_in[k + 1], c_in[k], 3, 3))
+        p[f"conv{k}_b"] = np.zeros(c_in[k + 1])
+    nflat = channels[2] * (vo.CROP_H // 8) * (vo.CROP_W // 8)
+    p["dense_w"] = rng.normal(0, np.sqrt(2 / (nflat + 2)), (nflat + 2, hidden))
+    p["dense_b"] = np.zeros(hidden)
+    p["out_w"] = rng.normal(0, np.sqrt(1 / hidden), hidden)
+    p["out_b"] = np.zeros(1)
+    p = {k: jnp.asarray(v, jnp.float32) for k, v in p.items()}
+    e_mean = extra.mean(0).astype(np.float32)
+    e_scale = (1 / (extra.std(0) + 1e-3)).astype(np.float32)
+    decayed = [k for k in p if k.endswith("_w")]
+
+    def logit(p, z, e):
+        a = z
+        for k in range(3):
+            a = lax.conv_general_dilated(a, p[f"conv{k}_w"], (1, 1), ((1, 1), (1, 1)),
+                                         dimension_numbers=("NCHW", "OIHW", "NCHW")) + p[f"conv{k}_b"][None, :, None, None]
+            a = lax.reduce_window(jnp.maximum(a, 0), -jnp.inf, lax.max, (1, 1, 2, 2), (1, 1, 2, 2), "VALID")
+        h = jnp.maximum(jnp.concatenate([a.reshape(a.shape[0], -1), e], 1) @ p["dense_w"] + p["dense_b"], 0)
+        return h @ p["out_w"] + p["out_b"][0]
+
+    def loss(p, z, e, yy, s):
+        data = jnp.sum(s * jax.nn.softplus(-yy * logit(p, z, e))) / jnp.sum(s)
+        return data + 0.5 * decay * sum(jnp.sum(p[k] ** 2) for k in decayed)
+
+    @jax.jit
+    def step(p, m, v, t, z, e, yy, s, rate):
+        val, g = jax.value_and_grad(loss)(p, z, e, yy, s)
+        m = jax.tree_util.tree_map(lambda a, b: 0.9 * a + 0.1 * b, m, g)
+        v = jax.tree_util.tree_map(lambda a, b: 0.999 * a + 0.001 * b * b, v, g)
+        p = jax.tree_util.tree_map(lambda q, a, b: q - rate * (a / (1 - 0.9 ** t)) / (jnp.sqrt(b / (1 - 0.999 ** t)) + 1e-8),
+                                   p, m, v)
+        return p, m, v, val
+
+    m = jax.tree_util.tree_map(jnp.zeros_like, p)
+    v = jax.tree_util.tree_map(jnp.zeros_like, p)
+    yf = np.where(y > 0, 1.0, -1.0).astype(np.float32)
+    sw = np.where(y > 0, 1 / (y > 0).sum(), 1 / (y < 0).sum()).astype(np.float32)
+    en = ((extra - e_mean) * e_scale).astype(np.float32)
+    per_epoch = len(y) // batch
+    steps, t = epochs * per_epoch, 0
+    with tqdm(total=steps, desc="cnn", unit="batch", file=sys.stderr, disable=not sys.stderr.isatty(),
+              leave=False) as bar:
+        for ep in range(epochs):
+            t0, total = time.perf_counter(), 0.0
+            order = rng.permutation(len(y))
+            flips = rng.random(len(y)) < 0.5
+            for b in range(per_epoch):
+                idx = np.sort(order[b * batch:(b + 1) * batch])
+                c = crops[idx]
+                c = np.where(flips[idx][:, None, None], c[:, :, ::-1], c)
+                t += 1
+                p, m, v, val = step(p, m, v, t, vo.standardise(c), en[idx], yf[idx], sw[idx],
+                                    np.float32(lr * (1 - (t - 1) / steps)))
+                total += float(val)
+                bar.update(1)
+            out = finish(p, e_mean, e_scale)
+            if on_epoch:
+                on_epoch(ep, out, total / per_epoch, time.perf_counter() - t0)
+    return finish(p, e_mean, e_scale)
+
+
+def finish(p, e_mean, e_scale) -> dict:
+    out = {k: np.asarray(v, np.float32) for k, v in p.items()}
+    out.update(extra_mean=e_mean, extra_scale=e_scale)
+    return out
+
+
+def predict(params: dict, crops: np.ndarray, extra: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    """verifier_onnx.forward in chunks."""
+    return np.concatenate([vo.forward(params, vo.standardise(crops[i:i + chunk]), extra[i:i + chunk])
+                           for i in range(0, len(crops), chunk)]) if len(crops) else np.zeros(0)
+
+
+def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int = 1, channels=(8, 16, 32),
+          hidden: int = 64, epochs: int = 6, decay: float = 1e-4, seed: int = 0, cache: str | None = None,
+          compare_hog: bool = False, log: Callable[[str], None] = print) -> dict:
+    """Fit on the training images less the held-out ones, log the held-out shares, write the ONNX to `out`.
+    `compare_hog`: also fit the HOG verifier on the same images and log it on the same held-out boxes."""
+    require_train_extra()
+    # one thread (the machine is shared); must be set before jax is first imported
+    os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+    t0 = time.perf_counter()
+    n_items = len(load_folders(folders)[::every])
+    with tqdm(total=n_items, desc="cascade detections", unit="img", file=sys.stderr,
+              disable=not sys.stderr.isatty(), leave=False) as bar:
+        d = samples(folders, cascade_xml, every, cfg, cache, progress=bar.update)
+    held = d["image"] % HELD_OUT[0] == HELD_OUT[1]
+    y = d["label"]
+    clear = (d["iou"][held] >= 0.5) | (d["iou"][held] < 0.3)   # the HOG verifier's samples
+    log(f"verifier (cnn): {n_items} images (every {every}), {int((y > 0).sum())} vehicle and {int((y < 0).sum())} "
+        f"other boxes (before mirroring), {int(held.sum())} of them on {len(np.unique(d['image'][held]))} held-out "
+        f"images; crop {vo.CROP_W}x{vo.CROP_H} gray, margin {vo.MARGIN}; conv {'/'.join(map(str, channels))}, "
+        f"{hidden} hidden, {epochs} epochs, decay {decay:g}, seed {seed}; samples {(time.perf_counter() - t0) / 60:.1f} min")
+    if compare_hog:
+        t1 = time.perf_counter()
+        ph = hog_baseline(folders, d, held, seed)
+        log(f"HOG verifier (verifier.py's recipe) fitted on the same images, held-out others with IoU < 0.3 passed at "
+            f"{'/'.join(map(str, KEEP))} of vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held][clear]))
+            + f"; {(time.perf_counter() - t1) / 60:.1f} min")
+    t1 = time.perf_counter()
+
+    def on_epoch(ep, params, loss, secs):   # the ONNX after every epoch: a stopped run leaves the last one
+        vo.save_onnx(params, out, doc=f"headway train verifier --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
+        ph = predict(params, d["crops"][held], d["extra"][held])
+        log(f"epoch {ep + 1}/{epochs}: loss {loss:.4f}, held-out others passed at {'/'.join(map(str, KEEP))} of "
+            f"vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held])) + "; of those with IoU < 0.3 "
+            "(the HOG verifier's others): " + " / ".join(f"{v:.3f}" for v in passed_at(ph[clear], y[held][clear]))
+            + f", {secs:.0f} s")
+
+    params = fit(d["crops"][~held], d["extra"][~held], y[~held], channels, hidden, epochs, decay=decay, seed=seed,
+                 on_epoch=on_epoch)
+    log(f"fit {(time.perf_counter() - t1) / 60:.1f} min, total {(time.perf_counter() - t0) / 60:.1f} min -> {out} "
+        f"({Path(out).stat().st_size / 1024:.0f} KiB)")
+    return params
+
+
+def hog_baseline(folders: list[str], d: dict, held: np.ndarray, seed: int) -> np.ndarray:
+    """The HOG verifier (verifier.py, its shipped recipe: IoU 0.3-0.5 left out, 64 hidden units, 12 epochs,
+    decay 1e-4, mirrors) fitted on the same images less the held-out ones; its probabilities for the held-out
+    samples with IoU >= 0.5 or < 0.3."""
+    from app.train.cascade.samples import read_gray
+    from app.train.verifier import box_features, fit_mlp, hog
+
+    h, items = hog(), load_folders(folders)
+    x = np.zeros((len(d["label"]), h.getDescriptorSize()), np.float32)
+    xm = np.zeros_like(x)
+    for i in tqdm(np.unique(d["image"]), desc="HOG", unit="img", file=sys.stderr, disable=not sys.stderr.isatty(),
+                  leave=False):
+        j = np.flatnonzero(d["image"] == i)
+        g = read_gray(items[i].path)
+        b = d["boxes"][j]
+        x[j] = box_features(h, g, b)
+        xm[j] = box_features(h, g[:, ::-1].copy(), np.c_[g.shape[1] - b[:, 2], b[:, 1], g.shape[1] - b[:, 0], b[:, 3]])
+    x, xm = np.c_[x, d["extra"]], np.c_[xm, d["extra"]]
+    y = np.where(d["label"] > 0, 1.0, -1.0)
+    clear = (d["iou"] >= 0.5) | (d["iou"] < 0.3)
+    fit_on = ~held & clear
+    m = fit_mlp(np.r_[x[fit_on], xm[fit_on]], np.r_[y[fit_on], y[fit_on]], 64, 12, 1e-4, seed)
+    return m.probability(x[held & clear])

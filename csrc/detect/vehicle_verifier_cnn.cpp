@@ -1,0 +1,74 @@
+#include "detect/vehicle_verifier_cnn.hpp"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace hw {
+
+CnnVerifier::CnnVerifier(const std::string &path) {
+    try {
+        net_ = cv::dnn::readNetFromONNX(path);
+    } catch (const cv::Exception &e) {
+        throw std::invalid_argument("cascade.verifier: cv::dnn cannot read '" + path + "' as ONNX (" + e.err +
+                                    "); train one with `headway train verifier --out X.onnx` or set the key to off");
+    }
+    if (net_.empty())
+        throw std::invalid_argument("cascade.verifier: '" + path + "' holds no network");
+    net_.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+    net_.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+    // one probe: the file must take a crop and the two extra features and give one probability
+    try {
+        const auto p = probabilities(cv::Mat(kCropH * 4, kCropW * 4, CV_8UC1, cv::Scalar(128)),
+                                     {cv::Rect2f(10.f, 10.f, 60.f, 40.f)}, {3}, 0.0, 1.5);
+        if (p.size() != 1 || !(p[0] >= 0.f && p[0] <= 1.f)) throw std::runtime_error("no probability");
+    } catch (const std::exception &e) {
+        throw std::invalid_argument("cascade.verifier: '" + path + "' is not a verifier network (inputs crop (N, 1, " +
+                                    std::to_string(kCropH) + ", " + std::to_string(kCropW) +
+                                    ") and extra (N, 2), output (N, 1)): " + e.what() +
+                                    "; train one with `headway train verifier --out X.onnx`");
+    }
+}
+
+cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box) {
+    // the box's edges as the Python side sees them (float right = x + width), widened in double
+    const double l = box.x, t = box.y, r = double(box.x + box.width), b = double(box.y + box.height);
+    const double mx = kMargin * (r - l), my = kMargin * (b - t);
+    const int x0 = int(std::floor(l - mx + 0.5)), y0 = int(std::floor(t - my + 0.5));
+    const int x1 = int(std::floor(r + mx + 0.5)), y1 = int(std::floor(b + my + 0.5));
+    cv::Mat out(kCropH, kCropW, CV_32F, cv::Scalar(0));
+    if (x1 - x0 < 2 || y1 - y0 < 2) return out;
+    const int cx0 = std::clamp(x0, 0, gray.cols - 1), cy0 = std::clamp(y0, 0, gray.rows - 1);
+    const int cx1 = std::max(std::min(x1, gray.cols), cx0 + 1), cy1 = std::max(std::min(y1, gray.rows), cy0 + 1);
+    cv::Mat padded, small;
+    cv::copyMakeBorder(gray(cv::Rect(cx0, cy0, cx1 - cx0, cy1 - cy0)), padded, cy0 - y0, std::max(0, y1 - cy1),
+                       cx0 - x0, std::max(0, x1 - cx1), cv::BORDER_REPLICATE);
+    cv::resize(padded, small, cv::Size(kCropW, kCropH), 0, 0, cv::INTER_AREA);
+    cv::Scalar mean, sd;
+    cv::meanStdDev(small, mean, sd);
+    small.convertTo(out, CV_32F, 1.0 / (sd[0] + 1.0), -mean[0] / (sd[0] + 1.0));
+    return out;
+}
+
+std::vector<float> CnnVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
+                                              const std::vector<int> &neighbors, double horizon_row,
+                                              double cam_height_m) const {
+    const int n = int(boxes.size());
+    if (n == 0) return {};
+    const int sz[4] = {n, 1, kCropH, kCropW};
+    cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F);
+    for (int i = 0; i < n; ++i) {
+        crop(gray, boxes[size_t(i)]).copyTo(cv::Mat(kCropH, kCropW, CV_32F, crops.ptr<float>(i)));
+        extra.at<float>(i, 0) = float(std::log1p(double(neighbors[size_t(i)])));
+        extra.at<float>(i, 1) = implied_vehicle_height(boxes[size_t(i)], horizon_row, cam_height_m);
+    }
+    net_.setInput(crops, "crop");
+    net_.setInput(extra, "extra");
+    const cv::Mat p = net_.forward();
+    CV_Assert(p.total() == size_t(n));
+    return std::vector<float>(p.ptr<float>(), p.ptr<float>() + n);
+}
+
+} // namespace hw
