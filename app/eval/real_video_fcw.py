@@ -19,6 +19,7 @@ from typing import Optional
 
 import yaml
 
+from app import config as configuration
 from app.eval.road_motion import fit_horizon, read_tme, read_video, tme_camera, udacity_camera
 from app.fcw_level import FcwLevel
 from app.replay import replay_recording
@@ -43,16 +44,22 @@ def recordings(data: Path) -> list[tuple[Path, dict, float, bool]]:
     return out
 
 
-def evaluate(data: str, preset: str = "thesis") -> list[dict]:
+def recording_config(camera: dict, preset: str, config_path: Optional[str] = None) -> dict:
+    """A recording's replay configuration: the user's (`headway eval --config`; validated, so a bad key fails
+    here naming it) under the recording's camera, the preset and the ego speed log's signals."""
+    cfg = {"camera": camera, "pipeline": {"preset": preset},
+           "vehicle": {"speed_dbc": str(DBC_PATH), "speed_message": "EGO_SPEED", "speed_signals": "SPEED_MPS"}}
+    return configuration.load(config_path, cfg) if config_path else cfg
+
+
+def evaluate(data: str, preset: str = "thesis", config_path: Optional[str] = None) -> list[dict]:
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         for source, camera, fps, is_folder in recordings(Path(data)):
             log = Path(tmp) / f"{source.stem}.log"
             write_ego_speed_log(log, Motion1D(0.0, EGO_SPEED_MPS, []), 60.0)
-            cfg = {"camera": camera, "pipeline": {"preset": preset},
-                   "vehicle": {"speed_dbc": str(DBC_PATH), "speed_message": "EGO_SPEED", "speed_signals": "SPEED_MPS"}}
             cfg_path = Path(tmp) / "config.yaml"
-            cfg_path.write_text(yaml.safe_dump(cfg))
+            cfg_path.write_text(yaml.safe_dump(recording_config(camera, preset, config_path)))
             s = replay_recording(str(source), str(cfg_path), fps=fps if is_folder else None, can_in=str(log),
                                  progress=False)
             out.append({"clip": source.name, "frames": s.frames, "seconds": round(s.frames / fps, 2),

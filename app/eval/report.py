@@ -209,13 +209,13 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
         from app.eval import road_motion
 
         say("road homography and track continuity on TME / Udacity")
-        report["road_motion"] = road_motion.evaluate(str(data), preset)
+        report["road_motion"] = road_motion.evaluate(str(data), preset, config_path=config_path)
     if "real_fcw" in parts:
         if (data / "udacity").exists():
             from app.eval import real_video_fcw
 
             say("false warnings on the real recordings")
-            report["real_fcw"] = real_video_fcw.evaluate(str(data), preset)
+            report["real_fcw"] = real_video_fcw.evaluate(str(data), preset, config_path)
         else:
             report["skipped"]["real_fcw"] = f"{data / 'udacity'} not found"
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
