@@ -57,6 +57,8 @@ struct PhdTrackerParams {
     double match_iou = 0.3;            // detection <-> vehicle box overlap that is the same vehicle
     double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
     int confirm_hits = 2;              // detections before a vehicle is confirmed
+    double birth_min_appearance = 0.9;  // a detection with a learned appearance score (the cascade's) under this
+                                        // starts no vehicle (it may still re-anchor one); others are not affected
     int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
     double max_dt_s = 1.0;             // s; a longer gap between frames restarts tracking
     BoxFeatureParams features;         // corners and LK (section phd_features)
