@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import pytest
 
-from app import config as configuration
 from app.eval import road_motion
 from tests.conftest import data_path
 
@@ -18,17 +17,12 @@ def tme08():
     return frames, fps, values
 
 
-def core(values: dict) -> dict:
-    """The core's configuration (the shipped cascade and verifier filled in), as `headway eval` builds it."""
-    return configuration.core_sections(configuration.load(None, values))
-
-
 def test_the_two_cars_ahead_are_tracked_and_few_other_tracks_born(tme08):
     """tme08 (50 frames): measured with the default birth_min_appearance 0.9: both cars ahead tracked on 47 of
     50 frames at IoU >= 0.3, one fragment, no id switch; 6 confirmed ids in all. With every cascade box allowed to
     start a vehicle (0): the same 47 / 47 frames, but 31 ids (docs/RESULTS.md)."""
     frames, fps, values = tme08
-    cfg = core(values)
+    cfg = road_motion.core_config(values)
     cars = road_motion.visible_throughout("tme08")
     res = road_motion.identity(frames, cfg, fps, cars)
     for car in cars:
@@ -41,5 +35,5 @@ def test_every_cascade_box_may_start_a_vehicle_when_asked(tme08):
     """birth_min_appearance 0 (every box starts a vehicle) gives far more confirmed tracks on the same
     sequence: the key is what holds them down (measured 31 against 6)."""
     frames, fps, values = tme08
-    cfg = core({**values, "phd": {"birth_min_appearance": 0.0}})
+    cfg = road_motion.core_config({**values, "phd": {"birth_min_appearance": 0.0}})
     assert road_motion.track_continuity(frames, cfg, fps)["ids"] >= 20

@@ -241,9 +241,9 @@ def synthetic_homography(cases=(("empty_road", None), ("empty_road", 0.4), ("ove
     return rows
 
 
-def _core(values: dict, config_path: Optional[str] = None) -> dict:
-    """The core's configuration: `config_path`'s (or the defaults) with `values` over them (and the shipped
-    cascade model)."""
+def core_config(values: dict, config_path: Optional[str] = None) -> dict:
+    """The core's configuration as `headway eval` builds it: `config_path`'s (or the defaults) with `values`
+    over them, the shipped cascade and verifier filled in."""
     return configuration.core_sections(configuration.load(config_path, values))
 
 
@@ -256,7 +256,7 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
     if tme.exists():
         frames, fps = read_tme(tme)
         cam = fit_horizon(tme_camera(data / "tme" / "calibration.ini"), frames)
-        cfg = _core({"camera": {**cam, "hood_frac": HOOD["tme08"]}, "pipeline": {"preset": preset}}, config_path)
+        cfg = core_config({"camera": {**cam, "hood_frac": HOOD["tme08"]}, "pipeline": {"preset": preset}}, config_path)
         report["tme08"] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                            "continuity": track_continuity(frames, cfg, fps),
                            "visible_throughout": identity(frames, cfg, fps, visible_throughout("tme08"))}
@@ -269,7 +269,7 @@ def evaluate(data_dir: str = "../shared/data", preset: str = "parallax", window:
             continue
         frames, fps = read_video(clip, udacity_max_frames)
         cam = fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
-        cfg = _core({"camera": {**cam, "hood_frac": HOOD.get(clip.name, 0.0)}, "pipeline": {"preset": preset}}, config_path)
+        cfg = core_config({"camera": {**cam, "hood_frac": HOOD.get(clip.name, 0.0)}, "pipeline": {"preset": preset}}, config_path)
         report[clip.name] = {"camera": cam, "homography": homography_windows(frames, cfg, window),
                              "continuity": track_continuity(frames, cfg, fps)}
         if visible_throughout(clip.name) and udacity_max_frames is None:

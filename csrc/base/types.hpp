@@ -75,7 +75,7 @@ struct LaneBoundary {
 // The road as the lane stage sees it in one frame.
 struct LaneModel {
     bool valid = false;  // both ego boundaries known
-    bool certain = false;  // valid, and both ego boundaries have paint along the road (lanes/lane_evidence.hpp)
+    bool certain = false;  // valid (implies it), and both ego boundaries have paint along the road (lanes/lane_evidence.hpp)
     LaneBoundary ego_left, ego_right;
     LaneBoundary adj_left, adj_right;  // outer boundaries of the adjacent lanes, where visible
     LaneBoundary out_left, out_right;  // one lane further out: outer boundaries of the lanes beyond, where visible

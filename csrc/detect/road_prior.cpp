@@ -25,7 +25,7 @@ ScaledCamera scale_camera(const CameraParams &cam, cv::Size size) {
 // Both ego boundaries known and believed painted markings (lanes/lane_evidence.hpp): on an unmarked road
 // the "lanes" are vehicle rears and barriers, and the camera's road is the better prior.
 bool lanes_usable(const LaneModel &lanes) {
-    return lanes.valid && lanes.certain && lanes.ego_left.valid && lanes.ego_right.valid;
+    return lanes.certain && lanes.ego_left.valid && lanes.ego_right.valid;
 }
 
 // Horizon row: the vanishing point of the lane model when it has one inside a sane band, else the

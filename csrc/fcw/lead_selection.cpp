@@ -15,7 +15,7 @@ double overlap_share(double a0, double a1, double b0, double b1) {
 } // namespace
 
 bool LeadSelector::lanes_believed(const LaneModel &lanes, double horizon_row) const {
-    if (!lanes.valid || !lanes.certain || lanes.frames_since_observed > p_.lanes_stale_frames || !std::isfinite(horizon_row)) return false;
+    if (!lanes.certain || lanes.frames_since_observed > p_.lanes_stale_frames || !std::isfinite(horizon_row)) return false;
     const double y = std::max(lanes.ego_left.bottom.y, lanes.ego_right.bottom.y);  // lower end of the lines
     const double xl = lanes.ego_left.x_at(float(y)), xr = lanes.ego_right.x_at(float(y));
     if (!(y > horizon_row + 1.0) || !std::isfinite(xl) || !std::isfinite(xr)) return false;

@@ -11,8 +11,8 @@ float boundary_support(const LaneBoundary &b, const std::vector<MarkingPoint> &p
                        const std::vector<cv::Rect2f> &hidden, float y_h, float y_near, const CameraParams &cam,
                        const LaneEvidenceParams &p, bool visible_only) {
     if (!b.valid || !std::isfinite(y_h) || p.bins < 1 || !(y_near > y_h + 1.f)) return 0.f;
-    // Range of a row on the flat road: Z = fy h / (y - y_h); the bins split [Z_near, Z_far] in log range.
-    const float z_near = float(cam.fy * cam.height_m) / (y_near - y_h);
+    // The bins split [Z_near, Z_far] of the flat road in log range.
+    const float z_near = range_at_row(cam, y_h, y_near);
     const float z_far = float(p.far_m);
     if (!(z_far > z_near)) return 0.f;
     const float log_span = std::log(z_far / z_near);
@@ -22,11 +22,9 @@ float boundary_support(const LaneBoundary &b, const std::vector<MarkingPoint> &p
         if (q.y < y_far || q.y > y_near) continue;
         const float tol = std::max(float(p.min_tolerance_px), float(p.tolerance_m) * px_per_m(cam, y_h, q.y));
         if (!(std::fabs(q.x - b.curve_x(q.y)) <= tol)) continue;
-        bool inside = false;
-        for (const auto &r : hidden)
-            if (r.contains(cv::Point2f(q.x, q.y))) { inside = true; break; }
-        if (inside) continue;
-        const float z = float(cam.fy * cam.height_m) / std::max(1e-3f, q.y - y_h);
+        if (std::any_of(hidden.begin(), hidden.end(), [&](const cv::Rect2f &r) { return r.contains({q.x, q.y}); }))
+            continue;
+        const float z = range_at_row(cam, y_h, q.y);  // q.y >= y_far > y_h
         const int bin = std::clamp(int(float(p.bins) * std::log(z / z_near) / log_span), 0, p.bins - 1);
         hit[size_t(bin)] = 1;
     }

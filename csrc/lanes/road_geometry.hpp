@@ -59,6 +59,11 @@ inline float row_at_range(const CameraParams &cam, float y_h, float range_m) {
     return float(y_h + cam.fy * cam.height_m / range_m);
 }
 
+// Range (m) of the road at image row y below the horizon y_h: Z = fy h / (y - y_h) (row_at_range's inverse).
+inline float range_at_row(const CameraParams &cam, float y_h, float y) {
+    return float(cam.fy * cam.height_m) / (y - y_h);
+}
+
 // A straight image line x(y) = x_ref + k (y - y_ref).
 struct ImageLine {
     float x_ref = 0.f, y_ref = 0.f, k = 0.f;
