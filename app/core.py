@@ -67,6 +67,9 @@ EVENTS = {
     lib.HW_EVENT_SIZE_CHANGED: "size_changed",
 }
 ROAD_MOTION = {lib.HW_ROAD_ACCEPTED: "accepted", lib.HW_ROAD_PREDICTED: "predicted"}
+# hw_calib_state -> name (the status, the tracks file and HW_CALIBRATION's STATE use these names)
+CALIB_STATES = {lib.HW_CALIB_OFF: "off", lib.HW_CALIB_LEARNING: "learning", lib.HW_CALIB_CONVERGED: "converged",
+                lib.HW_CALIB_AT_LIMIT: "at_limit"}
 
 
 def _check(status: int) -> None:
@@ -145,10 +148,14 @@ class FrameResult:
     road_motion: Optional[str] = None
     road_coast_frames: int = 0
     road_homography: Optional[np.ndarray] = None
-    # the camera as self-calibration has it: {pitch_deg, yaw_deg, height_m, *_sigma, updates, active}
+    # the camera as self-calibration has it: {pitch_deg, yaw_deg, height_m, *_sigma, updates, active, state}
+    # (state: off, learning, converged, at_limit)
     calibration: Optional[dict] = None
     lane_width_m: Optional[float] = None   # ego-lane width, None unless both ego boundaries are known
     lane_offset_m: Optional[float] = None  # the car's centre right of the ego lane's centre, None unless both known
+    # the lane model is believed (both ego boundaries have paint along the road, lanes.evidence_min): the road
+    # prior and the lead selection use only such a model
+    lanes_certain: bool = False
 
     @property
     def lead_id(self) -> Optional[int]:
@@ -200,6 +207,7 @@ def _result(r: Any) -> FrameResult:
         vanishing_point=vp,
         lane_width_m=_opt(r.lane_width_m),
         lane_offset_m=_opt(r.lane_offset_m),
+        lanes_certain=bool(r.lanes_certain),
         horizon_row=_opt(r.horizon_row),
         lead=lead,
         stages=stages,
@@ -221,7 +229,8 @@ def _calibration(r: Any) -> Optional[dict]:
     return {"pitch_deg": float(r.calib_pitch_deg), "yaw_deg": float(r.calib_yaw_deg),
             "height_m": float(r.calib_height_m), "pitch_sigma_deg": float(r.calib_pitch_sigma_deg),
             "yaw_sigma_deg": float(r.calib_yaw_sigma_deg), "height_sigma_m": float(r.calib_height_sigma_m),
-            "updates": int(r.calib_updates), "active": bool(r.calib_active)}
+            "updates": int(r.calib_updates), "active": bool(r.calib_active),
+            "state": CALIB_STATES[int(r.calib_state)]}
 
 
 def abi_version() -> int:
@@ -379,7 +388,7 @@ class Pipeline:
         self.close()
 
 
-# ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) ----------------------------------------------
+# ---- BEGIN paper 004 units, reachable alone for tests (ABI 7) ----------------------------------------------
 
 def _points(xy: Any) -> np.ndarray:
     a = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))

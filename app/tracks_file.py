@@ -1,14 +1,16 @@
 """The tracks file: one JSON object per frame, the record of what Headway saw.
 
 {"frame", "t", "tracks": [{"id", "box": [l,t,r,b], "range_m", "lateral_m", "range_rate_mps", "ttc_s",
-"ttc_scale_s", "in_path"}], "lead_id", "fcw", "lanes": {"width_m", "offset_m", "boundaries": [{"position",
+"ttc_scale_s", "in_path"}], "lead_id", "fcw", "lanes": {"width_m", "offset_m", "certain", "boundaries": [{"position",
 "observed", "points": [[x, y], ...]}]}, "calibration": {"pitch_deg", "yaw_deg", "height_m", "pitch_sigma_deg",
-"yaw_sigma_deg", "height_sigma_m", "updates", "active"}} with null where a value is not available. Only
+"yaw_sigma_deg", "height_sigma_m", "updates", "active", "state"}} with null where a value is not available. Only
 confirmed tracks are written: they are what the rest of the system acts on. Lanes are written for every frame:
 the boundaries the lane model holds (position -1 ego left, +1 ego right, -2 / +2 the adjacent lanes' outer
 boundaries, -3 / +3 one lane further out with lanes.outer_lanes; observed false when carried over by lane tracking) as image points from the bottom up (straight lines between
-them), the ego-lane width and the car's lateral offset from the ego lane's centre (m, right positive). The
-calibration is the camera as self-calibration has it, when it runs.
+them), the ego-lane width and the car's lateral offset from the ego lane's centre (m, right positive), and
+whether the model is certain (both ego boundaries have paint along the road: only then do the road prior and the
+lead selection believe it). The calibration is the camera as self-calibration has it, when it runs, with its
+state (off, learning, converged, at_limit).
 """
 from __future__ import annotations
 
@@ -54,7 +56,8 @@ def lanes_record(r: FrameResult) -> dict:
                     (ln.points or [(ln.x_bottom, ln.y_bottom), (ln.x_top, ln.y_top)])]}
         for ln in r.lanes
     ]
-    return {"width_m": _r(r.lane_width_m), "offset_m": _r(r.lane_offset_m), "boundaries": boundaries}
+    return {"width_m": _r(r.lane_width_m), "offset_m": _r(r.lane_offset_m), "certain": r.lanes_certain,
+            "boundaries": boundaries}
 
 
 class TracksWriter:

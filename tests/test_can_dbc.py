@@ -17,11 +17,11 @@ def test_headway_dbc_loads_strictly_with_the_documented_ids():
     db = cantools.database.load_file(str(HEADWAY_DBC), strict=True)
     ids = {m.name: m.frame_id for m in db.messages}
     assert ids == {"HW_FCW": 0x600, "HW_LEAD": 0x601, "HW_LEAD_TTC": 0x602, "HW_OBJECT_HEADER": 0x603,
-                   "HW_OBJECT": 0x604, "HW_STATUS": 0x605}
+                   "HW_OBJECT": 0x604, "HW_STATUS": 0x605, "HW_CALIBRATION": 0x606}
     assert all(m.length == 8 and not m.is_extended_frame for m in db.messages)
 
 
-UNITS = {"M": "m", "S": "s", "MPS": "m/s", "RAD": "rad", "HZ": "Hz", "MS": "ms"}
+UNITS = {"M": "m", "S": "s", "MPS": "m/s", "RAD": "rad", "HZ": "Hz", "MS": "ms", "DEG": "deg"}
 
 
 def test_every_message_and_signal_is_commented_and_carries_counter_and_checksum():
@@ -48,6 +48,10 @@ def test_value_tables_name_the_states_and_levels():
     assert [str(v) for v in status.get_signal_by_name("STATE").choices.values()] == \
         ["starting", "ok", "degraded", "fault"]
     assert db.get_message_by_name("HW_OBJECT").is_multiplexed()
+    cal = db.get_message_by_name("HW_CALIBRATION")
+    assert {int(k): str(v) for k, v in cal.get_signal_by_name("STATE").choices.items()} == \
+        {0: "off", 1: "learning", 2: "converged", 3: "at_limit"}
+    assert cal.is_multiplexed()
 
 
 def test_fault_bits_are_the_health_registry_bit_for_bit():
@@ -63,7 +67,7 @@ def test_fault_bits_are_the_health_registry_bit_for_bit():
 
 def test_id_base_moves_every_message():
     db = headway_database(0x680)
-    assert sorted(m.frame_id for m in db.messages) == list(range(0x680, 0x686))
+    assert sorted(m.frame_id for m in db.messages) == list(range(0x680, 0x687))
     assert db.get_message_by_frame_id(0x680).name == "HW_FCW"
     with pytest.raises(DbcError, match="outside 0x000-0x7FF"):
         headway_database(0x7FD)

@@ -64,3 +64,37 @@ def test_yaw_from_the_road_planes_motion():
     assert with_motion["converged_s"] is not None and with_motion["converged_s"] <= 2.0, with_motion
     assert abs(with_motion["final"]["yaw_err_deg"]) <= 0.05, with_motion
     assert without["converged_s"] is None or without["converged_s"] > 4.0, without
+
+
+def _states(scenario: str, seconds: float, pitch_off_deg: float = 0.0, **self_calibration) -> list[str]:
+    """The estimator's state in every frame of the first `seconds` of a scenario, thesis preset, CAN speed."""
+    import dataclasses
+    import itertools
+
+    from app import config as configuration
+    from app.core import Pipeline
+    from app.sim import load_scenario, render
+    from app.sim.frames import scenario_camera
+
+    sc = load_scenario(scenario)
+    cfg = configuration.load(None)
+    cfg["camera"].update(dataclasses.asdict(scenario_camera(sc)))
+    cfg["camera"]["pitch_deg"] += pitch_off_deg
+    cfg["self_calibration"].update(self_calibration)
+    states = []
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        for f in itertools.islice(render(sc), int(seconds * sc.fps)):
+            pipe.set_ego_motion(f.ego_speed_mps, f.yaw_rate_rps)
+            states.append(pipe.process(f.image, f.t_s).calibration["state"])
+    return states
+
+
+def test_the_state_says_learning_converged_at_a_limit_or_off():
+    exact = _states("steady_following", 3.0)
+    # one frame's lanes: 0.5 deg, 6 %; converged at 0.1 deg and 1 % (about 40 frames of lanes)
+    assert exact[0] == "learning" and exact[-1] == "converged"
+    first = exact.index("converged")
+    assert 10 <= first <= 60 and set(exact[first:]) == {"converged"}, exact
+    # the mounting 2 deg off and the estimate allowed 0.5 deg: held at the bound, and the state says so
+    assert _states("steady_following", 2.0, pitch_off_deg=2.0, max_pitch_dev_deg=0.5)[-1] == "at_limit"
+    assert set(_states("steady_following", 0.5, enabled=False)) == {"off"}

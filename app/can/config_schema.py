@@ -78,9 +78,9 @@ CAN_SCHEMA: dict[str, dict[str, dict]] = {
                                           "loop-back tests); off because the inputs never come from Headway"),
         "input_channel": _k("", "channel of the vehicle bus the inputs come from when it is not `channel` "
                                 "(same interface); empty = the same bus"),
-        "id_base": _k(0x600, "CAN id of HW_FCW (1536 = 0x600); the other messages follow at +1 .. +5 in the "
+        "id_base": _k(0x600, "CAN id of HW_FCW (1536 = 0x600); the other messages follow at +1 .. +6 in the "
                              "order of headway.dbc; the 0x6xx range is usually free of powertrain traffic",
-                      min=0, max=0x7FF - 5),
+                      min=0, max=0x7FF - 6),
         "fcw_rate_hz": _k(10.0, "Hz; HW_FCW is also sent at once on every change of level or availability; "
                                 "10 Hz lets a receiver time out a lost Headway within 0.3 s", min=0.5, max=100.0),
         "lead_rate_hz": _k(10.0, "Hz; HW_LEAD and HW_LEAD_TTC; 0 = not sent; 10 Hz is every third frame at "
@@ -89,6 +89,10 @@ CAN_SCHEMA: dict[str, dict[str, dict]] = {
                               min=0.0, max=100.0),
         "status_rate_hz": _k(10.0, "Hz; HW_STATUS heartbeat (state, fault bits); 10 Hz so that a receiver "
                                    "notices a silent Headway within a few hundred ms", min=0.5, max=100.0),
+        "calibration_rate_hz": _k(1.0, "Hz; HW_CALIBRATION (the camera's pitch, yaw and height as self-calibration "
+                                       "has them, their 1-sigma and state; two pages); 0 = not sent; 1 Hz because "
+                                       "the estimate moves over seconds (it settles in 0.1-3 s, then drifts slowly)",
+                                min=0.0, max=100.0),
         "max_objects": _k(16, "objects per object-list cycle (nearest first); 16 objects at 10 Hz make, "
                               "with the other messages, 370 frames/s: about 9 % of a 500 kbit/s bus", min=0, max=64),
         "data_timeout_s": _k(0.5, "s; FCW, lead and object frames never carry older results: past this age "

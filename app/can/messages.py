@@ -103,6 +103,30 @@ def objects_by_range(tracks: Iterable[Any], max_objects: int) -> list:
     return sorted(tracks, key=key)[:max_objects]
 
 
+CALIBRATION_STATES = ("off", "learning", "converged", "at_limit")  # STATE of HW_CALIBRATION, by value
+CALIBRATION_PAGES = ({"PITCH_DEG": "pitch_deg", "YAW_DEG": "yaw_deg", "HEIGHT_M": "height_m"},
+                     {"PITCH_SIGMA_DEG": "pitch_sigma_deg", "YAW_SIGMA_DEG": "yaw_sigma_deg",
+                      "HEIGHT_SIGMA_M": "height_sigma_m"})
+UPDATES_MAX = 255  # HW_CALIBRATION.UPDATES saturates here
+
+
+def calibration_signals(cal: Mapping[str, Any], limits: Mapping[str, tuple[float, float]]) -> tuple[dict, dict]:
+    """HW_CALIBRATION page 0 (estimate) and page 1 (uncertainties) of the core's calibration dict
+    (``FrameResult.calibration``). ``limits``: {signal: (min, max)} of the DBC; a value outside them is
+    sent at the range's end by the packer, and SATURATED says so on its page (never a wrapped number)."""
+    state = CALIBRATION_STATES.index(cal["state"])
+    pages = []
+    for page, names in enumerate(CALIBRATION_PAGES):
+        sig = {sname: _num(cal.get(key)) for sname, key in names.items()}
+        over = any(v is not None and not (limits[s][0] <= v <= limits[s][1]) for s, v in sig.items())
+        if page == 0:
+            updates = int(cal.get("updates", 0))
+            over |= updates > UPDATES_MAX
+            sig["UPDATES"] = min(max(updates, 0), UPDATES_MAX)
+        pages.append({"STATE": state, "CAL_PAGE": page, "SATURATED": int(over), **sig})
+    return pages[0], pages[1]
+
+
 def status_signals(state: str, faults: Iterable[str], known_faults: Iterable[str],
                    frame_rate_hz: Optional[float] = None, latency_p99_ms: Optional[float] = None) -> dict:
     """HW_STATUS. ``known_faults`` are the DBC's fault names (``database.fault_names``); a fault

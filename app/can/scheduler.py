@@ -1,7 +1,8 @@
 """CanScheduler: which of Headway's frames go out when, on the caller's clock.
 
 Messages are sent in groups (``fcw``: HW_FCW; ``lead``: HW_LEAD + HW_LEAD_TTC; ``objects``:
-HW_OBJECT_HEADER + HW_OBJECT pages; ``status``: HW_STATUS), each at its own rate. A group whose
+HW_OBJECT_HEADER + HW_OBJECT pages; ``status``: HW_STATUS; ``calibration``: the two HW_CALIBRATION
+pages), each at its own rate. A group whose
 change key (FCW: level and availability) differs from the last one sent goes out at once and its
 period restarts. Data older than ``data_timeout_s`` is never sent: the group's fallback frames
 (FCW not available, no lead, no objects) go instead.
@@ -19,7 +20,7 @@ import can
 
 from .packer import CanPacker
 
-GROUPS = ("fcw", "lead", "objects", "status")  # sending order within one tick: most urgent first
+GROUPS = ("fcw", "lead", "objects", "status", "calibration")  # sending order within one tick: most urgent first
 EPS_S = 1e-6  # frame times such as 3 * (1/30) land a hair before a 0.1 s period; they count as on time
 
 Frames = Sequence[tuple[str, Mapping[str, Any]]]

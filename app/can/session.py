@@ -58,7 +58,7 @@ class CanSession:
         self._own_ids = {(m.frame_id, bool(m.is_extended_frame)) for m in self.db.messages}
         self.packer = CanPacker(self.db, channel=output.channel)
         rates = {"fcw": c["fcw_rate_hz"], "lead": c["lead_rate_hz"], "objects": c["objects_rate_hz"],
-                 "status": c["status_rate_hz"]}
+                 "status": c["status_rate_hz"], "calibration": c["calibration_rate_hz"]}
         self.scheduler = CanScheduler(self.packer, rates, float(c["data_timeout_s"]), _fallbacks())
         self.output = output
         self.vehicle = vehicle
@@ -69,6 +69,8 @@ class CanSession:
         self.clock_base_s = clock_base_s
         self.camera = cfg.get("camera")
         self.max_objects = int(c["max_objects"])
+        self._cal_limits = {sig.name: (sig.minimum, sig.maximum)
+                            for sig in self.db.get_message_by_name("HW_CALIBRATION").signals}
         self.tx_error_hold_s = float(c["tx_error_hold_s"])
         self._frame_times: collections.deque = collections.deque()
         self._latency_ms: collections.deque = collections.deque(maxlen=LATENCY_WINDOW)
@@ -237,6 +239,10 @@ class CanSession:
             p0, p1 = hm.object_signals(i, t, self.camera)
             objs += [("HW_OBJECT", p0), ("HW_OBJECT", p1)]
         self.scheduler.update("objects", objs, now_s)
+        cal = getattr(result, "calibration", None)
+        if cal is not None:  # none from the single-image stages: the frame is not sent then
+            p0, p1 = hm.calibration_signals(cal, self._cal_limits)
+            self.scheduler.update("calibration", [("HW_CALIBRATION", p0), ("HW_CALIBRATION", p1)], now_s)
 
     # ---- end ---------------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:

@@ -54,7 +54,8 @@ def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = N
     self-calibration on or off. Reports when every estimate got within TOLERANCE for good, the largest
     errors afterwards (also per phase of the drive: straight, curve, hill, lane change) and the range
     error afterwards. The CAN bus gives the ego speed and the true yaw rate (the curves', the lane changes'),
-    unless a run says ``can_yaw_rate: False``; a run's ``self_calibration`` mapping overrides that section."""
+    unless a run says ``can_yaw_rate: False``; a run's ``self_calibration`` and ``road`` mappings override
+    those sections."""
     from app.sim import load_scenario, render
     from app.sim.frames import scenario_camera
 
@@ -71,6 +72,7 @@ def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = N
         cfg["pipeline"]["preset"] = preset
         cfg["self_calibration"]["enabled"] = run.get("enabled", True)
         cfg["self_calibration"].update(run.get("self_calibration") or {})
+        cfg["road"].update(run.get("road") or {})
         pipes.append(Pipeline(configuration.core_sections(cfg)))
         states.append({"off": off, "rows": [], "ranges": []})  # rows: (t, errors..., sigmas, phase)
     try:
@@ -151,17 +153,18 @@ def lane_clips(data: str) -> dict:
     for d in dirs:
         frames = sorted(d.glob("*.jpg"), key=lambda p: int(p.stem))
         cfg = tusimple_config(configuration.load(None), TUSIMPLE_LANE_PITCH_DEG)
-        est = []
+        est, state = [], None
         with Pipeline(configuration.core_sections(cfg)) as pipe:
             for i, p in enumerate(frames):
                 r = pipe.process(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), i / 20.0)
                 est.append((r.calibration["pitch_deg"], r.calibration["yaw_deg"], r.calibration["height_m"],
                             r.calibration["updates"]))
+                state = r.calibration["state"]
         e = np.array(est)
         half = e[len(e) // 2:]
         per.append({"clip": str(d.relative_to(root)), "pitch_deg": round(float(e[-1, 0]), 3),
                     "yaw_deg": round(float(e[-1, 1]), 3), "height_m": round(float(e[-1, 2]), 3),
-                    "updates": int(e[-1, 3]),
+                    "updates": int(e[-1, 3]), "state": state,
                     "within_clip_std": {"pitch_deg": round(float(half[:, 0].std()), 3),
                                         "yaw_deg": round(float(half[:, 1].std()), 3),
                                         "height_m": round(float(half[:, 2].std()), 4)}})

@@ -78,4 +78,4 @@ def format_calibration(c: dict) -> str:
         return f"off (configured pitch {c['pitch_deg']:.2f} deg, yaw {c['yaw_deg']:.2f} deg, height {c['height_m']:.2f} m)"
     return (f"pitch {c['pitch_deg']:.2f} +- {c['pitch_sigma_deg']:.2f} deg, yaw {c['yaw_deg']:.2f} +- "
             f"{c['yaw_sigma_deg']:.2f} deg, height {c['height_m']:.3f} +- {c['height_sigma_m']:.3f} m "
-            f"({c['updates']} frames used)")
+            f"({c['updates']} frames used" + (f", {c['state']})" if c.get("state") else ")"))

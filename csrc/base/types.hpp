@@ -123,6 +123,13 @@ struct RoadMotion {
     State state = State::kNone;
     int coast_frames = 0;
     cv::Matx33d H = cv::Matx33d::eye();  // pixels, previous -> current
+    // This frame's correspondences fitted once more with the road plane's tilt free (homography.fit_tilt,
+    // geometry/road_motion_fit.hpp), around the mounting the stage assumed: whether that fit explained them,
+    // the tilt e (rad: the mounting's true pitch minus the assumed one, down positive) and the travel (m,
+    // scaled by the assumed height: true travel * assumed height / true height). Self-calibration's pitch
+    // and height from the road's motion; NaN when not fitted.
+    bool tilt_ok = false;
+    double tilt_rad = kNaN, tilt_travel_m = kNaN;
 };
 
 // What the road-motion stage (road/road_motion_stage.hpp) hands the parts that need it in one frame:
@@ -158,6 +165,7 @@ struct FrameOutput {
     float calib_pitch_sigma_deg = kNaN, calib_yaw_sigma_deg = kNaN, calib_height_sigma_m = kNaN;
     int calib_updates = 0;
     bool calib_active = false;
+    int calib_state = 0;  // CalibrationState (0 off, 1 learning, 2 converged, 3 at a limit)
 };
 
 } // namespace hw

@@ -157,6 +157,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->vanishing_y = o.lanes.vanishing_point.y;
     r->lane_width_m = o.lanes.width_m;
     r->lane_offset_m = o.lanes.offset_m;
+    r->lanes_certain = o.lanes.certain ? 1 : 0;
     r->horizon_row = o.horizon_row;
     r->lead_id = o.lead_id;
     r->n_stages = int32_t(std::min<size_t>(o.times.items.size(), HW_MAX_STAGES));
@@ -182,6 +183,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->calib_height_sigma_m = o.calib_height_sigma_m;
     r->calib_updates = o.calib_updates;
     r->calib_active = o.calib_active ? 1 : 0;
+    r->calib_state = o.calib_state;
 }
 
 cv::Mat wrap_gray(const uint8_t *gray, int32_t width, int32_t height, int32_t stride) {

@@ -84,6 +84,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
         out.calib_yaw_sigma_deg = float(e.yaw_sigma_deg);
         out.calib_height_sigma_m = float(e.height_sigma_m);
         out.calib_updates = e.updates;
+        out.calib_state = int(e.state);
         out.times.add("calibration", sw.ms());
     }
     {

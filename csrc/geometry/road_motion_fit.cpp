@@ -49,13 +49,15 @@ cv::Vec3d road_motion_translation(const cv::Matx33d &H, const CameraParams &cam)
 
 cv::Matx33d road_motion_rotation(const cv::Matx33d &H, const CameraParams &cam) { return level_motion(H, cam).R; }
 
-cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta) {
+cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta, double tilt_rad) {
     const cv::Matx33d Rc = mounting_rotation(cam);
     cv::Matx33d Rd;
     cv::Rodrigues(cv::Vec3d(theta[0], theta[1], theta[2]), Rd);
     const double h = cam.height_m;
-    // I - t n^T / h with n = (0, 1, 0): only the middle column changes.
-    const cv::Matx33d T(1, -theta[3] / h, 0, 0, 1, 0, 0, -theta[4] / h, 1);
+    // I - t n^T / h, t = (lateral, 0, travel), n = (0, cos e, sin e): the middle and last columns change
+    // (only the middle one on the assumed plane, e = 0).
+    const double c = std::cos(tilt_rad) / h, s = std::sin(tilt_rad) / h;
+    const cv::Matx33d T(1, -theta[3] * c, -theta[3] * s, 0, 1, 0, 0, -theta[4] * c, 1 - theta[4] * s);
     const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
     cv::Matx33d G = K * Rd * Rc * T * Rc.t() * K.inv();
     return G * (1.0 / G(2, 2));
@@ -63,10 +65,17 @@ cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double
 
 namespace {
 
+// The model's homography of N parameters: the five of road_motion_homography, and the tilt as a sixth.
+template <int N>
+cv::Matx33d model_homography(const CameraParams &cam, const cv::Vec<double, N> &th) {
+    return road_motion_homography(cam, cv::Vec<double, 5>(th[0], th[1], th[2], th[3], th[4]), N > 5 ? th[N - 1] : 0.0);
+}
+
 // Transfer residuals (dx, dy per point) of the model at theta.
-void residuals(const CameraParams &cam, const cv::Vec<double, 5> &theta, const std::vector<cv::Point2f> &from,
+template <int N>
+void residuals(const CameraParams &cam, const cv::Vec<double, N> &theta, const std::vector<cv::Point2f> &from,
                const std::vector<cv::Point2f> &to, std::vector<double> &r) {
-    const cv::Matx33d H = road_motion_homography(cam, theta);
+    const cv::Matx33d H = model_homography<N>(cam, theta);
     r.resize(2 * from.size());
     for (size_t i = 0; i < from.size(); ++i) {
         const cv::Vec3d q = H * cv::Vec3d(from[i].x, from[i].y, 1.0);
@@ -75,10 +84,47 @@ void residuals(const CameraParams &cam, const cv::Vec<double, 5> &theta, const s
     }
 }
 
+// Gauss-Newton from th (the model is nearly linear in every parameter: small angles, and the translation
+// enters linearly before the projection), Jacobian by forward differences (steps far below the
+// parameters' precision, far above the rounding of the residuals); at most 8 iterations. False when the
+// normal equations are singular (the tilt at rest: it acts only through the travel).
+template <int N>
+bool gauss_newton(const CameraParams &cam, const std::vector<cv::Point2f> &f, const std::vector<cv::Point2f> &t,
+                  cv::Vec<double, N> &th) {
+    const double step[6] = {1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-6};
+    std::vector<double> r, rp;
+    std::vector<cv::Vec<double, N>> J;
+    for (int it = 0; it < 8; ++it) {
+        residuals<N>(cam, th, f, t, r);
+        cv::Matx<double, N, N> JtJ = cv::Matx<double, N, N>::zeros();
+        cv::Vec<double, N> Jtr = cv::Vec<double, N>::all(0.0);
+        J.resize(r.size());
+        for (int k = 0; k < N; ++k) {
+            cv::Vec<double, N> a = th;
+            a[k] += step[k];
+            residuals<N>(cam, a, f, t, rp);
+            for (size_t i = 0; i < r.size(); ++i) J[i][k] = (rp[i] - r[i]) / step[k];
+        }
+        for (size_t i = 0; i < r.size(); ++i) {
+            for (int a = 0; a < N; ++a) {
+                Jtr[a] += J[i][a] * r[i];
+                for (int b = 0; b < N; ++b) JtJ(a, b) += J[i][a] * J[i][b];
+            }
+        }
+        cv::Vec<double, N> d;
+        if (!cv::solve(JtJ, -Jtr, d, cv::DECOMP_CHOLESKY)) return false;
+        th += d;
+        // converged: the update moves no road point by more than ~0.01 px
+        double angles = std::abs(d[0]) + std::abs(d[1]) + std::abs(d[2]) + (N > 5 ? std::abs(d[N - 1]) : 0.0);
+        if (angles < 1e-6 && std::abs(d[3]) + std::abs(d[4]) < 1e-4) break;
+    }
+    return true;
+}
+
 } // namespace
 
 RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
-                              const cv::Matx33d &dlt, const CameraParams &cam, const DltParams &p) {
+                              const cv::Matx33d &dlt, const CameraParams &cam, const DltParams &p, bool free_tilt) {
     RoadMotionFit out;
     // The correspondences the DLT explains (its trimming rule): a wrong one has the same leverage here.
     std::vector<double> e(from.size());
@@ -90,44 +136,26 @@ RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::v
     std::vector<cv::Point2f> f, t;
     for (size_t i = 0; i < from.size(); ++i)
         if (e[i] <= lim) { f.push_back(from[i]); t.push_back(to[i]); }
-    if (int(f.size()) < std::max(5, p.min_points)) return out;
+    if (int(f.size()) < std::max(free_tilt ? 6 : 5, p.min_points)) return out;
 
-    // Gauss-Newton from rest (the model is nearly linear in all five: small angles, and the translation
-    // enters linearly before the projection), Jacobian by forward differences (steps far below the
-    // parameters' precision, far above the rounding of the residuals); at most 8 iterations.
-    cv::Vec<double, 5> th(0, 0, 0, 0, 0);
-    const double step[5] = {1e-6, 1e-6, 1e-6, 1e-4, 1e-4};
-    std::vector<double> r, rp;
-    std::vector<cv::Vec<double, 5>> J;
-    for (int it = 0; it < 8; ++it) {
-        residuals(cam, th, f, t, r);
-        cv::Matx<double, 5, 5> JtJ = cv::Matx<double, 5, 5>::zeros();
-        cv::Vec<double, 5> Jtr(0, 0, 0, 0, 0);
-        J.resize(r.size());
-        for (int k = 0; k < 5; ++k) {
-            cv::Vec<double, 5> a = th;
-            a[k] += step[k];
-            residuals(cam, a, f, t, rp);
-            for (size_t i = 0; i < r.size(); ++i) J[i][k] = (rp[i] - r[i]) / step[k];
-        }
-        for (size_t i = 0; i < r.size(); ++i) {
-            for (int a = 0; a < 5; ++a) {
-                Jtr[a] += J[i][a] * r[i];
-                for (int b = 0; b < 5; ++b) JtJ(a, b) += J[i][a] * J[i][b];
-            }
-        }
-        cv::Vec<double, 5> d;
-        if (!cv::solve(JtJ, -Jtr, d, cv::DECOMP_CHOLESKY)) return out;
-        th += d;
-        // converged: the update moves no road point by more than ~0.01 px
-        if (std::abs(d[0]) + std::abs(d[1]) + std::abs(d[2]) < 1e-6 && std::abs(d[3]) + std::abs(d[4]) < 1e-4) break;
+    // from rest; the tilt then from the five-parameter solution (at rest it has no effect: singular)
+    std::vector<double> r;
+    cv::Vec<double, 5> th5 = cv::Vec<double, 5>::all(0.0);
+    if (!gauss_newton<5>(cam, f, t, th5)) return out;
+    if (free_tilt) {
+        cv::Vec<double, 6> th(th5[0], th5[1], th5[2], th5[3], th5[4], 0.0);
+        if (!gauss_newton<6>(cam, f, t, th)) return out;
+        residuals<6>(cam, th, f, t, r);
+        out.theta = cv::Vec<double, 5>(th[0], th[1], th[2], th[3], th[4]);
+        out.tilt_rad = th[5];
+    } else {
+        residuals<5>(cam, th5, f, t, r);
+        out.theta = th5;
     }
-    residuals(cam, th, f, t, r);
     double ss = 0;
     for (double v : r) ss += v * v;
     out.rms_px = std::sqrt(ss / double(f.size()));
-    out.theta = th;
-    out.H = road_motion_homography(cam, th);
+    out.H = road_motion_homography(cam, out.theta, out.tilt_rad);
     out.used = int(f.size());
     out.ok = std::isfinite(out.rms_px) && out.rms_px <= p.max_rms_px;
     return out;

@@ -13,6 +13,15 @@
 // R_c the mounting (pitch, yaw of CameraParams), R_d = Rodrigues(pitch_d, yaw_d, roll_d) the rotation
 // between the frames. Fitted by Gauss-Newton on the transfer error of the correspondences the DLT kept
 // (those within trim_factor medians of its transfer error), started at rest.
+//
+// With free_tilt the road plane's tilt e against the assumed mounting is a sixth parameter: the plane is
+// n^T X = h with n = (0, cos e, sin e) in the assumed level-camera axes, n = R_c^T R_true (0, 1, 0), so for
+// a mounting pitched e more than assumed (down positive). Why it is observable in one frame pair: on a level
+// camera a road point at normalised row v (depth h / v) moves by dv = (t_z / h) v^2 over a travel t_z; a
+// tilt moves the zero of that flow to the true horizon, dv = (t_z / h) (v + e)^2 = (t_z / h)(v^2 + 2 e v + e^2),
+// and du = (t_z / h) u (v + e): the linear terms 2 e v t_z / h and e u t_z / h are told apart from a
+// rotation (flow ~ constant in v) and the travel (~ v^2) by the spread of rows and columns of the
+// markings. Needs travel (t_z / h of a few per cent) and is the local road plane's (the markings 5-40 m).
 #pragma once
 
 #include "geometry/camera.hpp"
@@ -24,8 +33,9 @@
 
 namespace hw {
 
-// theta = (pitch_d, yaw_d, roll_d [rad], lateral_m, travel_m) -> homography, H(2,2) = 1.
-cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta);
+// theta = (pitch_d, yaw_d, roll_d [rad], lateral_m, travel_m) -> homography, H(2,2) = 1; tilt_rad: the
+// road plane's tilt e against the assumed mounting (0: the plane the mounting says).
+cv::Matx33d road_motion_homography(const CameraParams &cam, const cv::Vec<double, 5> &theta, double tilt_rad = 0.0);
 
 // R_c of the model: the camera's mounting, yaw about y then pitch about x (level-camera -> camera axes).
 cv::Matx33d mounting_rotation(const CameraParams &cam);
@@ -45,11 +55,14 @@ struct RoadMotionFit {
     cv::Vec<double, 5> theta;
     int used = 0;
     double rms_px = 0.0;
+    double tilt_rad = 0.0;  // the plane's tilt e (free_tilt only; 0 otherwise): true pitch - assumed pitch
 };
 
 // The road-motion homography closest to the correspondences that `dlt` (a DLT of them) explains
 // within DltParams' trimming; ok when it explains them within max_rms_px.
+// free_tilt: the plane's tilt is fitted too (six parameters, RoadMotionFit::tilt_rad).
 RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
-                              const cv::Matx33d &dlt, const CameraParams &cam, const DltParams &p);
+                              const cv::Matx33d &dlt, const CameraParams &cam, const DltParams &p,
+                              bool free_tilt = false);
 
 } // namespace hw

@@ -75,6 +75,13 @@ struct SelfCalibrationParams {
     int reacquire_after = 15;          // this many gated-out measurements in a row: the estimate is wrong, widen it
     bool road_motion = true;           // also measure the yaw from the road plane's motion (when it is fitted)
     double motion_yaw_noise_deg = 1.0; // 1-sigma of one frame's yaw from the road plane's motion
+    bool motion_pitch = true;          // also measure the pitch from the road plane's tilt in its motion (fit_tilt)
+    double motion_pitch_noise_deg = 0.5; // 1-sigma of one frame's pitch from the road plane's tilt
+    bool motion_height = true;         // also measure the height: the CAN speed against the road's image motion
+    double motion_height_noise = 0.05; // 1-sigma of one frame's height from the road's motion, relative
+    double converged_sigma_deg = 0.1;  // pitch and yaw 1-sigma at or below this (and the height's below
+                                       // converged_sigma_height): the state says converged (~25 lane frames)
+    double converged_sigma_height = 0.01; // relative; the height's 1-sigma for "converged" (~40 lane frames)
 
     void bind(ParamMap &m);
 };
@@ -88,12 +95,23 @@ struct SelfCalibrationParams {
 // NaN when dt is not positive.
 double yaw_rate_of_road_motion(const cv::Matx33d &H, const CameraParams &cam, double dt_s);
 
+// What the estimator is doing (the status, the tracks file and the CAN calibration frame report it).
+enum class CalibrationState {
+    kOff = 0,        // self_calibration.enabled is false: the configured camera is used as it is
+    kLearning = 1,   // on, an uncertainty above the converged_sigma_* thresholds (at the start, or after a
+                     // long time without lane measurements, or after a re-acquisition widened it)
+    kConverged = 2,  // on, every uncertainty within the converged_sigma_* thresholds
+    kAtLimit = 3     // on, an estimate held at its configured bound (max_*_dev): the mounting is farther
+                     // off than the limits allow, or the measurements are wrong; either way worth a look
+};
+
 // One frame's view of the calibration, with 1-sigma uncertainties.
 struct CalibrationEstimate {
     double pitch_deg = NAN, yaw_deg = NAN, height_m = NAN;
     double pitch_sigma_deg = NAN, yaw_sigma_deg = NAN, height_sigma_m = NAN;
     int updates = 0;   // frames whose measurement was used
     bool active = false;  // self-calibration on
+    CalibrationState state = CalibrationState::kOff;
 };
 
 class SelfCalibration {

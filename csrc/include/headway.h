@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 6
+#define HW_ABI_VERSION 7
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -49,6 +49,14 @@ typedef enum {
     HW_ROAD_ACCEPTED = 1,  /* a measured homography passed the gate and updated the filter */
     HW_ROAD_PREDICTED = 2  /* no acceptable measurement: the filter's prediction carries on (coasting) */
 } hw_road_motion;
+
+/* What self-calibration is doing (geometry/self_calibration.hpp, CalibrationState). */
+typedef enum {
+    HW_CALIB_OFF = 0,        /* self_calibration.enabled false: the configured camera as it is */
+    HW_CALIB_LEARNING = 1,   /* an uncertainty above self_calibration.converged_sigma_* */
+    HW_CALIB_CONVERGED = 2,  /* every uncertainty within them */
+    HW_CALIB_AT_LIMIT = 3    /* an estimate held at its configured bound (max_*_dev) */
+} hw_calib_state;
 
 /* FCW levels (the warning state machine runs in the supervisor, which has the ego speed, brake and turn
  * signals; the core reports no level). */
@@ -120,6 +128,8 @@ typedef struct {
     float vanishing_x, vanishing_y; /* NaN if no lane model yet */
     float lane_width_m;    /* ego-lane width at the bottom row, m; NaN unless both ego boundaries are known */
     float lane_offset_m;   /* the car's centre right of the ego lane's centre, m; NaN unless both are known */
+    int32_t lanes_certain; /* 1 when the lane model is believed: both ego boundaries have paint along the road
+                            * (lanes.evidence_min); the road prior and the lead selection use only such a model */
     float horizon_row;     /* horizon row used for range, NaN if n/a */
     int32_t lead_id;       /* -1 if no lead */
     int32_t n_stages;
@@ -141,6 +151,7 @@ typedef struct {
     float calib_pitch_sigma_deg, calib_yaw_sigma_deg, calib_height_sigma_m;
     int32_t calib_updates;
     int32_t calib_active;
+    int32_t calib_state;   /* hw_calib_state */
 } hw_frame_result;
 
 typedef struct {

@@ -32,6 +32,7 @@ struct HomographyParams {
     DltParams dlt;
     HomographyKalmanParams kalman;
     bool road_model = true;   // the measurement restricted to the road plane's motion (road_motion_fit.hpp)
+    bool fit_tilt = true;     // also fit the plane's tilt (sixth parameter) for self-calibration's pitch and height
     void bind(ParamMap &m);
 };
 
