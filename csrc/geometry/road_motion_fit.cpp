@@ -136,28 +136,33 @@ RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::v
     std::vector<cv::Point2f> f, t;
     for (size_t i = 0; i < from.size(); ++i)
         if (e[i] <= lim) { f.push_back(from[i]); t.push_back(to[i]); }
-    if (int(f.size()) < std::max(free_tilt ? 6 : 5, p.min_points)) return out;
+    if (int(f.size()) < std::max(5, p.min_points)) return out;
 
     // from rest; the tilt then from the five-parameter solution (at rest it has no effect: singular)
+    const auto rms = [&](const std::vector<double> &res) {
+        double ss = 0;
+        for (double v : res) ss += v * v;
+        return std::sqrt(ss / double(f.size()));
+    };
     std::vector<double> r;
     cv::Vec<double, 5> th5 = cv::Vec<double, 5>::all(0.0);
     if (!gauss_newton<5>(cam, f, t, th5)) return out;
-    if (free_tilt) {
-        cv::Vec<double, 6> th(th5[0], th5[1], th5[2], th5[3], th5[4], 0.0);
-        if (!gauss_newton<6>(cam, f, t, th)) return out;
-        residuals<6>(cam, th, f, t, r);
-        out.theta = cv::Vec<double, 5>(th[0], th[1], th[2], th[3], th[4]);
-        out.tilt_rad = th[5];
-    } else {
-        residuals<5>(cam, th5, f, t, r);
-        out.theta = th5;
-    }
-    double ss = 0;
-    for (double v : r) ss += v * v;
-    out.rms_px = std::sqrt(ss / double(f.size()));
-    out.H = road_motion_homography(cam, out.theta, out.tilt_rad);
+    residuals<5>(cam, th5, f, t, r);
+    out.rms_px = rms(r);
+    out.theta = th5;
+    out.H = road_motion_homography(cam, th5);
     out.used = int(f.size());
     out.ok = std::isfinite(out.rms_px) && out.rms_px <= p.max_rms_px;
+    if (free_tilt && f.size() >= 6) {
+        cv::Vec<double, 6> th(th5[0], th5[1], th5[2], th5[3], th5[4], 0.0);
+        if (gauss_newton<6>(cam, f, t, th)) {
+            residuals<6>(cam, th, f, t, r);
+            const double e = rms(r);
+            out.tilt_ok = std::isfinite(e) && e <= p.max_rms_px;
+            out.tilt_rad = th[5];
+            out.tilt_travel_m = th[4];
+        }
+    }
     return out;
 }
 

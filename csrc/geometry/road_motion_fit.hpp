@@ -55,12 +55,16 @@ struct RoadMotionFit {
     cv::Vec<double, 5> theta;
     int used = 0;
     double rms_px = 0.0;
-    double tilt_rad = 0.0;  // the plane's tilt e (free_tilt only; 0 otherwise): true pitch - assumed pitch
+    // free_tilt only: the six-parameter fit continued from this one (the fields above stay the five-parameter
+    // fit's): whether it explained the correspondences within max_rms_px, the plane's tilt e (rad, true pitch -
+    // assumed pitch) and its travel (m, for the assumed height)
+    bool tilt_ok = false;
+    double tilt_rad = NAN, tilt_travel_m = NAN;
 };
 
 // The road-motion homography closest to the correspondences that `dlt` (a DLT of them) explains
 // within DltParams' trimming; ok when it explains them within max_rms_px.
-// free_tilt: the plane's tilt is fitted too (six parameters, RoadMotionFit::tilt_rad).
+// free_tilt: the plane's tilt is then fitted too (six parameters, RoadMotionFit::tilt_*).
 RoadMotionFit fit_road_motion(const std::vector<cv::Point2f> &from, const std::vector<cv::Point2f> &to,
                               const cv::Matx33d &dlt, const CameraParams &cam, const DltParams &p,
                               bool free_tilt = false);

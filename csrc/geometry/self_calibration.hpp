@@ -75,10 +75,11 @@ struct SelfCalibrationParams {
     int reacquire_after = 15;          // this many gated-out measurements in a row: the estimate is wrong, widen it
     bool road_motion = true;           // also measure the yaw from the road plane's motion (when it is fitted)
     double motion_yaw_noise_deg = 1.0; // 1-sigma of one frame's yaw from the road plane's motion
-    bool motion_pitch = true;          // also measure the pitch from the road plane's tilt in its motion (fit_tilt)
-    double motion_pitch_noise_deg = 0.5; // 1-sigma of one frame's pitch from the road plane's tilt
+    bool motion_pitch = false;         // also measure the pitch from the road plane's tilt in its motion (fit_tilt);
+                                       // off: on the synthetic hills it followed the hill more than the lanes do
+    double motion_pitch_noise_deg = 0.2; // 1-sigma of one frame's pitch from the road plane's tilt (0.18 measured)
     bool motion_height = true;         // also measure the height: the CAN speed against the road's image motion
-    double motion_height_noise = 0.05; // 1-sigma of one frame's height from the road's motion, relative
+    double motion_height_noise = 0.015; // 1-sigma of one frame's height from the road's motion, relative (0.014 measured)
     double converged_sigma_deg = 0.1;  // pitch and yaw 1-sigma at or below this (and the height's below
                                        // converged_sigma_height): the state says converged (~25 lane frames)
     double converged_sigma_height = 0.01; // relative; the height's 1-sigma for "converged" (~40 lane frames)
