@@ -114,3 +114,11 @@ def test_a_replay_sends_the_estimate_the_tracks_file_records(tmp_path):
         assert states[-1] == cal["state"]
     # the scenario's camera is exact and the lanes are painted: learning at the first frame, converged after
     assert states[0] == "learning" and all(s == "converged" for s in states[4:])
+
+
+def test_state_names_are_the_core_enum_and_the_dbc_value_table():
+    from app.core import CALIB_STATES
+
+    table = headway_database().get_message_by_name("HW_CALIBRATION").get_signal_by_name("STATE").choices
+    assert list(CALIBRATION_STATES) == [str(table[i]) for i in range(len(table))] == \
+        [CALIB_STATES[i] for i in sorted(CALIB_STATES)]
