@@ -70,8 +70,9 @@ def test_no_pre_warning_on_tme08_from_pitch_or_the_feature_clouds_background(tmp
     """The car ahead at ~48 m keeps its distance. Before: a 9 px pitch swing (the lanes' horizon followed 2 px of
     it) and a feature cloud whose road and background points grew faster than the car gave the UKF -13 m/s and a
     pre-warning at TTC 3.67 s. With the horizon following the far scene (phd_pitch) and the expansion's spread
-    not averaged over points that share one bias (phd.expansion_independent_points): no event, the lead's TTC
-    at least 4.81 s (measured), over the 4.0 s pre-warning threshold."""
+    not averaged over points that share one bias (phd.expansion_independent_points): no event; the lead's smallest
+    TTC 5.43 s (measured; 4.10 s with the expansion change alone), asserted half a second over the 4.0 s
+    pre-warning threshold."""
     events, min_ttc = _tme08_through_the_stack(tmp_path, {})
     assert events == [] and min_ttc >= 4.5, (events, min_ttc)
 

@@ -22,7 +22,8 @@ void ScenePitchParams::bind(ParamMap &m) {
           "corners followed at least for a scene measurement; fewer (bare sky and road): the lane horizon");
     m.add("lane_gain", lane_gain, 0.0, 1.0,
           "1/frame; gain g of the complementary filter towards the lane horizon: the slow part of the horizon "
-          "(load, long slopes) comes from the lanes, the fast part (pitch within a second) from the scene");
+          "(load, long slopes) comes from the lanes, the fast part (pitch within a second) from the scene; 0.05 gave the "
+          "phd preset a pre-warning at the end of solidWhiteRight, 0.1 none (docs/RESULTS.md)");
     m.add("max_offset_px", max_offset_px, 0.0, 500.0,
           "px; the scene-followed horizon stays within this of the lane horizon (a bad frame cannot wreck range)");
 }

@@ -30,7 +30,7 @@ struct ScenePitchParams {
     double band_below_px = 12.0;    // px; rows below it (the road there is > 150 m away at fy h = 2000 px m)
     int max_points = 60;            // corners followed per frame
     int min_points = 8;             // fewer followed: no scene measurement this frame
-    double lane_gain = 0.05;        // g, 1/frame; pull towards the lane horizon (time constant 1/g frames)
+    double lane_gain = 0.1;         // g, 1/frame; pull towards the lane horizon (time constant 1/g frames)
     double max_offset_px = 25.0;    // px; the scene's horizon stays this close to the lane horizon
 
     void bind(ParamMap &m);
