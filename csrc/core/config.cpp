@@ -32,6 +32,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("gmphd", c.phd.phd);
     fn("phd_features", c.phd.features);
     fn("phd_ukf", c.phd.ukf);
+    fn("phd_pitch", c.phd.pitch);
 }
 
 // Keys that moved to one shared definition (issue 11): {old section, old key, new "section.key"}. A

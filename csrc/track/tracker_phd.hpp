@@ -20,7 +20,11 @@
 //      heaviest one (eq. 15), each also by (1 + t_y)^2 (a row error is divided by 1 + t_y).
 //   4. The UKF (vehicle_ukf.hpp) predicts with constant velocity and updates with that contact point, and
 //      with the feature cloud's expansion (s - 1)/dt = -(dZ/dt)/Z, which carries the range rate without
-//      the contact row's pixel offset.
+//      the contact row's pixel offset. The expansion's 1-sigma is the pair ratios' spread over the square
+//      root of at most expansion_independent_points points: road and background points inside the box
+//      expand faster than the vehicle and bias every point alike, which more points do not average out.
+//      The horizon row the contact is read against follows the car's pitch through the far scene's
+//      vertical motion, the slow part from the lanes (scene_pitch.hpp).
 //   5. Every detect_every_n frames it asks the detector parts (the phd preset: shadow) for a full
 //      detection; any detector composes (shadow, parallax, both). A detection overlapping a vehicle re-measures its
 //      contact point (UKF update), pulls its width and features' offsets towards the detected box, and
@@ -33,6 +37,7 @@
 #include "geometry/horizon.hpp"
 #include "track/box_features.hpp"
 #include "track/gmphd.hpp"
+#include "track/scene_pitch.hpp"
 #include "track/tracker.hpp"
 #include "track/vehicle_ukf.hpp"
 
@@ -50,6 +55,7 @@ struct PhdTrackerParams {
     int min_stable = 3;                // stable features needed to measure the contact point
     double min_depth_ratio = 0.6;      // a feature's row below the horizon / the contact's under this: not used for range
     double expansion_sigma_min = 0.002;  // least 1-sigma of the cloud's frame-to-frame scale (UKF rate observation)
+    int expansion_independent_points = 4;     // points counted as independent in the expansion's 1-sigma, at most
     double expansion_min_width_px = 40.0;  // px; narrower (far) vehicles: no expansion observation
     double contact_sigma_px = 0.8;     // px; 1-sigma of the features' contact point (UKF R)
     double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
@@ -64,6 +70,7 @@ struct PhdTrackerParams {
     BoxFeatureParams features;         // corners and LK (section phd_features)
     GmPhdParams phd;                   // the GM-PHD filter (section gmphd)
     VehicleUkfParams ukf;              // the UKF (section phd_ukf)
+    ScenePitchParams pitch;            // the horizon followed through the car's pitch (section phd_pitch)
 
     void bind(ParamMap &m);
 };
@@ -107,6 +114,7 @@ private:
     CameraParams cam_;
     HorizonTracker horizon_;
     PointFlow flow_;
+    ScenePitch pitch_;
     std::vector<Vehicle> vehicles_;
     int next_id_ = 1;
     int64_t frame_ = 0;
