@@ -143,6 +143,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         d.stage_sum = raw[i].weight;
         d.confidence = float(n / (n + p_.neighbors_half));
         out.push_back(d);
+        if (p_.max_groups > 0 && int(out.size()) >= p_.max_groups) break;  // the seeds come strongest first
     }
     if (verifier_) {  // every group of the frame at once (the CNN verifier runs them as one batch)
         std::vector<cv::Rect2f> boxes;
