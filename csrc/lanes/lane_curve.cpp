@@ -26,17 +26,28 @@ struct Curve {
 // so that the normal equations are well conditioned (d^2 and 1/d differ by 10 orders at 720 rows);
 // b = b' / D, e = e' / D^2, c = c' D. Normal equations N u = r, u = (a_0, b'_0, e'_0, a_1, ..., c').
 bool solve(const std::vector<MarkingPoint> &pts, const std::vector<int> &owner, int n, float y_h, float D,
-           float c_prior, float w_prior, float w_e, std::array<Curve, kMaxBoundaries> &curves, float &c) {
+           float c_prior, float w_prior, float w_e, float contrast_power, std::array<Curve, kMaxBoundaries> &curves,
+           float &c) {
     const int dim = 3 * n + 1;
     cv::Mat N = cv::Mat::zeros(dim, dim, CV_64F), r = cv::Mat::zeros(dim, 1, CV_64F);
+    // Point weights: w_j = min(1, contrast_j / median contrast of the fitted points)^power (power 0: all 1). A
+    // seam's bright lip or the texture beside the paint weighs less than the paint; a point brighter than the
+    // median (a vehicle's lamp or chrome inside the corridor) weighs no more than the paint.
+    std::vector<float> cs;
+    for (size_t j = 0; j < pts.size(); ++j)
+        if (owner[j] >= 0) cs.push_back(pts[j].contrast);
+    if (cs.empty()) return false;
+    std::nth_element(cs.begin(), cs.begin() + long(cs.size() / 2), cs.end());
+    const double c_med = std::max(1.0, double(cs[cs.size() / 2]));
     for (size_t j = 0; j < pts.size(); ++j) {
         const int i = owner[j];
         if (i < 0) continue;
+        const double w = std::pow(std::min(1.0, double(pts[j].contrast) / c_med), double(contrast_power));
         const double t = (pts[j].y - y_h) / D, g[4] = {1.0, t, t * t, 1.0 / t};
         const int idx[4] = {3 * i, 3 * i + 1, 3 * i + 2, dim - 1};
         for (int u = 0; u < 4; ++u) {
-            r.at<double>(idx[u]) += g[u] * pts[j].x;
-            for (int v = 0; v < 4; ++v) N.at<double>(idx[u], idx[v]) += g[u] * g[v];
+            r.at<double>(idx[u]) += w * g[u] * pts[j].x;
+            for (int v = 0; v < 4; ++v) N.at<double>(idx[u], idx[v]) += w * g[u] * g[v];
         }
     }
     for (int i = 0; i < n; ++i) N.at<double>(3 * i + 2, 3 * i + 2) += w_e;
@@ -109,7 +120,7 @@ void fit_lane_curves(const std::vector<MarkingPoint> &pts, float y_h, const Came
         float cs;
         // e' = 1 (1 px at the bottom row) weighs as much as prior_e_points points; c' likewise.
         if (!solve(pts, o, m_fit, y_h, float(cam.height) - y_h, c_prior, float(p.prior_points),
-                   float(p.prior_e_points), sol, cs))
+                   float(p.prior_e_points), float(p.contrast_power), sol, cs))
             return false;
         c = std::clamp(cs, -c_max, c_max);
         for (int i = 0; i < n; ++i)
