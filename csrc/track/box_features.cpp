@@ -33,6 +33,16 @@ void BoxFeatureParams::bind(ParamMap &m) {
           "of a vehicle between frames plus the window at the coarsest level); the rest of the frame is not read");
 }
 
+std::vector<cv::Point2f> fast_corners_strongest_first(const cv::Mat &gray, int threshold) {
+    std::vector<cv::KeyPoint> kps;
+    cv::FAST(gray, kps, threshold, true);
+    std::sort(kps.begin(), kps.end(), [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; });
+    std::vector<cv::Point2f> pts;
+    pts.reserve(kps.size());
+    for (const cv::KeyPoint &k : kps) pts.push_back(k.pt);
+    return pts;
+}
+
 std::vector<cv::Vec2d> box_corners(const cv::Mat &gray, const cv::Rect2f &box, const std::vector<cv::Vec2d> &existing,
                                    const BoxFeatureParams &p) {
     const float mx = float(p.inner_margin_frac) * box.width, mt = float(p.inner_margin_frac) * box.height;
@@ -46,10 +56,7 @@ std::vector<cv::Vec2d> box_corners(const cv::Mat &gray, const cv::Rect2f &box, c
     const cv::Mat roi = gray(inner);
     std::vector<cv::Point2f> found;
     if (p.detector == "fast") {
-        std::vector<cv::KeyPoint> kps;
-        cv::FAST(roi, kps, p.fast_threshold, true);
-        std::sort(kps.begin(), kps.end(), [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; });
-        for (const auto &k : kps) found.push_back(k.pt);
+        found = fast_corners_strongest_first(roi, p.fast_threshold);
     } else {
         cv::goodFeaturesToTrack(roi, found, std::max(1, 2 * p.max_per_vehicle), p.quality, p.min_distance_px, cv::noArray(),
                                 3, p.detector == "harris", 0.04);

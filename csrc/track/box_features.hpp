@@ -37,6 +37,9 @@ struct BoxFeatureParams {
 std::vector<cv::Vec2d> box_corners(const cv::Mat &gray, const cv::Rect2f &box, const std::vector<cv::Vec2d> &existing,
                                    const BoxFeatureParams &p);
 
+// FAST corners of an image (non-maximum suppressed), strongest response first; points in its coordinates.
+std::vector<cv::Point2f> fast_corners_strongest_first(const cv::Mat &gray, int threshold);
+
 // LK with the forward-backward check between consecutive frames. Only the region the points can reach is
 // looked at: the bounding box of the points plus `roi_margin_px` (the largest motion followed, plus the LK
 // window at the coarsest level), the same rectangle in both frames, and the pyramids of that rectangle

@@ -1,6 +1,5 @@
 #include "track/scene_pitch.hpp"
 
-#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -106,13 +105,10 @@ double ScenePitch::update(const cv::Mat &gray, const PointFlow &flow, double lan
     }
     // FAST corners, strongest first, at least 8 px apart (the minimum-eigenvalue search cost 0.19 ms on the band,
     // FAST 0.03 ms; docs/PERFORMANCE.md)
-    std::vector<cv::KeyPoint> kps;
-    cv::FAST(gray(band), kps, lk_.fast_threshold, true);
-    std::sort(kps.begin(), kps.end(), [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; });
-    for (const cv::KeyPoint &k : kps) {
+    for (const cv::Point2f &f : fast_corners_strongest_first(gray(band), lk_.fast_threshold)) {
         if (int(prev_pts_.size()) >= p_.max_points) break;
-        if (!mask.at<uchar>(cv::Point(k.pt))) continue;
-        const cv::Point2f q(k.pt.x + float(band.x), k.pt.y + float(band.y));
+        if (!mask.at<uchar>(cv::Point(f))) continue;
+        const cv::Point2f q(f.x + float(band.x), f.y + float(band.y));
         bool near = false;
         for (const cv::Point2f &e : prev_pts_) near = near || (q - e).dot(q - e) < 64.0f;
         if (!near) prev_pts_.push_back(q);
