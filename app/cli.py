@@ -104,7 +104,8 @@ def _cmd_train(args) -> int:
             try:
                 verifier_cnn.train(args.data, args.cascade, args.out, cfg, every=args.every or 1, channels=channels,
                                    hidden=args.hidden, epochs=args.epochs or 6, decay=args.decay, seed=args.seed,
-                                   cache=args.cache, compare_hog=args.compare_hog, log=log)
+                                   cache=args.cache, compare_hog=args.compare_hog, log=log, box=not args.no_box,
+                                   near=args.near, margin=args.margin)
             finally:
                 log.close()
             return 0
@@ -269,6 +270,14 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--compare-hog", action="store_true",
                    help="CNN: also fit the HOG verifier on the same images and log both on the same held-out boxes")
     t.add_argument("--log", help="CNN: also write the training log here")
+    t.add_argument("--no-box", action="store_true",
+                   help="CNN: without the box output (the refined box the core reports before its suppression)")
+    t.add_argument("--near", choices=("negative", "ignore"), default="negative",
+                   help="CNN: detections at IoU 0.3-0.5 with an annotated box are others (default) or left out of "
+                        "the classification (they still teach the box output)")
+    t.add_argument("--margin", type=float, default=0.1,
+                   help="CNN: of the box's size added each side of its crop (default 0.1; the core crops a network "
+                        "with a box output with BOX_MARGIN, verifier_onnx.py)")
     t.add_argument("--decay", type=float, default=1e-4, help="L2 weight decay (default 1e-4)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")

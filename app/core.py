@@ -287,6 +287,7 @@ class Pipeline:
         _check(lib.hw_pipeline_create(json.dumps(config or {}).encode(), out))
         self._p = ffi.gc(out[0], lib.hw_pipeline_destroy)
         self._res = ffi.new("hw_frame_result *")  # reused: one result buffer per pipeline
+        self._box_cap = 1024  # stage_boxes(): detections room is made for (grows when a stage gives more)
         _live.add(self)
 
     @property
@@ -312,6 +313,23 @@ class Pipeline:
         _check(lib.hw_pipeline_run_stage(self._handle(), stage.encode(), ffi.from_buffer(g), g.shape[1], g.shape[0],
                                          g.strides[0], self._res))
         return _result(self._res)
+
+    def stage_boxes(self, stage: str, gray: np.ndarray) -> tuple[np.ndarray, Optional[float]]:
+        """Every detection of a single-image stage as (n, 5) float32 rows (left, top, right, bottom,
+        confidence), without run_stage()'s cap of HW_MAX_TRACKS (for training on every cascade group), and
+        the frame's horizon row (run_stage()'s horizon_row)."""
+        g = _as_gray(gray, "stage_boxes()")
+        n, horizon = ffi.new("int32_t *"), ffi.new("float *")
+        cap = self._box_cap
+        while True:
+            buf = ffi.new("hw_box[]", cap)
+            _check(lib.hw_pipeline_stage_boxes(self._handle(), stage.encode(), ffi.from_buffer(g), g.shape[1],
+                                               g.shape[0], g.strides[0], buf, cap, n, horizon))
+            if n[0] <= cap:
+                break
+            cap = self._box_cap = int(n[0])   # more than ever before: once more with room for all
+        boxes = np.frombuffer(ffi.buffer(buf, n[0] * ffi.sizeof("hw_box")), np.float32).reshape(n[0], 5).copy()
+        return boxes, _opt(horizon[0])
 
     def reset(self) -> None:
         _check(lib.hw_pipeline_reset(self._handle()))

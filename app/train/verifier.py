@@ -68,12 +68,12 @@ def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: di
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for k, it in enumerate(load_folders(folders)[::every]):
             g = read_gray(it.path)
-            r = pipe.run_stage("cascade", g)
-            det = np.array([t.box for t in r.tracks], float).reshape(-1, 4)
-            conf = np.array([t.confidence for t in r.tracks], float)
+            r, horizon = pipe.stage_boxes("cascade", g)   # every group (run_stage's tracks stop at HW_MAX_TRACKS)
+            det = r[:, :4].astype(float)
+            conf = r[:, 4].astype(float)
             n = np.rint(half * conf / np.maximum(1 - conf, 1e-6))   # confidence n / (n + half) without verifier
             m = iou(det, it.boxes).max(1) if len(it.boxes) else np.zeros(len(det))
-            yield k, g, det, n, np.where(m >= 0.5, 1, np.where(m < 0.3, -1, 0)), r.horizon_row, m
+            yield k, g, det, n, np.where(m >= 0.5, 1, np.where(m < 0.3, -1, 0)), horizon, m
             if progress:
                 progress(1)
 

@@ -8,8 +8,16 @@ is not: the verifier learns to tell a well placed box (what the scoring counts) 
 which would otherwise win the suppression of overlapping detections. Each is cropped as the core crops it
 (verifier_onnx.crop_boxes) and mirrored at random while training.
 
-Fit: Adam (beta 0.9, 0.999; the learning rate falls linearly to 0) on the class-balanced cross-entropy
-    L = sum_i s_i softplus(-y_i f(x_i)) / sum_i s_i + decay |W|^2 / 2,   s_i = 1 / n_class(y_i),
+Box output (session 5): for every detection with IoU >= REGRESS_IOU (0.3) with an annotated box, the
+target is that box (the one it overlaps most) as verifier_onnx.offsets of the detection's box; with
+`near="ignore"` the detections at IoU 0.3-0.5 are left out of the classification (they are neither: once
+refined they may be well placed) but still teach the box output. Samples come from the core without the
+ABI's cap of 64 tracks (Pipeline.stage_boxes): every group of every image.
+
+Fit: Adam (beta 0.9, 0.999; the learning rate falls linearly to 0) on the class-balanced cross-entropy and
+the smooth-L1 loss of the box output,
+    L = sum_i s_i softplus(-y_i f(x_i)) / sum_i s_i + BOX_WEIGHT mean_{i: IoU_i >= 0.3} mean_k huber((d_ik - t_ik) / BOX_SIGMA)
+        + decay |W|^2 / 2,   s_i = 1 / n_class(y_i) (0 for a detection left out),  huber(u) = u^2/2 if |u| < 1 else |u| - 1/2,
 batches of `batch`, weights He-initialised from the seed: the same command gives the same file.
 The images the HOG verifier held out (every 15th from the 13th of the training folders: the 5th of each
 five of its every-3rd images) are held out here too, and the share of other boxes passed at the
@@ -30,10 +38,14 @@ from tqdm import tqdm
 
 from app.train import verifier_onnx as vo
 from app.train.cascade.samples import load_folders
-from app.train.verifier import cascade_detections, geometry_features
+from app.train.verifier import cascade_detections, geometry_features, iou
 
 HELD_OUT = (15, 12)   # image i (in the training folders' order) is held out when i % 15 == 12
 KEEP = (0.8, 0.9, 0.95)   # shares of held-out vehicles at which the others passed are reported
+REGRESS_IOU = 0.3     # detections overlapping an annotated box at least this much teach the box output
+BOX_SIGMA = 0.1       # of the box's width / height: the offset error at which smooth-L1 turns linear
+BOX_WEIGHT = 1.0      # of the box loss against the cross-entropy
+NEAR = ("negative", "ignore")   # how the detections at IoU 0.3-0.5 count for the classification
 
 
 def require_train_extra():
@@ -47,29 +59,35 @@ def require_train_extra():
 
 
 def samples(folders: list[str], cascade_xml: str, every: int, cfg: dict, cache: str | None = None,
-            progress=None) -> dict:
+            progress=None, margin: float = vo.MARGIN) -> dict:
     """Crops (n, H, W) uint8, extra features (n, 2), labels (n,) +1/-1, image index in the folders (n,),
-    boxes (n, 4) and largest IoU with an annotated box (n,) of the cascade's detections; read from / written to `cache` (.npz) when given and
-    made from the same cascade, images and crop geometry."""
-    key = hashlib.sha256(json.dumps(["labels: IoU >= 0.5 vs the rest", hashlib.sha256(Path(cascade_xml).read_bytes()).hexdigest(),
+    boxes (n, 4), largest IoU with an annotated box (n,) and that annotated box (n, 4) of the cascade's
+    detections (every group: no cap); read from / written to `cache` (.npz) when given and made from the same
+    cascade, images and crop geometry."""
+    key = hashlib.sha256(json.dumps(["labels: IoU >= 0.5 vs the rest, every group, matched box",
+                                     hashlib.sha256(Path(cascade_xml).read_bytes()).hexdigest(),
                                      [str(Path(f).resolve()) for f in folders], every, vo.CROP_W, vo.CROP_H,
-                                     vo.MARGIN, cfg["camera"], cfg["cascade"]], default=str).encode()).hexdigest()[:16]
+                                     margin, cfg["camera"], cfg["cascade"]], default=str).encode()).hexdigest()[:16]
     if cache and Path(cache).is_file():
         d = dict(np.load(cache))
         if str(d.get("key")) == key:
             return d
     cfg["cascade"]["nms_iou"] = 1.0   # every group: the verifier judges them all before suppression
     cam_h = cfg["camera"]["height_m"]
-    crops, extra, label, image, boxes, overlap = [], [], [], [], [], []
+    items = load_folders(folders)[::every]
+    crops, extra, label, image, boxes, overlap, matched = [], [], [], [], [], [], []
     for k, g, det, n, lab, horizon, m in cascade_detections(folders, cascade_xml, every, cfg, progress):
-        crops.append(vo.crop_boxes(g, det))
+        crops.append(vo.crop_boxes(g, det, margin))
         extra.append(geometry_features(det, n, horizon, cam_h))
         label.append(np.where(m >= 0.5, 1, -1).astype(np.int8))
         image.append(np.full(len(det), k * every, np.int32))
         boxes.append(det.astype(np.float32))
         overlap.append(m.astype(np.float32))
+        gt = np.asarray(items[k].boxes, float).reshape(-1, 4)
+        matched.append((gt[iou(det, gt).argmax(1)] if len(gt) else np.full((len(det), 4), np.nan)).astype(np.float32))
     d = dict(crops=np.concatenate(crops), extra=np.concatenate(extra), label=np.concatenate(label),
-             image=np.concatenate(image), boxes=np.concatenate(boxes), iou=np.concatenate(overlap), key=np.array(key))
+             image=np.concatenate(image), boxes=np.concatenate(boxes), iou=np.concatenate(overlap),
+             matched=np.concatenate(matched), key=np.array(key))
     if cache:
         Path(cache).parent.mkdir(parents=True, exist_ok=True)
         np.savez(cache, **d)
@@ -83,8 +101,10 @@ def passed_at(p: np.ndarray, y: np.ndarray, keep=KEEP) -> list[float]:
 
 
 def fit(crops, extra, y, channels=(8, 16, 32), hidden=64, epochs=6, lr=2e-3, decay=1e-4, seed=0, batch=128,
-        on_epoch: Callable[[int, dict, float], None] | None = None) -> dict:
-    """Parameters (numpy, verifier_onnx.forward's names) fitted by Adam on the class-balanced cross-entropy."""
+        on_epoch: Callable[[int, dict, float], None] | None = None, target=None) -> dict:
+    """Parameters (numpy, verifier_onnx.forward's names) fitted by Adam on the class-balanced cross-entropy
+    (y: +1 vehicle, -1 other, 0 left out) and, with `target` (n, 4) offsets (NaN rows = none), the box
+    output's smooth-L1 loss (module docstring)."""
     import jax
     import jax.numpy as jnp
     from jax import lax
@@ -100,27 +120,34 @@ def fit(crops, extra, y, channels=(8, 16, 32), hidden=64, epochs=6, lr=2e-3, dec
     p["dense_b"] = np.zeros(hidden)
     p["out_w"] = rng.normal(0, np.sqrt(1 / hidden), hidden)
     p["out_b"] = np.zeros(1)
+    if target is not None:   # the box output starts near 0: the detection's own box
+        p["box_w"] = rng.normal(0, 0.01 / np.sqrt(hidden), (hidden, 4))
+        p["box_b"] = np.zeros(4)
     p = {k: jnp.asarray(v, jnp.float32) for k, v in p.items()}
     e_mean = extra.mean(0).astype(np.float32)
     e_scale = (1 / (extra.std(0) + 1e-3)).astype(np.float32)
     decayed = [k for k in p if k.endswith("_w")]
 
-    def logit(p, z, e):
+    def hidden_layer(p, z, e):
         a = z
         for k in range(3):
             a = lax.conv_general_dilated(a, p[f"conv{k}_w"], (1, 1), ((1, 1), (1, 1)),
                                          dimension_numbers=("NCHW", "OIHW", "NCHW")) + p[f"conv{k}_b"][None, :, None, None]
             a = lax.reduce_window(jnp.maximum(a, 0), -jnp.inf, lax.max, (1, 1, 2, 2), (1, 1, 2, 2), "VALID")
-        h = jnp.maximum(jnp.concatenate([a.reshape(a.shape[0], -1), e], 1) @ p["dense_w"] + p["dense_b"], 0)
-        return h @ p["out_w"] + p["out_b"][0]
+        return jnp.maximum(jnp.concatenate([a.reshape(a.shape[0], -1), e], 1) @ p["dense_w"] + p["dense_b"], 0)
 
-    def loss(p, z, e, yy, s):
-        data = jnp.sum(s * jax.nn.softplus(-yy * logit(p, z, e))) / jnp.sum(s)
+    def loss(p, z, e, yy, s, tt, r):
+        h = hidden_layer(p, z, e)
+        data = jnp.sum(s * jax.nn.softplus(-yy * (h @ p["out_w"] + p["out_b"][0]))) / jnp.maximum(jnp.sum(s), 1e-12)
+        if "box_w" in p:   # smooth L1 over the detections with a target (r = 1)
+            u = jnp.abs((h @ p["box_w"] + p["box_b"] - tt) / BOX_SIGMA)
+            hub = jnp.where(u < 1, 0.5 * u * u, u - 0.5).mean(1)
+            data = data + BOX_WEIGHT * jnp.sum(r * hub) / jnp.maximum(jnp.sum(r), 1.0)
         return data + 0.5 * decay * sum(jnp.sum(p[k] ** 2) for k in decayed)
 
     @jax.jit
-    def step(p, m, v, t, z, e, yy, s, rate):
-        val, g = jax.value_and_grad(loss)(p, z, e, yy, s)
+    def step(p, m, v, t, z, e, yy, s, tt, r, rate):
+        val, g = jax.value_and_grad(loss)(p, z, e, yy, s, tt, r)
         m = jax.tree_util.tree_map(lambda a, b: 0.9 * a + 0.1 * b, m, g)
         v = jax.tree_util.tree_map(lambda a, b: 0.999 * a + 0.001 * b * b, v, g)
         p = jax.tree_util.tree_map(lambda q, a, b: q - rate * (a / (1 - 0.9 ** t)) / (jnp.sqrt(b / (1 - 0.999 ** t)) + 1e-8),
@@ -130,8 +157,11 @@ def fit(crops, extra, y, channels=(8, 16, 32), hidden=64, epochs=6, lr=2e-3, dec
     m = jax.tree_util.tree_map(jnp.zeros_like, p)
     v = jax.tree_util.tree_map(jnp.zeros_like, p)
     yf = np.where(y > 0, 1.0, -1.0).astype(np.float32)
-    sw = np.where(y > 0, 1 / (y > 0).sum(), 1 / (y < 0).sum()).astype(np.float32)
+    sw = np.where(y > 0, 1 / max(1, (y > 0).sum()), np.where(y < 0, 1 / max(1, (y < 0).sum()), 0.0)).astype(np.float32)
     en = ((extra - e_mean) * e_scale).astype(np.float32)
+    has_t = np.zeros(len(y), bool) if target is None else np.isfinite(target).all(1)
+    tg = np.zeros((len(y), 4), np.float32) if target is None else np.where(has_t[:, None], target, 0).astype(np.float32)
+    rw = has_t.astype(np.float32)
     per_epoch = len(y) // batch
     steps, t = epochs * per_epoch, 0
     with tqdm(total=steps, desc="cnn", unit="batch", file=sys.stderr, disable=not sys.stderr.isatty(),
@@ -143,9 +173,12 @@ def fit(crops, extra, y, channels=(8, 16, 32), hidden=64, epochs=6, lr=2e-3, dec
             for b in range(per_epoch):
                 idx = np.sort(order[b * batch:(b + 1) * batch])
                 c = crops[idx]
-                c = np.where(flips[idx][:, None, None], c[:, :, ::-1], c)
+                f = flips[idx]
+                c = np.where(f[:, None, None], c[:, :, ::-1], c)
+                tb = tg[idx]   # mirrored: left and right swap and change sign, (dl, dt, dr, db) -> (-dr, dt, -dl, db)
+                tb = np.where(f[:, None], tb[:, [2, 1, 0, 3]] * np.float32([-1, 1, -1, 1]), tb)
                 t += 1
-                p, m, v, val = step(p, m, v, t, vo.standardise(c), en[idx], yf[idx], sw[idx],
+                p, m, v, val = step(p, m, v, t, vo.standardise(c), en[idx], yf[idx], sw[idx], tb, rw[idx],
                                     np.float32(lr * (1 - (t - 1) / steps)))
                 total += float(val)
                 bar.update(1)
@@ -161,17 +194,46 @@ def finish(p, e_mean, e_scale) -> dict:
     return out
 
 
-def predict(params: dict, crops: np.ndarray, extra: np.ndarray, chunk: int = 2048) -> np.ndarray:
-    """verifier_onnx.forward in chunks."""
-    return np.concatenate([vo.forward(params, vo.standardise(crops[i:i + chunk]), extra[i:i + chunk])
-                           for i in range(0, len(crops), chunk)]) if len(crops) else np.zeros(0)
+def predict(params: dict, crops: np.ndarray, extra: np.ndarray, chunk: int = 2048, box: bool = False):
+    """verifier_onnx.forward in chunks: probabilities (n,), and with `box` the box output (n, 4) too."""
+    if not len(crops):
+        return (np.zeros(0), np.zeros((0, 4))) if box else np.zeros(0)
+    out = [vo.forward(params, vo.standardise(crops[i:i + chunk]), extra[i:i + chunk], box=True)
+           for i in range(0, len(crops), chunk)]
+    p = np.concatenate([o[0] for o in out])
+    return (p, np.concatenate([o[1] for o in out])) if box else p
+
+
+def paired_iou(a, b) -> np.ndarray:
+    """(n,) IoU of a[i] with b[i], boxes (n, 4) left, top, right, bottom."""
+    a, b = np.asarray(a, float).reshape(-1, 4), np.asarray(b, float).reshape(-1, 4)
+    w = np.clip(np.minimum(a[:, 2], b[:, 2]) - np.maximum(a[:, 0], b[:, 0]), 0, None)
+    h = np.clip(np.minimum(a[:, 3], b[:, 3]) - np.maximum(a[:, 1], b[:, 1]), 0, None)
+    area = lambda x: (x[:, 2] - x[:, 0]) * (x[:, 3] - x[:, 1])
+    return w * h / np.maximum(area(a) + area(b) - w * h, 1e-9)
+
+
+def box_summary(d_out: np.ndarray, boxes, matched, overlap) -> str:
+    """How the box output moves the detections with a target: median IoU with their annotated box before /
+    after, and the share of those at IoU 0.3-0.5 it brings to >= 0.5 (and of those >= 0.5 it keeps there)."""
+    after = paired_iou(vo.refine(boxes, d_out), matched)
+    near, good = (overlap >= REGRESS_IOU) & (overlap < 0.5), overlap >= 0.5
+    sel = overlap >= REGRESS_IOU
+    return (f"box output on {int(sel.sum())} detections with IoU >= {REGRESS_IOU}: median IoU {np.median(overlap[sel]):.3f} -> "
+            f"{np.median(after[sel]):.3f}; of IoU 0.3-0.5 now >= 0.5: {(after[near] >= 0.5).mean():.3f}, of >= 0.5 still: "
+            f"{(after[good] >= 0.5).mean():.3f}")
 
 
 def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int = 1, channels=(8, 16, 32),
           hidden: int = 64, epochs: int = 6, decay: float = 1e-4, seed: int = 0, cache: str | None = None,
-          compare_hog: bool = False, log: Callable[[str], None] = print) -> dict:
+          compare_hog: bool = False, log: Callable[[str], None] = print, box: bool = True,
+          near: str = "negative", margin: float = vo.MARGIN) -> dict:
     """Fit on the training images less the held-out ones, log the held-out shares, write the ONNX to `out`.
-    `compare_hog`: also fit the HOG verifier on the same images and log it on the same held-out boxes."""
+    `compare_hog`: also fit the HOG verifier on the same images and log it on the same held-out boxes.
+    `box`: with the box output; `near`: the detections at IoU 0.3-0.5 are others ("negative") or left out of
+    the classification ("ignore")."""
+    if near not in NEAR:
+        raise ValueError(f"near={near!r}: one of {', '.join(NEAR)}")
     require_train_extra()
     # one thread (the machine is shared); must be set before jax is first imported
     os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
@@ -179,14 +241,18 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
     n_items = len(load_folders(folders)[::every])
     with tqdm(total=n_items, desc="cascade detections", unit="img", file=sys.stderr,
               disable=not sys.stderr.isatty(), leave=False) as bar:
-        d = samples(folders, cascade_xml, every, cfg, cache, progress=bar.update)
+        d = samples(folders, cascade_xml, every, cfg, cache, progress=bar.update, margin=margin)
     held = d["image"] % HELD_OUT[0] == HELD_OUT[1]
     y = d["label"]
+    ov = d["iou"]
+    fit_y = np.where((near == "ignore") & (ov >= REGRESS_IOU) & (ov < 0.5), 0, y)
+    target = np.where((ov >= REGRESS_IOU)[:, None], vo.offsets(d["boxes"], d["matched"]), np.nan) if box else None
     clear = (d["iou"][held] >= 0.5) | (d["iou"][held] < 0.3)   # the HOG verifier's samples
     log(f"verifier (cnn): {n_items} images (every {every}), {int((y > 0).sum())} vehicle and {int((y < 0).sum())} "
         f"other boxes (before mirroring), {int(held.sum())} of them on {len(np.unique(d['image'][held]))} held-out "
-        f"images; crop {vo.CROP_W}x{vo.CROP_H} gray, margin {vo.MARGIN}; conv {'/'.join(map(str, channels))}, "
-        f"{hidden} hidden, {epochs} epochs, decay {decay:g}, seed {seed}; samples {(time.perf_counter() - t0) / 60:.1f} min")
+        f"images; crop {vo.CROP_W}x{vo.CROP_H} gray, margin {margin:g}; conv {'/'.join(map(str, channels))}, "
+        f"{hidden} hidden, {epochs} epochs, decay {decay:g}, seed {seed}; box output {'on' if box else 'off'}, IoU 0.3-0.5 "
+        f"{near} ({int(((ov >= REGRESS_IOU) & (ov < 0.5)).sum())} of them); samples {(time.perf_counter() - t0) / 60:.1f} min")
     if compare_hog:
         t1 = time.perf_counter()
         ph = hog_baseline(folders, d, held, seed)
@@ -197,14 +263,14 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
 
     def on_epoch(ep, params, loss, secs):   # the ONNX after every epoch: a stopped run leaves the last one
         vo.save_onnx(params, out, doc=f"headway train verifier --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
-        ph = predict(params, d["crops"][held], d["extra"][held])
+        ph, dh = predict(params, d["crops"][held], d["extra"][held], box=True)
         log(f"epoch {ep + 1}/{epochs}: loss {loss:.4f}, held-out others passed at {'/'.join(map(str, KEEP))} of "
             f"vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held])) + "; of those with IoU < 0.3 "
             "(the HOG verifier's others): " + " / ".join(f"{v:.3f}" for v in passed_at(ph[clear], y[held][clear]))
-            + f", {secs:.0f} s")
+            + f", {secs:.0f} s" + ("; " + box_summary(dh, d["boxes"][held], d["matched"][held], ov[held]) if box else ""))
 
-    params = fit(d["crops"][~held], d["extra"][~held], y[~held], channels, hidden, epochs, decay=decay, seed=seed,
-                 on_epoch=on_epoch)
+    params = fit(d["crops"][~held], d["extra"][~held], fit_y[~held], channels, hidden, epochs, decay=decay, seed=seed,
+                 on_epoch=on_epoch, target=None if target is None else target[~held])
     log(f"fit {(time.perf_counter() - t1) / 60:.1f} min, total {(time.perf_counter() - t0) / 60:.1f} min -> {out} "
         f"({Path(out).stat().st_size / 1024:.0f} KiB)")
     return params

@@ -15,6 +15,9 @@ Network (ONNX opset 11, every node cv::dnn of OpenCV 4.6 reads):
     a3 = maxpool2(relu(conv3x3(a2, c3)))      (c3, H/8, W/8)
     h  = relu(W_h [flatten(a3), (extra - mean_e) * scale_e] + b_h)
     p  = sigmoid(w_o . h + b_o)
+    d  = W_d h + b_d                          (4: the box output, when the network has one)
+The box output refines the box (l, t, r, b) the crop was cut from (`refine`):
+    l' = l + d_0 w,   t' = t + d_1 h,   r' = r + d_2 w,   b' = b + d_3 h,   w = r - l, h = b - t.
 Convolutions pad by one pixel (same size), pools are 2x2 with stride 2; flatten is in (channel, row, column)
 order as ONNX's Flatten of NCHW.
 """
@@ -27,13 +30,13 @@ MARGIN = 0.1              # of the box's width (height) added left and right (to
 OPSET = 11                # read by OpenCV 4.6's ONNX importer
 
 
-def crop_boxes(gray: np.ndarray, boxes) -> np.ndarray:
+def crop_boxes(gray: np.ndarray, boxes, margin: float = MARGIN) -> np.ndarray:
     """(n, CROP_H, CROP_W) uint8: every box (left, top, right, bottom) with its margin, border replicated."""
     out = np.zeros((len(boxes), CROP_H, CROP_W), np.uint8)
     import cv2
 
     for i, (l, t, r, b) in enumerate(np.asarray(boxes, float).reshape(-1, 4)):
-        mx, my = MARGIN * (r - l), MARGIN * (b - t)
+        mx, my = margin * (r - l), margin * (b - t)
         x0, y0, x1, y1 = (int(np.floor(v + 0.5)) for v in (l - mx, t - my, r + mx, b + my))
         if x1 - x0 < 2 or y1 - y0 < 2:
             continue
@@ -64,20 +67,41 @@ def _conv3x3_relu_pool(x: np.ndarray, w: np.ndarray, b: np.ndarray) -> np.ndarra
     return y.reshape(n, y.shape[1], h // 2, 2, wd // 2, 2).max((3, 5))
 
 
-def forward(params: dict, z: np.ndarray, extra: np.ndarray) -> np.ndarray:
-    """Probabilities (n,) for standardised crops z (n, 1, H, W) and raw extra features (n, 2)."""
+def forward(params: dict, z: np.ndarray, extra: np.ndarray, box: bool = False):
+    """Probabilities (n,) for standardised crops z (n, 1, H, W) and raw extra features (n, 2); with `box`,
+    also the box output (n, 4) (zeros for a network without one)."""
     a = z.astype(np.float32)
     for k in range(3):
         a = _conv3x3_relu_pool(a, params[f"conv{k}_w"], params[f"conv{k}_b"])
     e = (extra - params["extra_mean"]) * params["extra_scale"]
     h = np.maximum(np.c_[a.reshape(len(a), -1), e] @ params["dense_w"] + params["dense_b"], 0)
-    return 1 / (1 + np.exp(-(h @ params["out_w"] + params["out_b"]).ravel()))
+    p = 1 / (1 + np.exp(-(h @ params["out_w"] + params["out_b"]).ravel()))
+    if not box:
+        return p
+    d = h @ params["box_w"] + params["box_b"] if "box_w" in params else np.zeros((len(h), 4), np.float32)
+    return p, d
+
+
+def refine(boxes, d) -> np.ndarray:
+    """(n, 4) boxes (left, top, right, bottom) moved by the box output d (n, 4): each edge by d times the
+    box's width (left, right) or height (top, bottom)."""
+    b = np.asarray(boxes, np.float64).reshape(-1, 4)
+    wh = np.c_[b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]]
+    return b + np.asarray(d, np.float64).reshape(-1, 4) * wh[:, [0, 1, 0, 1]]
+
+
+def offsets(boxes, targets) -> np.ndarray:
+    """The box output that moves `boxes` onto `targets` (refine's inverse), (n, 4)."""
+    b = np.asarray(boxes, np.float64).reshape(-1, 4)
+    wh = np.c_[b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]]
+    return (np.asarray(targets, np.float64).reshape(-1, 4) - b) / wh[:, [0, 1, 0, 1]]
 
 
 # ---- ONNX ----
 
 def save_onnx(params: dict, path: str, doc: str = "") -> None:
-    """Write the network as ONNX (opset 11): inputs `crop` (N, 1, H, W) and `extra` (N, 2), output `p` (N, 1).
+    """Write the network as ONNX (opset 11): inputs `crop` (N, 1, H, W) and `extra` (N, 2), outputs `p` (N, 1)
+    and, when the parameters hold the box output (`box_w`, `box_b`), `box` (N, 4).
     The extra features' standardisation is folded into the dense layer: W_e' = scale_e W_e,
     b' = b - (mean_e scale_e) . W_e."""
     import onnx
@@ -112,11 +136,16 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
               helper.make_node("Relu", ["d"], ["h"]),
               helper.make_node("Gemm", ["h", "out_w", "out_b"], ["logit"], transB=1),
               helper.make_node("Sigmoid", ["logit"], ["p"])]
+    outputs = [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, 1])]
+    if "box_w" in p:
+        init += [numpy_helper.from_array(p["box_w"].T.copy(), "box_w"), numpy_helper.from_array(p["box_b"], "box_b")]
+        nodes.append(helper.make_node("Gemm", ["h", "box_w", "box_b"], ["box"], transB=1))
+        outputs.append(helper.make_tensor_value_info("box", TensorProto.FLOAT, [1, 4]))
     graph = helper.make_graph(
         nodes, "headway_vehicle_verifier",
         [helper.make_tensor_value_info("crop", TensorProto.FLOAT, [1, 1, CROP_H, CROP_W]),
          helper.make_tensor_value_info("extra", TensorProto.FLOAT, [1, 2])],
-        [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, 1])], init)
+        outputs, init)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)], producer_name="headway",
                               doc_string=doc)
     model.ir_version = 7
@@ -135,4 +164,6 @@ def load_onnx(path: str) -> dict:
     out = {k: w[k] for k in ("conv0_w", "conv0_b", "conv1_w", "conv1_b", "conv2_w", "conv2_b", "dense_b")}
     out.update(dense_w=np.r_[w["dense_w"].T, w["dense_we"].T], out_w=w["out_w"].ravel(), out_b=w["out_b"],
                extra_mean=np.zeros(2, np.float32), extra_scale=np.ones(2, np.float32))
+    if "box_w" in w:
+        out.update(box_w=w["box_w"].T.copy(), box_b=w["box_b"])
     return out

@@ -15,6 +15,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/core/utils/logger.hpp>
 
+#include <algorithm>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -290,6 +291,27 @@ int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray
         std::lock_guard<std::mutex> lock(p->mu);
         require_stopped(p, "run_stage()");
         fill_result(p->pipeline->run_stage(stage, wrap_gray(gray, width, height, stride)), out);
+        return HW_OK;
+    });
+}
+
+int hw_pipeline_stage_boxes(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width, int32_t height,
+                            int32_t stride, hw_box *out, int32_t cap, int32_t *n, float *horizon_row) {
+    return guard([&] {
+        require(p, "pipeline");
+        require(stage, "stage");
+        require(n, "n");
+        if (cap < 0) throw std::invalid_argument("cap must not be negative");
+        if (cap > 0) require(out, "out");
+        std::lock_guard<std::mutex> lock(p->mu);
+        require_stopped(p, "stage_boxes()");
+        const hw::FrameOutput o = p->pipeline->run_stage(stage, wrap_gray(gray, width, height, stride));
+        *n = int32_t(o.tracks.size());
+        if (horizon_row) *horizon_row = o.horizon_row;
+        for (int32_t i = 0; i < std::min(cap, *n); ++i) {
+            const auto &t = o.tracks[size_t(i)];
+            out[i] = hw_box{t.box.x, t.box.y, t.box.x + t.box.width, t.box.y + t.box.height, t.confidence};
+        }
         return HW_OK;
     });
 }

@@ -155,8 +155,12 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             boxes.push_back(out[i].box);
             ns.push_back(out[i].neighbors);
         }
-        const std::vector<float> p = verifier_->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
-        for (size_t k = 0; k < judged.size(); ++k) out[judged[k]].confidence = p[k];
+        const std::vector<float> p = p_.refine_boxes ? verifier_->judge(gray, boxes, ns, cam.horizon_row(), hc)
+                                                     : verifier_->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
+        for (size_t k = 0; k < judged.size(); ++k) {
+            out[judged[k]].confidence = p[k];
+            out[judged[k]].box = boxes[k];  // moved by the box output when the verifier has one (refine_boxes)
+        }
     }
     if (p_.nms_iou >= 1.0) return out;
     // non-maximum suppression by confidence: most confident first, drop what overlaps a kept one

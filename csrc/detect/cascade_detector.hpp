@@ -17,7 +17,8 @@
 // seed window first) are kept, which bounds the verifier's cost. With a verifier (vehicle_verifier.hpp: a
 // small CNN on the box's crop, or the HOG of the box, with log(1 + n) and the vehicle height the box
 // implies, through a trained network) the confidence is instead its probability that the group's box
-// holds a vehicle (all the groups of a frame judged at once). Last, a detection
+// holds a vehicle (all the groups of a frame judged at once), and a CNN verifier with a box output moves each
+// group's box onto the vehicle (refine_boxes; vehicle_verifier_cnn.hpp). Last, a detection
 // overlapping a more confident one at IoU >= nms_iou is dropped (two groups on one vehicle).
 #pragma once
 
@@ -53,6 +54,7 @@ struct CascadeParams {
     double neighbors_half = 6.0;        // a group of this many windows gets confidence 0.5
     int verify_min_neighbors = 0;       // groups of fewer raw windows skip the verifier (confidence from n)
     int max_groups = 0;                 // only the groups with the strongest seed windows are kept (0 = all)
+    bool refine_boxes = true;           // a verifier with a box output moves each box before the suppression
     double nms_iou = 0.3;               // a detection overlapping a more confident one this much is dropped (1 = none)
 
     void bind(ParamMap &m) {
@@ -102,6 +104,10 @@ struct CascadeParams {
               "it was trained on the first 64 groups of each training image; 96 measured as good as all at high "
               "precision on held-out training images and saves ~5 ms a 1280x720 frame, but the cascade preset then warned once on "
               "project_video_cut.mp4 (2.56 s; docs/cascade.md), so it is off by default");
+        m.add("refine_boxes", refine_boxes,
+              "true = a verifier with a box output (a CNN trained with one, docs/cascade.md) moves each group's box onto "
+              "the vehicle before the suppression, so that two groups on one vehicle merge and a group beside it becomes "
+              "a well placed box; false = the group's mean box as it is (verifiers without a box output never move it)");
         m.add("nms_iou", nms_iou, 0.05, 1.0,
               "IoU; after scoring, a detection overlapping a more confident one at least this much is dropped (a "
               "second group on the same vehicle); 0.3 measured best at high precision on the TuSimple validation "

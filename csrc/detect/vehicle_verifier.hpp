@@ -35,6 +35,12 @@ public:
     virtual std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                              const std::vector<int> &neighbors, double horizon_row,
                                              double cam_height_m) const = 0;
+    // probabilities(), and for a verifier with a box output (a CNN trained with one) each box moved onto the
+    // vehicle as that output says; a verifier without one leaves the boxes as they are.
+    virtual std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes,
+                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m) const {
+        return probabilities(gray, boxes, neighbors, horizon_row, cam_height_m);
+    }
 };
 
 // The verifier the file holds (.onnx: CnnVerifier, else HogVerifier); throws std::invalid_argument naming it.

@@ -19,16 +19,28 @@ CnnVerifier::CnnVerifier(const std::string &path) {
         throw std::invalid_argument("cascade.verifier: '" + path + "' holds no network");
     net_.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
     net_.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
-    // one probe: the file must take a crop and the two extra features and give one probability
+    // outputs: "p" alone (session 3's form) or "p" and "box"; anything else is not a verifier network
+    std::vector<cv::String> names = net_.getUnconnectedOutLayersNames();
+    std::sort(names.begin(), names.end());
+    const std::string form = "inputs crop (N, 1, " + std::to_string(kCropH) + ", " + std::to_string(kCropW) +
+                             ") and extra (N, 2), outputs p (N, 1) and optionally box (N, 4)";
+    has_box_ = names == std::vector<cv::String>{"box", "p"};
+    if (!has_box_ && names != std::vector<cv::String>{"p"}) {
+        std::string got;
+        for (const auto &n : names) got += (got.empty() ? "" : ", ") + n;
+        throw std::invalid_argument("cascade.verifier: '" + path + "' is not a verifier network (" + form +
+                                    "; it has the outputs " + got + "); train one with `headway train verifier --out X.onnx`");
+    }
+    outs_ = has_box_ ? std::vector<cv::String>{"p", "box"} : std::vector<cv::String>{"p"};
+    // one probe: the file must take a crop and the two extra features and give one probability (and 4 offsets)
     try {
-        const auto p = probabilities(cv::Mat(kCropH * 4, kCropW * 4, CV_8UC1, cv::Scalar(128)),
-                                     {cv::Rect2f(10.f, 10.f, 60.f, 40.f)}, {3}, 0.0, 1.5);
+        cv::Mat offsets;
+        const auto p = run(cv::Mat(kCropH * 4, kCropW * 4, CV_8UC1, cv::Scalar(128)), {cv::Rect2f(10.f, 10.f, 60.f, 40.f)},
+                           {3}, 0.0, 1.5, &offsets);
         if (p.size() != 1 || !(p[0] >= 0.f && p[0] <= 1.f)) throw std::runtime_error("no probability");
     } catch (const std::exception &e) {
-        throw std::invalid_argument("cascade.verifier: '" + path + "' is not a verifier network (inputs crop (N, 1, " +
-                                    std::to_string(kCropH) + ", " + std::to_string(kCropW) +
-                                    ") and extra (N, 2), output (N, 1)): " + e.what() +
-                                    "; train one with `headway train verifier --out X.onnx`");
+        throw std::invalid_argument("cascade.verifier: '" + path + "' is not a verifier network (" + form + "): " +
+                                    e.what() + "; train one with `headway train verifier --out X.onnx`");
     }
 }
 
@@ -52,9 +64,9 @@ cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box) {
     return out;
 }
 
-std::vector<float> CnnVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
-                                              const std::vector<int> &neighbors, double horizon_row,
-                                              double cam_height_m) const {
+std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
+                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
+                                     cv::Mat *offsets) const {
     const int n = int(boxes.size());
     if (n == 0) return {};
     const int sz[4] = {n, 1, kCropH, kCropW};
@@ -66,9 +78,40 @@ std::vector<float> CnnVerifier::probabilities(const cv::Mat &gray, const std::ve
     }
     net_.setInput(crops, "crop");
     net_.setInput(extra, "extra");
-    const cv::Mat p = net_.forward();
-    CV_Assert(p.total() == size_t(n));
-    return std::vector<float>(p.ptr<float>(), p.ptr<float>() + n);
+    std::vector<cv::Mat> out;
+    net_.forward(out, outs_);
+    if (out[0].total() != size_t(n))
+        throw std::runtime_error("output p holds " + std::to_string(out[0].total()) + " values for " + std::to_string(n) +
+                                 " boxes");
+    if (has_box_) {
+        if (out[1].total() != size_t(4 * n))
+            throw std::runtime_error("output box holds " + std::to_string(out[1].total()) + " values for " +
+                                     std::to_string(n) + " boxes, not 4 each");
+        if (offsets) *offsets = out[1].reshape(1, n);
+    }
+    return std::vector<float>(out[0].ptr<float>(), out[0].ptr<float>() + n);
+}
+
+std::vector<float> CnnVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
+                                              const std::vector<int> &neighbors, double horizon_row,
+                                              double cam_height_m) const {
+    return run(gray, boxes, neighbors, horizon_row, cam_height_m, nullptr);
+}
+
+std::vector<float> CnnVerifier::judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes,
+                                      const std::vector<int> &neighbors, double horizon_row, double cam_height_m) const {
+    cv::Mat d;
+    std::vector<float> p = run(gray, boxes, neighbors, horizon_row, cam_height_m, &d);
+    for (int i = 0; i < d.rows; ++i) {  // l' = l + d0 w, t' = t + d1 h, r' = r + d2 w, b' = b + d3 h
+        cv::Rect2f &b = boxes[size_t(i)];
+        const float *o = d.ptr<float>(i);
+        const double w = b.width, h = b.height;
+        const double l = b.x + o[0] * w, t = b.y + o[1] * h;
+        const double r = double(b.x + b.width) + o[2] * w, bt = double(b.y + b.height) + o[3] * h;
+        if (r - l < 1.0 || bt - t < 1.0) continue;  // a degenerate box: keep the group's own
+        b = cv::Rect2f(float(l), float(t), float(r - l), float(bt - t));
+    }
+    return p;
 }
 
 } // namespace hw

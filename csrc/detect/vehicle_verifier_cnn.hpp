@@ -7,8 +7,10 @@
 //   (floor(v + 0.5)), the part outside the image filled by replicating the border, resized to kCropW x kCropH
 //   (INTER_AREA), standardised by its own mean and standard deviation, z = (c - mean) / (std + 1);
 // - extra (N, 2): log(1 + n) of the n raw cascade windows grouped, and implied_vehicle_height.
-// Output p (N, 1): the probability that the box holds a vehicle. All the boxes of a frame go through the
-// network in one batch.
+// Outputs: p (N, 1), the probability that the box holds a vehicle, and, in a network trained with it (session
+// 5), box (N, 4): offsets d that move the box's edges onto the vehicle's,
+//     l' = l + d0 w,   t' = t + d1 h,   r' = r + d2 w,   b' = b + d3 h    (w, h: the box's width and height)
+// (verifier_onnx.refine). All the boxes of a frame go through the network in one batch.
 #pragma once
 
 #include "detect/vehicle_verifier.hpp"
@@ -26,11 +28,20 @@ public:
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                      const std::vector<int> &neighbors, double horizon_row,
                                      double cam_height_m) const override;
+    std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
+                             double horizon_row, double cam_height_m) const override;
+    bool has_box_output() const { return has_box_; }
     // The standardised crop of one box (kCropH x kCropW, float), as the network takes it.
     static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box);
 
 private:
+    // p (n) and, with the box output, offsets (n x 4 float) for the boxes; `offsets` left empty without one
+    std::vector<float> run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
+                           double horizon_row, double cam_height_m, cv::Mat *offsets) const;
+
     mutable cv::dnn::Net net_;  // forward() is not const; one verifier serves one pipeline thread
+    bool has_box_ = false;      // the file has the box output ("box", N x 4)
+    std::vector<cv::String> outs_;  // output names asked of forward(): {"p"} or {"p", "box"}
 };
 
 } // namespace hw

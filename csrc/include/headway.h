@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 7
+#define HW_ABI_VERSION 8
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -201,6 +201,19 @@ int hw_pipeline_process(hw_pipeline *p, const uint8_t *gray, int32_t width, int3
  * verification: the detector's boxes with their scores as confidence). */
 int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
                           int32_t height, int32_t stride, hw_frame_result *out);
+/* One detection of a single-image stage (hw_pipeline_stage_boxes). */
+typedef struct {
+    float left, top, right, bottom; /* px */
+    float confidence;               /* 0..1 */
+} hw_box;
+/* Offline, for training (ABI 8): the same stages as hw_pipeline_run_stage, but every detection the stage
+ * gives, without the HW_MAX_TRACKS cap of hw_frame_result (the cascade stage with cascade.nms_iou 1 gives
+ * ~150 groups on a 1280x720 image). Copies at most cap of them into out (NULL allowed when cap is 0) and
+ * *n receives how many the stage gave: call again with a larger out when *n > cap. *horizon_row (may be
+ * NULL) receives the frame's horizon row as hw_frame_result.horizon_row. */
+int hw_pipeline_stage_boxes(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
+                            int32_t height, int32_t stride, hw_box *out, int32_t cap, int32_t *n,
+                            float *horizon_row);
 /* The car's own motion from the vehicle bus (NaN = not available): used for the ego path when the
  * lanes are missing. Allowed while the loop runs; takes effect from the next frame. */
 int hw_pipeline_set_ego_motion(hw_pipeline *p, double speed_mps, double yaw_rate_rps);
