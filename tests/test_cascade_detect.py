@@ -177,3 +177,25 @@ def test_max_groups_keeps_the_groups_of_the_strongest_windows():
         out[k] = _cascade_tracks(cfg, frames)
     assert all(len(a) > 10 for a in out[0])
     assert out[10] == [a[:10] for a in out[0]]
+
+
+def test_stage_boxes_gives_every_group_past_the_abis_64_tracks():
+    """Pipeline.stage_boxes (hw_pipeline_stage_boxes, ABI 8) returns every detection of a single-image stage: on a
+    real 1280x720 image the cascade forms far more than the HW_MAX_TRACKS (64) groups run_stage() can report; the
+    first 64 are run_stage()'s, box for box, and the horizon row is run_stage()'s. The verifier is trained on them."""
+    from app._headway_core import lib
+    from app.eval.tusimple_boxes import tusimple_config
+
+    supp = data_path("tusimple", "supp")
+    entry = json.loads((supp / "annotation.json").read_text())[0]
+    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    cfg = tusimple_config(configuration.load(None, {"cascade": EVERY_GROUP}))
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        r = pipe.run_stage("cascade", gray)
+        boxes, horizon = pipe.stage_boxes("cascade", gray)
+    assert len(r.tracks) == lib.HW_MAX_TRACKS < len(boxes)
+    assert np.allclose(boxes[:lib.HW_MAX_TRACKS], [(*t.box, t.confidence) for t in r.tracks])
+    assert horizon == pytest.approx(r.horizon_row)
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        with pytest.raises(ValueError, match="stage"):
+            pipe.stage_boxes("no such stage", gray)

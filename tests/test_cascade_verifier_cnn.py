@@ -53,6 +53,44 @@ def test_cnn_learns_is_deterministic_and_its_onnx_runs_in_cv2_dnn(tmp_path):
     assert np.abs(vo.forward(back, z, te[:40]) - pt[:40]).max() < 1e-4
 
 
+def _shifted(rng, n):
+    """Crops of boxes shifted off a bright, dark-rimmed 'vehicle' (each edge by up to 0.2 of the box's size),
+    their box output targets (verifier_onnx.offsets) and the boxes, in px."""
+    crops = np.zeros((n, vo.CROP_H, vo.CROP_W), np.uint8)
+    gt = np.zeros((n, 4))
+    boxes = np.zeros((n, 4))
+    for i in range(n):
+        img = rng.normal(110, 25, (120, 160)).clip(0, 255).astype(np.uint8)
+        w, h = rng.uniform(50, 70), rng.uniform(34, 46)
+        l, t = rng.uniform(40, 160 - 40 - w), rng.uniform(35, 120 - 35 - h)
+        gt[i] = l, t, l + w, t + h
+        cv2.rectangle(img, (round(l), round(t)), (round(l + w), round(t + h)), 20, -1)
+        cv2.rectangle(img, (round(l + 4), round(t + 4)), (round(l + w - 4), round(t + h - 6)), int(rng.uniform(170, 230)), -1)
+        boxes[i] = gt[i] + rng.uniform(-0.2, 0.2, 4) * np.r_[w, h, w, h]
+        crops[i] = vo.crop_boxes(img, boxes[i:i + 1], vo.BOX_MARGIN)[0]
+    return crops, vo.offsets(boxes, gt).astype(np.float32), boxes, gt
+
+
+def test_box_output_learns_the_shift_and_is_deterministic(tmp_path):
+    """Fitted on crops of shifted boxes, the box output brings held-out boxes back onto the vehicle: their
+    edges' mean error falls from ~5 px (measured 4.8) to under 2 px (1.2), and the same seed gives the same weights."""
+    pytest.importorskip("jax", reason="the CNN trainer needs the train extra: pip install '.[train]'")
+    from app.train.verifier_cnn import fit, predict
+
+    rng = np.random.default_rng(0)
+    crops, target, _, _ = _shifted(rng, 2048)
+    tc, _, tb, tg = _shifted(rng, 256)
+    y = np.ones(len(crops), np.int8)
+    extra = np.zeros((len(crops), 2), np.float32)
+    kw = dict(channels=(4, 8, 8), hidden=16, epochs=6, seed=0, target=target)
+    p = fit(crops, extra, y, **kw)
+    _, d = predict(p, tc, np.zeros((len(tc), 2), np.float32), box=True)
+    before, after = np.abs(tb - tg).mean(), np.abs(vo.refine(tb, d) - tg).mean()
+    assert before > 4 and after < 2, (before, after)
+    again = fit(crops, extra, y, **kw)
+    assert all(np.array_equal(p[k], again[k]) for k in p) and "box_w" in p
+
+
 def test_crop_keeps_the_box_and_replicates_the_border():
     gray = np.zeros((100, 200), np.uint8)
     gray[40:60, 50:110] = 200                      # a 60 x 20 bright box
@@ -89,6 +127,79 @@ def test_core_and_cv2_dnn_give_the_trainers_probability():
     assert np.abs(p - np.array([t.confidence for t in r.tracks])).max() < 1e-3
     assert np.abs(p - _dnn_probability(SHIPPED_CNN, z, extra)).max() < 1e-3
     assert p.min() < 0.5 < p.max()   # it tells the boxes apart
+
+
+def _random_params(rng, box=True, box_outputs=4):
+    """A verifier network of the shipped shape with random weights (and a box output that moves boxes by
+    ~0.1-0.3 of their size): for comparing the implementations, whatever is shipped."""
+    c = (1, 8, 16, 32)
+    p = {}
+    for k in range(3):
+        p[f"conv{k}_w"] = rng.normal(0, np.sqrt(2 / (9 * c[k])), (c[k + 1], c[k], 3, 3)).astype(np.float32)
+        p[f"conv{k}_b"] = rng.normal(0, 0.1, c[k + 1]).astype(np.float32)
+    nflat = 32 * (vo.CROP_H // 8) * (vo.CROP_W // 8)
+    p.update(dense_w=rng.normal(0, np.sqrt(2 / (nflat + 2)), (nflat + 2, 16)).astype(np.float32),
+             dense_b=rng.normal(0, 0.1, 16).astype(np.float32), out_w=rng.normal(0, 1, 16).astype(np.float32),
+             out_b=np.zeros(1, np.float32), extra_mean=np.float32([1.5, 2.0]), extra_scale=np.float32([1.0, 0.5]))
+    if box:
+        p.update(box_w=rng.normal(0, 0.1, (16, box_outputs)).astype(np.float32),
+                 box_b=rng.normal(0, 0.05, box_outputs).astype(np.float32))
+    return p
+
+
+def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
+    """A network with the box output (`box`, N x 4): the core (cv::dnn of Debian's OpenCV), cv2.dnn and the
+    trainer's numpy forward pass give every cascade group of a validation image the same probability and the
+    same refined box (l + d0 w, t + d1 h, r + d2 w, b + d3 h) from the crop of the group's own box; the refined
+    boxes are what the stage reports (before its suppression), and `cascade.refine_boxes: false` keeps the
+    groups' boxes."""
+    pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
+    from app.eval.tusimple_boxes import tusimple_config
+    from app.train.verifier import geometry_features
+
+    params = _random_params(np.random.default_rng(1))
+    path = tmp_path / "box.onnx"
+    vo.save_onnx(params, str(path))
+    supp = data_path("tusimple", "supp")
+    entry = json.loads((supp / "annotation.json").read_text())[0]
+    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    over = {"verifier": str(path), "nms_iou": 1.0}
+    cfg = tusimple_config(configuration.load(None, {"cascade": over}))
+    kept = tusimple_config(configuration.load(None, {"cascade": {**over, "refine_boxes": False}}))
+    off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
+    with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain, \
+            Pipeline(configuration.core_sections(kept)) as unmoved:
+        core, horizon = pipe.stage_boxes("cascade", gray)
+        groups, _ = plain.stage_boxes("cascade", gray)
+        as_is, _ = unmoved.stage_boxes("cascade", gray)
+    half = off["cascade"]["neighbors_half"]
+    n = np.rint(half * groups[:, 4] / (1 - groups[:, 4]))
+    assert len(groups) > 64 and len(core) == len(groups) == len(as_is)
+    boxes = groups[:, :4].astype(float)
+    z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(params)))
+    extra = geometry_features(boxes, n, horizon, cfg["camera"]["height_m"])
+    p, d = vo.forward(vo.load_onnx(str(path)), z, extra, box=True)
+    assert np.abs(p - core[:, 4]).max() < 1e-3
+    moved = vo.refine(boxes, d)
+    assert np.abs(moved - core[:, :4]).max() < 0.05   # px
+    assert np.abs(moved - boxes).max() > 5           # it does move them
+    assert np.array_equal(as_is[:, :4], groups[:, :4]) and np.abs(as_is[:, 4] - core[:, 4]).max() < 1e-6
+    net = cv2.dnn.readNetFromONNX(str(path))
+    net.setInput(z, "crop")
+    net.setInput(extra.astype(np.float32), "extra")
+    pd, dd = net.forward(["p", "box"])
+    assert np.abs(pd.ravel() - p).max() < 1e-4 and np.abs(dd - d).max() < 1e-4
+
+
+@pytest.mark.parametrize("outputs", [3, 5])
+def test_a_box_output_of_the_wrong_shape_is_a_clear_error(tmp_path, outputs):
+    pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
+    path = tmp_path / "box.onnx"
+    vo.save_onnx(_random_params(np.random.default_rng(0), box_outputs=outputs), str(path))
+    cfg = configuration.load(None, {"cascade": {"verifier": str(path)}})
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        with pytest.raises(ValueError, match=r"cascade.verifier.*box.*not 4 each.*headway train verifier"):
+            pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))
 
 
 def test_a_file_that_is_not_a_verifier_network_is_a_clear_error(tmp_path):

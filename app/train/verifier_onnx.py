@@ -27,6 +27,7 @@ import numpy as np
 
 CROP_W, CROP_H = 48, 32   # px: the cascade's aspect 1.5; a 40 px box (the scored band's smallest) at ~1:1
 MARGIN = 0.1              # of the box's width (height) added left and right (top and bottom)
+BOX_MARGIN = 0.1          # the same for a network with the box output (the core tells them by that output)
 OPSET = 11                # read by OpenCV 4.6's ONNX importer
 
 
@@ -46,6 +47,11 @@ def crop_boxes(gray: np.ndarray, boxes, margin: float = MARGIN) -> np.ndarray:
                                cv2.BORDER_REPLICATE)
         out[i] = cv2.resize(c, (CROP_W, CROP_H), interpolation=cv2.INTER_AREA)
     return out
+
+
+def crop_margin(params: dict) -> float:
+    """The crop margin the network was trained with: BOX_MARGIN with the box output, else MARGIN."""
+    return BOX_MARGIN if "box_w" in params else MARGIN
 
 
 def standardise(crops: np.ndarray) -> np.ndarray:

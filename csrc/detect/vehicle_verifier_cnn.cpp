@@ -32,6 +32,7 @@ CnnVerifier::CnnVerifier(const std::string &path) {
                                     "; it has the outputs " + got + "); train one with `headway train verifier --out X.onnx`");
     }
     outs_ = has_box_ ? std::vector<cv::String>{"p", "box"} : std::vector<cv::String>{"p"};
+    margin_ = has_box_ ? kBoxMargin : kMargin;
     // one probe: the file must take a crop and the two extra features and give one probability (and 4 offsets)
     try {
         cv::Mat offsets;
@@ -44,10 +45,10 @@ CnnVerifier::CnnVerifier(const std::string &path) {
     }
 }
 
-cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box) {
+cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double margin) {
     // the box's edges as the Python side sees them (float right = x + width), widened in double
     const double l = box.x, t = box.y, r = double(box.x + box.width), b = double(box.y + box.height);
-    const double mx = kMargin * (r - l), my = kMargin * (b - t);
+    const double mx = margin * (r - l), my = margin * (b - t);
     const int x0 = int(std::floor(l - mx + 0.5)), y0 = int(std::floor(t - my + 0.5));
     const int x1 = int(std::floor(r + mx + 0.5)), y1 = int(std::floor(b + my + 0.5));
     cv::Mat out(kCropH, kCropW, CV_32F, cv::Scalar(0));
@@ -72,7 +73,7 @@ std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::R
     const int sz[4] = {n, 1, kCropH, kCropW};
     cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F);
     for (int i = 0; i < n; ++i) {
-        crop(gray, boxes[size_t(i)]).copyTo(cv::Mat(kCropH, kCropW, CV_32F, crops.ptr<float>(i)));
+        crop(gray, boxes[size_t(i)], margin_).copyTo(cv::Mat(kCropH, kCropW, CV_32F, crops.ptr<float>(i)));
         extra.at<float>(i, 0) = float(std::log1p(double(neighbors[size_t(i)])));
         extra.at<float>(i, 1) = implied_vehicle_height(boxes[size_t(i)], horizon_row, cam_height_m);
     }

@@ -23,6 +23,7 @@ class CnnVerifier : public VehicleVerifier {
 public:
     static constexpr int kCropW = 48, kCropH = 32;  // px: the cascade's aspect 1.5
     static constexpr double kMargin = 0.1;          // of the box's width (height) added each side: context
+    static constexpr double kBoxMargin = 0.1;       // the same for a network with the box output (BOX_MARGIN)
 
     explicit CnnVerifier(const std::string &path);  // throws std::invalid_argument naming the file
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
@@ -31,8 +32,8 @@ public:
     std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
                              double horizon_row, double cam_height_m) const override;
     bool has_box_output() const { return has_box_; }
-    // The standardised crop of one box (kCropH x kCropW, float), as the network takes it.
-    static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box);
+    // The standardised crop of one box (kCropH x kCropW, float) widened by `margin` each side, as the network takes it.
+    static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box, double margin);
 
 private:
     // p (n) and, with the box output, offsets (n x 4 float) for the boxes; `offsets` left empty without one
@@ -41,6 +42,7 @@ private:
 
     mutable cv::dnn::Net net_;  // forward() is not const; one verifier serves one pipeline thread
     bool has_box_ = false;      // the file has the box output ("box", N x 4)
+    double margin_ = kMargin;   // of the box's size added each side of the crop: kBoxMargin with the box output
     std::vector<cv::String> outs_;  // output names asked of forward(): {"p"} or {"p", "box"}
 };
 
