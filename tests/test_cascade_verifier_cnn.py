@@ -67,7 +67,7 @@ def _shifted(rng, n):
         cv2.rectangle(img, (round(l), round(t)), (round(l + w), round(t + h)), 20, -1)
         cv2.rectangle(img, (round(l + 4), round(t + 4)), (round(l + w - 4), round(t + h - 6)), int(rng.uniform(170, 230)), -1)
         boxes[i] = gt[i] + rng.uniform(-0.2, 0.2, 4) * np.r_[w, h, w, h]
-        crops[i] = vo.crop_boxes(img, boxes[i:i + 1], vo.BOX_MARGIN)[0]
+        crops[i] = vo.crop_boxes(img, boxes[i:i + 1])[0]
     return crops, vo.offsets(boxes, gt).astype(np.float32), boxes, gt
 
 
@@ -141,16 +141,17 @@ def _random_params(rng, box=True, box_outputs=4):
     p.update(dense_w=rng.normal(0, np.sqrt(2 / (nflat + 2)), (nflat + 2, 16)).astype(np.float32),
              dense_b=rng.normal(0, 0.1, 16).astype(np.float32), out_w=rng.normal(0, 1, 16).astype(np.float32),
              out_b=np.zeros(1, np.float32), extra_mean=np.float32([1.5, 2.0]), extra_scale=np.float32([1.0, 0.5]))
-    if box:
+    if box:   # and a crop margin other than the default: the core must take the file's
         p.update(box_w=rng.normal(0, 0.1, (16, box_outputs)).astype(np.float32),
-                 box_b=rng.normal(0, 0.05, box_outputs).astype(np.float32))
+                 box_b=rng.normal(0, 0.05, box_outputs).astype(np.float32), crop_margin=np.float32([0.2]))
     return p
 
 
 def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     """A network with the box output (`box`, N x 4): the core (cv::dnn of Debian's OpenCV), cv2.dnn and the
     trainer's numpy forward pass give every cascade group of a validation image the same probability and the
-    same refined box (l + d0 w, t + d1 h, r + d2 w, b + d3 h) from the crop of the group's own box; the refined
+    same refined box (l + d0 w, t + d1 h, r + d2 w, b + d3 h) from the crop of the group's own box (with the
+    crop margin the file carries, here 0.2); the refined
     boxes are what the stage reports (before its suppression), and `cascade.refine_boxes: false` keeps the
     groups' boxes."""
     pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
@@ -176,9 +177,11 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     n = np.rint(half * groups[:, 4] / (1 - groups[:, 4]))
     assert len(groups) > 64 and len(core) == len(groups) == len(as_is)
     boxes = groups[:, :4].astype(float)
-    z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(params)))
+    back = vo.load_onnx(str(path))
+    assert vo.crop_margin(back) == pytest.approx(0.2)   # float32 in the file, as the core reads it
+    z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(back)))
     extra = geometry_features(boxes, n, horizon, cfg["camera"]["height_m"])
-    p, d = vo.forward(vo.load_onnx(str(path)), z, extra, box=True)
+    p, d = vo.forward(back, z, extra, box=True)
     assert np.abs(p - core[:, 4]).max() < 1e-3
     moved = vo.refine(boxes, d)
     assert np.abs(moved - core[:, :4]).max() < 0.05   # px
@@ -187,8 +190,9 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     net = cv2.dnn.readNetFromONNX(str(path))
     net.setInput(z, "crop")
     net.setInput(extra.astype(np.float32), "extra")
-    pd, dd = net.forward(["p", "box"])
+    pd, dd, margin = net.forward(["p", "box", "margin"])
     assert np.abs(pd.ravel() - p).max() < 1e-4 and np.abs(dd - d).max() < 1e-4
+    assert np.allclose(margin, 0.2)
 
 
 @pytest.mark.parametrize("outputs", [3, 5])

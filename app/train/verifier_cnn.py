@@ -262,6 +262,8 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
     t1 = time.perf_counter()
 
     def on_epoch(ep, params, loss, secs):   # the ONNX after every epoch: a stopped run leaves the last one
+        if box:
+            params["crop_margin"] = np.float32([margin])
         vo.save_onnx(params, out, doc=f"headway train verifier --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
         ph, dh = predict(params, d["crops"][held], d["extra"][held], box=True)
         log(f"epoch {ep + 1}/{epochs}: loss {loss:.4f}, held-out others passed at {'/'.join(map(str, KEEP))} of "
@@ -271,6 +273,8 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
 
     params = fit(d["crops"][~held], d["extra"][~held], fit_y[~held], channels, hidden, epochs, decay=decay, seed=seed,
                  on_epoch=on_epoch, target=None if target is None else target[~held])
+    if box:
+        params["crop_margin"] = np.float32([margin])
     log(f"fit {(time.perf_counter() - t1) / 60:.1f} min, total {(time.perf_counter() - t0) / 60:.1f} min -> {out} "
         f"({Path(out).stat().st_size / 1024:.0f} KiB)")
     return params

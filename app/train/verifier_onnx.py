@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 CROP_W, CROP_H = 48, 32   # px: the cascade's aspect 1.5; a 40 px box (the scored band's smallest) at ~1:1
-MARGIN = 0.1              # of the box's width (height) added left and right (top and bottom)
-BOX_MARGIN = 0.1          # the same for a network with the box output (the core tells them by that output)
+MARGIN = 0.1              # of the box's width (height) added left and right (top and bottom); a network with
+                          # the box output carries its own (`crop_margin`, output `margin`), read by the core
 OPSET = 11                # read by OpenCV 4.6's ONNX importer
 
 
@@ -50,8 +50,8 @@ def crop_boxes(gray: np.ndarray, boxes, margin: float = MARGIN) -> np.ndarray:
 
 
 def crop_margin(params: dict) -> float:
-    """The crop margin the network was trained with: BOX_MARGIN with the box output, else MARGIN."""
-    return BOX_MARGIN if "box_w" in params else MARGIN
+    """The crop margin the network was trained with: its `crop_margin` (networks with the box output), else MARGIN."""
+    return float(np.asarray(params["crop_margin"]).ravel()[0]) if "crop_margin" in params else MARGIN
 
 
 def standardise(crops: np.ndarray) -> np.ndarray:
@@ -107,7 +107,9 @@ def offsets(boxes, targets) -> np.ndarray:
 
 def save_onnx(params: dict, path: str, doc: str = "") -> None:
     """Write the network as ONNX (opset 11): inputs `crop` (N, 1, H, W) and `extra` (N, 2), outputs `p` (N, 1)
-    and, when the parameters hold the box output (`box_w`, `box_b`), `box` (N, 4).
+    and, when the parameters hold the box output (`box_w`, `box_b`), `box` (N, 4) and `margin` (N, 1): the crop
+    margin it was trained with (`crop_margin`, default MARGIN), a constant the core reads once when it loads
+    the file (cv::dnn exposes no other way to carry a number in the file).
     The extra features' standardisation is folded into the dense layer: W_e' = scale_e W_e,
     b' = b - (mean_e scale_e) . W_e."""
     import onnx
@@ -145,8 +147,12 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
     outputs = [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, 1])]
     if "box_w" in p:
         init += [numpy_helper.from_array(p["box_w"].T.copy(), "box_w"), numpy_helper.from_array(p["box_b"], "box_b")]
-        nodes.append(helper.make_node("Gemm", ["h", "box_w", "box_b"], ["box"], transB=1))
-        outputs.append(helper.make_tensor_value_info("box", TensorProto.FLOAT, [1, 4]))
+        init += [numpy_helper.from_array(np.zeros((1, len(p["dense_b"])), np.float32), "margin_w"),
+                 numpy_helper.from_array(np.float32([crop_margin(p)]), "margin_b")]
+        nodes += [helper.make_node("Gemm", ["h", "box_w", "box_b"], ["box"], transB=1),
+                  helper.make_node("Gemm", ["h", "margin_w", "margin_b"], ["margin"], transB=1)]
+        outputs += [helper.make_tensor_value_info("box", TensorProto.FLOAT, [1, 4]),
+                    helper.make_tensor_value_info("margin", TensorProto.FLOAT, [1, 1])]
     graph = helper.make_graph(
         nodes, "headway_vehicle_verifier",
         [helper.make_tensor_value_info("crop", TensorProto.FLOAT, [1, 1, CROP_H, CROP_W]),
@@ -171,5 +177,5 @@ def load_onnx(path: str) -> dict:
     out.update(dense_w=np.r_[w["dense_w"].T, w["dense_we"].T], out_w=w["out_w"].ravel(), out_b=w["out_b"],
                extra_mean=np.zeros(2, np.float32), extra_scale=np.ones(2, np.float32))
     if "box_w" in w:
-        out.update(box_w=w["box_w"].T.copy(), box_b=w["box_b"])
+        out.update(box_w=w["box_w"].T.copy(), box_b=w["box_b"], crop_margin=w["margin_b"])
     return out

@@ -19,12 +19,12 @@ CnnVerifier::CnnVerifier(const std::string &path) {
         throw std::invalid_argument("cascade.verifier: '" + path + "' holds no network");
     net_.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
     net_.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
-    // outputs: "p" alone (session 3's form) or "p" and "box"; anything else is not a verifier network
+    // outputs: "p" alone (session 3's form) or "p", "box" and "margin"; anything else is not a verifier network
     std::vector<cv::String> names = net_.getUnconnectedOutLayersNames();
     std::sort(names.begin(), names.end());
     const std::string form = "inputs crop (N, 1, " + std::to_string(kCropH) + ", " + std::to_string(kCropW) +
-                             ") and extra (N, 2), outputs p (N, 1) and optionally box (N, 4)";
-    has_box_ = names == std::vector<cv::String>{"box", "p"};
+                             ") and extra (N, 2), outputs p (N, 1), optionally with box (N, 4) and margin (N, 1)";
+    has_box_ = names == std::vector<cv::String>{"box", "margin", "p"};
     if (!has_box_ && names != std::vector<cv::String>{"p"}) {
         std::string got;
         for (const auto &n : names) got += (got.empty() ? "" : ", ") + n;
@@ -32,12 +32,20 @@ CnnVerifier::CnnVerifier(const std::string &path) {
                                     "; it has the outputs " + got + "); train one with `headway train verifier --out X.onnx`");
     }
     outs_ = has_box_ ? std::vector<cv::String>{"p", "box"} : std::vector<cv::String>{"p"};
-    margin_ = has_box_ ? kBoxMargin : kMargin;
-    // one probe: the file must take a crop and the two extra features and give one probability (and 4 offsets)
+    // one probe: the file must take a crop and the two extra features and give one probability (and 4 offsets,
+    // and its crop margin)
     try {
+        const cv::Mat probe(kCropH * 4, kCropW * 4, CV_8UC1, cv::Scalar(128));
+        if (has_box_) {
+            net_.setInput(cv::Mat(std::vector<int>{1, 1, kCropH, kCropW}, CV_32F, cv::Scalar(0)), "crop");
+            net_.setInput(cv::Mat(1, 2, CV_32F, cv::Scalar(1)), "extra");
+            const cv::Mat m = net_.forward("margin");
+            if (m.total() != 1 || !(m.at<float>(0) >= 0.f && m.at<float>(0) <= 1.f))
+                throw std::runtime_error("output margin is not one value in 0..1");
+            margin_ = m.at<float>(0);
+        }
         cv::Mat offsets;
-        const auto p = run(cv::Mat(kCropH * 4, kCropW * 4, CV_8UC1, cv::Scalar(128)), {cv::Rect2f(10.f, 10.f, 60.f, 40.f)},
-                           {3}, 0.0, 1.5, &offsets);
+        const auto p = run(probe, {cv::Rect2f(10.f, 10.f, 60.f, 40.f)}, {3}, 0.0, 1.5, &offsets);
         if (p.size() != 1 || !(p[0] >= 0.f && p[0] <= 1.f)) throw std::runtime_error("no probability");
     } catch (const std::exception &e) {
         throw std::invalid_argument("cascade.verifier: '" + path + "' is not a verifier network (" + form + "): " +

@@ -3,14 +3,15 @@
 // Trained by `headway train verifier --out X.onnx` (app/train/verifier_cnn.py, JAX) and written as ONNX
 // (app/train/verifier_onnx.py, which also holds the network's equations). Its inputs, computed here exactly
 // as the trainer computes them:
-// - crop (N, 1, kCropH, kCropW): the box widened by kMargin of its size each side, rounded to whole pixels
+// - crop (N, 1, kCropH, kCropW): the box widened by kMargin (or the file's margin) of its size each side, rounded to whole pixels
 //   (floor(v + 0.5)), the part outside the image filled by replicating the border, resized to kCropW x kCropH
 //   (INTER_AREA), standardised by its own mean and standard deviation, z = (c - mean) / (std + 1);
 // - extra (N, 2): log(1 + n) of the n raw cascade windows grouped, and implied_vehicle_height.
 // Outputs: p (N, 1), the probability that the box holds a vehicle, and, in a network trained with it (session
 // 5), box (N, 4): offsets d that move the box's edges onto the vehicle's,
 //     l' = l + d0 w,   t' = t + d1 h,   r' = r + d2 w,   b' = b + d3 h    (w, h: the box's width and height)
-// (verifier_onnx.refine). All the boxes of a frame go through the network in one batch.
+// (verifier_onnx.refine), with margin (N, 1): the crop margin it was trained with, a constant read once by the
+// probe (it replaces kMargin for that file). All the boxes of a frame go through the network in one batch.
 #pragma once
 
 #include "detect/vehicle_verifier.hpp"
@@ -22,8 +23,8 @@ namespace hw {
 class CnnVerifier : public VehicleVerifier {
 public:
     static constexpr int kCropW = 48, kCropH = 32;  // px: the cascade's aspect 1.5
-    static constexpr double kMargin = 0.1;          // of the box's width (height) added each side: context
-    static constexpr double kBoxMargin = 0.1;       // the same for a network with the box output (BOX_MARGIN)
+    static constexpr double kMargin = 0.1;  // of the box's width (height) added each side: context (networks
+                                            // with the box output carry their own: output "margin")
 
     explicit CnnVerifier(const std::string &path);  // throws std::invalid_argument naming the file
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
@@ -42,7 +43,7 @@ private:
 
     mutable cv::dnn::Net net_;  // forward() is not const; one verifier serves one pipeline thread
     bool has_box_ = false;      // the file has the box output ("box", N x 4)
-    double margin_ = kMargin;   // of the box's size added each side of the crop: kBoxMargin with the box output
+    double margin_ = kMargin;   // of the box's size added each side of the crop: the file's "margin" output, if any
     std::vector<cv::String> outs_;  // output names asked of forward(): {"p"} or {"p", "box"}
 };
 
