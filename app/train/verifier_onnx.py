@@ -177,5 +177,5 @@ def load_onnx(path: str) -> dict:
     out.update(dense_w=np.r_[w["dense_w"].T, w["dense_we"].T], out_w=w["out_w"].ravel(), out_b=w["out_b"],
                extra_mean=np.zeros(2, np.float32), extra_scale=np.ones(2, np.float32))
     if "box_w" in w:
-        out.update(box_w=w["box_w"].T.copy(), box_b=w["box_b"], crop_margin=w["margin_b"])
+        out.update(box_w=w["box_w"].T.copy(), box_b=w["box_b"], crop_margin=w.get("margin_b", np.float32([MARGIN])))
     return out

@@ -100,8 +100,8 @@ struct CascadeParams {
               "neighbors_half); 0 = every group verified");
         m.add("max_groups", max_groups, 0, 10000,
               "groups; only this many are kept and verified: those whose strongest raw window has the highest "
-              "last-stage sum (the order they are grouped in); 0 = all. The CNN verifier costs ~0.12 ms a group, and "
-              "it was trained on the first 64 groups of each training image; 96 measured as good as all at high "
+              "last-stage sum (the order they are grouped in); 0 = all. The CNN verifier costs ~0.12 ms a group; with "
+              "session 3's verifier (trained on the first 64 groups of each training image) 96 measured as good as all at high "
               "precision on held-out training images and saves ~5 ms a 1280x720 frame, but the cascade preset then warned once on "
               "project_video_cut.mp4 (2.56 s; docs/cascade.md), so it is off by default");
         m.add("refine_boxes", refine_boxes,
