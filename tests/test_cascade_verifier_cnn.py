@@ -22,7 +22,7 @@ def _dnn_probability(path, z, extra):
     net = cv2.dnn.readNetFromONNX(str(path))
     net.setInput(z, "crop")
     net.setInput(extra.astype(np.float32), "extra")
-    return net.forward().ravel()
+    return net.forward("p").ravel()
 
 
 def _bars(rng, n):
@@ -116,16 +116,20 @@ def test_core_and_cv2_dnn_give_the_trainers_probability():
     off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
         r = pipe.run_stage("cascade", gray)
-        # the same groups without the verifier: confidence n / (n + neighbors_half) gives their window counts
+        # the same groups without the verifier: confidence n / (n + neighbors_half) gives their window counts, and
+        # their boxes are what the verifier crops (the shipped one, with its box output, then moves them)
         half = off["cascade"]["neighbors_half"]
-        n = [round(half * t.confidence / (1 - t.confidence)) for t in plain.run_stage("cascade", gray).tracks]
+        groups = plain.run_stage("cascade", gray).tracks
+        n = [round(half * t.confidence / (1 - t.confidence)) for t in groups]
     assert len(r.tracks) >= 10 and len(n) == len(r.tracks)
-    boxes = [t.box for t in r.tracks]
-    z = vo.standardise(vo.crop_boxes(gray, boxes))
+    boxes = [t.box for t in groups]
+    params = vo.load_onnx(str(SHIPPED_CNN))
+    z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(params)))
     extra = geometry_features(boxes, n, r.horizon_row, cfg["camera"]["height_m"])
-    p = vo.forward(vo.load_onnx(str(SHIPPED_CNN)), z, extra)
+    p, d = vo.forward(params, z, extra, box=True)
     assert np.abs(p - np.array([t.confidence for t in r.tracks])).max() < 1e-3
     assert np.abs(p - _dnn_probability(SHIPPED_CNN, z, extra)).max() < 1e-3
+    assert np.abs(vo.refine(boxes, d) - np.array([t.box for t in r.tracks])).max() < 0.05   # px
     assert p.min() < 0.5 < p.max()   # it tells the boxes apart
 
 
