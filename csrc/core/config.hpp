@@ -45,7 +45,8 @@ struct PipelineParams {
               "phd: feature points by a GM-PHD filter and a UKF per vehicle, paper 004), cascade (detector cascade: the "
               "trained Haar cascade; tracker phd: paper 004), fused (detectors cascade, shadow and parallax, their "
               "hypotheses merged and verified once; tracker kalman), cascade_shadow_phd (detectors cascade and shadow, "
-              "merged and verified once, a cascade-only vehicle kept at verifier probability >= 0.9; tracker phd), the "
+              "merged and verified once, a cascade-only vehicle kept at verifier probability >= 0.9 within two lanes of "
+              "the ego lane; tracker phd), the "
               "crossed parallax_kalman and shadow_particles, none (lanes only). A preset may also set other keys "
               "(`headway config doc`, Presets); a key the configuration sets itself wins");
         m.add("detectors", detectors, detector_choices(),

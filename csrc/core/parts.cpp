@@ -56,8 +56,10 @@ const std::map<std::string, Preset> &presets() {
         {"cascade", {{{"cascade"}, "phd"}}},
         {"fused", {{{"cascade", "shadow", "parallax"}, "kalman"}}},
         // The cascade's and the shadow detector's hypotheses merged, tracked by phd: a vehicle only the cascade
-        // found is kept when its verifier probability is >= 0.9 (docs/RESULTS.md, "One preset for both bars").
-        {"cascade_shadow_phd", {{{"cascade", "shadow"}, "phd"}, {{"merge", {{"min_appearance", 0.9}}}}}},
+        // found is kept when its verifier probability is >= 0.9 and it stands within two lanes of the ego lane
+        // (docs/RESULTS.md, "Preset `cascade_shadow_phd`").
+        {"cascade_shadow_phd",
+         {{{"cascade", "shadow"}, "phd"}, {{"merge", {{"min_appearance", 0.9}, {"appearance_lanes", 2}}}}}},
         {"none", {{{}, ""}}},
     };
     return r;
