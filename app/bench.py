@@ -31,10 +31,8 @@ def run_bench(scenario: str = "dense_traffic", preset: Optional[str] = None, wid
     sc = load_scenario(scenario)
     frames = [(f.image, f.t_s) for f in render(sc, camera_overrides={"width": width, "height": height,
                                                                        "cx": width / 2, "cy": height / 2})]
-    cfg = configuration.load(config_path)
+    cfg = configuration.load(config_path, {"pipeline": {"preset": preset}} if preset else None)
     cfg["camera"].update(width=width, height=height, cx=width / 2, cy=height / 2)
-    if preset:
-        cfg["pipeline"]["preset"] = preset
     per_kind: dict[str, dict[str, list[float]]] = {"all": {}, "full_detection": {}, "tracking_only": {}}
     for _ in range(repeats):
         with Pipeline(configuration.core_sections(cfg)) as p:

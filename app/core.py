@@ -254,7 +254,14 @@ def core_schema() -> dict:
     """Every key the core knows: {section: {key: {default, type, min, max, doc}}}."""
     described = _config_json(ffi.NULL)
     described.pop("moved_keys")
+    described.pop("presets")
     return described
+
+
+def core_presets() -> dict[str, dict]:
+    """The named compositions: {name: {"detectors": [...], "tracker": str, "keys": {section: {key: value}}}};
+    "keys" are the preset's own defaults, which a configuration's own values override."""
+    return _config_json(ffi.NULL)["presets"]
 
 
 def core_moved_keys() -> dict[str, str]:

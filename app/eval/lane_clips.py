@@ -44,9 +44,8 @@ def clip_frames(labelled: Path) -> list[Path]:
 def lane_config(config_path: Optional[str], preset: str, width: int, height: int) -> dict:
     """The core configuration for TuSimple's lane camera at width x height (the camera config must match the
     frame size: TuSimple's 1280x720 camera scaled)."""
-    cfg = tusimple_config(configuration.load(config_path), TUSIMPLE_LANE_PITCH_DEG)
+    cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}}), TUSIMPLE_LANE_PITCH_DEG)
     cfg["camera"] = configuration.scaled_camera(cfg["camera"], width, height)
-    cfg["pipeline"]["preset"] = preset
     return configuration.core_sections(cfg)
 
 

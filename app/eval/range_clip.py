@@ -17,8 +17,7 @@ def evaluate(clip_dir: str, config_path: Optional[str] = None, preset: str = "th
     root = Path(clip_dir)
     frames = sorted((root / "imgs").glob("*.jpg"))
     ann = json.loads((root / "annotation.json").read_text())
-    cfg = tusimple_config(configuration.load(config_path))
-    cfg["pipeline"]["preset"] = preset
+    cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}}))
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for i, path in enumerate(frames):
             r = pipe.process(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), i / fps)

@@ -65,11 +65,10 @@ def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = N
     pipes, states = [], []
     for run in runs:
         off = dict(OFFSETS, **(run.get("offsets") or {}))
-        cfg = configuration.load(None)
+        cfg = configuration.load(None, {"pipeline": {"preset": preset}})
         cfg["camera"].update(true)
         cfg["camera"].update(pitch_deg=true["pitch_deg"] + off["pitch_deg"], yaw_deg=true["yaw_deg"] + off["yaw_deg"],
                              height_m=true["height_m"] * (1.0 + off["height_rel"]))
-        cfg["pipeline"]["preset"] = preset
         cfg["self_calibration"]["enabled"] = run.get("enabled", True)
         cfg["self_calibration"].update(run.get("self_calibration") or {})
         cfg["road"].update(run.get("road") or {})

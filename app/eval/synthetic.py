@@ -24,9 +24,8 @@ def evaluate_scenario(name: str, preset: str, config_path: Optional[str] = None,
     from app.sim.frames import scenario_camera
 
     sc = load_scenario(name)
-    cfg = configuration.load(config_path)
+    cfg = configuration.load(config_path, {"pipeline": {"preset": preset}})
     cfg["camera"].update(dataclasses.asdict(scenario_camera(sc)))
-    cfg["pipeline"]["preset"] = preset
     score = TrackScorer(max_range_m, min_visible)
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for f in render(sc):

@@ -106,12 +106,10 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
              on_image: Optional[Callable] = None) -> dict:
     root = Path(supp_dir)
     entries = load_entries(supp_dir, limit)
-    cfg = tusimple_config(configuration.load(config_path))
     # "cascade" (the trained Haar cascade alone) and "fused" (cascade + shadows) are single-image stages,
     # not tracking presets
     stage = preset if preset in ("cascade", "fused") else "detect"
-    if stage == "detect":
-        cfg["pipeline"]["preset"] = preset
+    cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}} if stage == "detect" else None))
     scored = []
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for e in entries:

@@ -254,9 +254,10 @@ int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *need
         require(needed, "needed");
         nlohmann::json j;
         if (p) j = p->config.to_json();
-        else {  // no pipeline: describe every key with its default, and the keys that moved
+        else {  // no pipeline: describe every key with its default, the keys that moved, the presets
             j = hw::Config().describe();
             j["moved_keys"] = hw::Config::moved_keys();
+            j["presets"] = hw::describe_presets();
         }
         const std::string s = j.dump();
         *needed = int32_t(s.size() + 1);

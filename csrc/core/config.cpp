@@ -64,6 +64,24 @@ void reject_moved_keys(const json &root) {
                               " (one definition for every stage); set " + m.to + " instead");
 }
 
+// The preset's own keys (core/parts.cpp) fill in what the configuration leaves out: {"merge":
+// {"min_appearance": 0.9}} for cascade_shadow_phd unless the configuration sets merge.min_appearance. A
+// section given as something other than a mapping is left for read_section to report.
+void fill_preset_keys(json &root) {
+    std::string preset = PipelineParams{}.preset;
+    if (root.contains("pipeline") && root.at("pipeline").is_object() && root.at("pipeline").contains("preset") &&
+        root.at("pipeline").at("preset").is_string())
+        preset = root.at("pipeline").at("preset").get<std::string>();
+    const json own = preset_keys(preset);  // kept alive: items() refers to it
+    for (const auto &[section, keys] : own.items()) {
+        if (!root.contains(section)) root[section] = json::object();
+        json &given = root[section];
+        if (!given.is_object()) continue;
+        for (const auto &[key, value] : keys.items())
+            if (!given.contains(key)) given[key] = value;
+    }
+}
+
 // The road section is read once and handed to every unit that uses it (their `road` member).
 void share_road(Config &c) {
     for (RoadParams *r : {&c.lanes.assembly.road, &c.shadow.road.road, &c.cascade.road.road, &c.lead.road,
@@ -88,6 +106,7 @@ Config Config::from_json(const std::string &text) {
     }
     if (!root.is_object()) throw ConfigError("configuration: expected a mapping of sections");
     reject_moved_keys(root);
+    fill_preset_keys(root);
     Config c;
     std::vector<std::string> known;
     for_each_section(c, [&](const char *name, auto &params) {

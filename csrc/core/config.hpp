@@ -44,8 +44,11 @@ struct PipelineParams {
               "+ aligned difference; tracker particles: joint particle filter, paper 000), phd (detector shadow; tracker "
               "phd: feature points by a GM-PHD filter and a UKF per vehicle, paper 004), cascade (detector cascade: the "
               "trained Haar cascade; tracker phd: paper 004), fused (detectors cascade, shadow and parallax, their "
-              "hypotheses merged and verified once; tracker kalman), the crossed parallax_kalman and shadow_particles, "
-              "none (lanes only)");
+              "hypotheses merged and verified once; tracker kalman), cascade_shadow_phd (detectors cascade and shadow, "
+              "merged and verified once, a cascade-only vehicle kept at verifier probability >= 0.9 within two lanes of "
+              "the ego lane; tracker phd), the "
+              "crossed parallax_kalman and shadow_particles, none (lanes only). A preset may also set other keys "
+              "(`headway config doc`, Presets); a key the configuration sets itself wins");
         m.add("detectors", detectors, detector_choices(),
               "detector parts that replace the preset's: a list, or names separated by commas, e.g. [shadow, parallax]; "
               "empty: the preset's. A part that needs the road's motion (parallax) makes the road-motion stage run; "

@@ -39,17 +39,28 @@ const std::map<std::string, Factory<Tracker>> &trackers() {
     return r;
 }
 
+// A named composition, and the keys it sets ({section: {key: value}}; a configuration's own value wins).
+struct Preset {
+    Composition parts;
+    nlohmann::json keys = nlohmann::json::object();
+};
+
 // The named compositions.
-const std::map<std::string, Composition> &presets() {
-    static const std::map<std::string, Composition> r{
-        {"thesis", {{"shadow"}, "kalman"}},
-        {"parallax", {{"parallax"}, "particles"}},
-        {"parallax_kalman", {{"parallax"}, "kalman"}},
-        {"shadow_particles", {{"shadow"}, "particles"}},
-        {"phd", {{"shadow"}, "phd"}},
-        {"cascade", {{"cascade"}, "phd"}},
-        {"fused", {{"cascade", "shadow", "parallax"}, "kalman"}},
-        {"none", {{}, ""}},
+const std::map<std::string, Preset> &presets() {
+    static const std::map<std::string, Preset> r{
+        {"thesis", {{{"shadow"}, "kalman"}}},
+        {"parallax", {{{"parallax"}, "particles"}}},
+        {"parallax_kalman", {{{"parallax"}, "kalman"}}},
+        {"shadow_particles", {{{"shadow"}, "particles"}}},
+        {"phd", {{{"shadow"}, "phd"}}},
+        {"cascade", {{{"cascade"}, "phd"}}},
+        {"fused", {{{"cascade", "shadow", "parallax"}, "kalman"}}},
+        // The cascade's and the shadow detector's hypotheses merged, tracked by phd: a vehicle only the cascade
+        // found is kept when its verifier probability is >= 0.9 and it stands within two lanes of the ego lane
+        // (docs/RESULTS.md, "Preset `cascade_shadow_phd`").
+        {"cascade_shadow_phd",
+         {{{"cascade", "shadow"}, "phd"}, {{"merge", {{"min_appearance", 0.9}, {"appearance_lanes", 2}}}}}},
+        {"none", {{{}, ""}}},
     };
     return r;
 }
@@ -82,7 +93,7 @@ Composition composition_of(const PipelineParams &p) {
     const auto preset = presets().find(p.preset);
     if (preset == presets().end())
         throw ConfigError("pipeline.preset: unknown preset '" + p.preset + "' (one of " + preset_choices() + ")");
-    Composition c = preset->second;
+    Composition c = preset->second.parts;
     if (!p.detectors.empty()) c.detectors = p.detectors;
     if (!p.tracker.empty()) c.tracker = p.tracker == "none" ? "" : p.tracker;
     std::set<std::string> seen;
@@ -100,6 +111,18 @@ Composition composition_of(const PipelineParams &p) {
         throw ConfigError("pipeline.detectors: detectors need a tracker: set pipeline.tracker (one of " +
                           joined(trackers()) + ") or a preset that has one");
     return c;
+}
+
+nlohmann::json preset_keys(const std::string &preset) {
+    const auto it = presets().find(preset);
+    return it == presets().end() ? nlohmann::json::object() : it->second.keys;
+}
+
+nlohmann::json describe_presets() {
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto &[name, p] : presets())
+        out[name] = {{"detectors", p.parts.detectors}, {"tracker", p.parts.tracker}, {"keys", p.keys}};
+    return out;
 }
 
 Parts make_parts(const Config &cfg) {

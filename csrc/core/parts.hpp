@@ -3,13 +3,16 @@
 // A pipeline is composed of detector parts (detect/detector.hpp) and one tracker part
 // (track/tracker.hpp); the road-motion stage (road/road_motion_stage.hpp) runs when one of the parts
 // needs it. The configuration names the parts: pipeline.preset picks a named composition,
-// pipeline.detectors and pipeline.tracker, when set, replace the preset's detectors or tracker.
+// pipeline.detectors and pipeline.tracker, when set, replace the preset's detectors or tracker. A
+// preset may also set keys of other sections (its defaults; the configuration's own value wins).
 // One registry per role, in parts.cpp: adding a part is one file and one line there.
 #pragma once
 
 #include "detect/detector.hpp"
 #include "road/road_motion_stage.hpp"
 #include "track/tracker.hpp"
+
+#include <nlohmann/json.hpp>
 
 #include <memory>
 #include <string>
@@ -32,6 +35,13 @@ struct Composition {
     std::string tracker;  // empty: no tracker (lanes only)
 };
 Composition composition_of(const PipelineParams &p);
+
+// The keys a preset sets, {section: {key: value}}: defaults for that preset that a configuration still
+// overrides key by key (Config::from_json fills them in where the configuration has none). Empty for a
+// preset that sets none, or an unknown name (composition_of reports that).
+nlohmann::json preset_keys(const std::string &preset);
+// Every preset: {name: {"detectors": [...], "tracker": "...", "keys": {section: {key: value}}}}.
+nlohmann::json describe_presets();
 
 // The parts of a configuration, built.
 struct Parts {

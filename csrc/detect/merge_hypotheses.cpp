@@ -33,6 +33,15 @@ float road_gray_below(const cv::Mat &gray, const cv::Rect2f &b) {
     return float(cv::mean(gray(strip))[0]);
 }
 
+// Whether a bottom centre (u, y) lies on the ego lane or within `lanes_beside` lane widths of it; true when
+// the lane model does not say.
+bool near_ego_lane(const LaneModel &lanes, float u, float y, int lanes_beside) {
+    const float l = lanes.ego_left.x_at(y), r = lanes.ego_right.x_at(y);
+    if (!lanes.valid || !std::isfinite(l) || !std::isfinite(r) || !(r > l)) return true;
+    const float w = r - l;
+    return u >= l - float(lanes_beside) * w && u <= r + float(lanes_beside) * w;
+}
+
 struct Group {
     Hypothesis anchor;
     std::vector<const char *> sources;  // the detectors of its members, each once
@@ -72,9 +81,11 @@ std::vector<Hypothesis> HypothesisMerge::merge_and_verify(const RoadContext &ctx
     std::vector<const char *> source;
     for (const Group &g : groups) {
         const bool shadow_edge = std::isfinite(g.anchor.road_gray);
-        if (!shadow_edge && g.sources.size() < 2 && g.appearance < float(p_.min_appearance)) continue;
+        const bool appearance_only = !shadow_edge && g.sources.size() < 2;
+        if (appearance_only && g.appearance < float(p_.min_appearance)) continue;
         const cv::Rect2f &b = g.anchor.box;
         const float bottom = bottom_of(b);
+        if (appearance_only && !near_ego_lane(ctx.lanes, b.x + 0.5f * b.width, bottom, p_.appearance_lanes)) continue;
         // The anchor as the verification's bottom edge (its box's height is not used).
         ShadowHypothesis s;
         s.box = cv::Rect2f(b.x, bottom - 0.5f * b.width, b.width, 0.5f * b.width);

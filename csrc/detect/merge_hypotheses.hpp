@@ -6,7 +6,9 @@
 // at least span_iou (1-D IoU). A merged vehicle takes its bottom edge and sides from its anchor, the
 // member with the most precise bottom: a measured shadow edge (road_gray known), else a learned
 // appearance (the cascade's box), else any (a parallax region). A vehicle without a shadow edge that
-// one detector alone found needs a cascade score of at least min_appearance.
+// one detector alone found needs a cascade score of at least min_appearance, and to stand on the ego lane
+// or within appearance_lanes lane widths of it (with a lane model: x_l(y) - k w(y) <= u <= x_r(y) + k w(y)
+// at its bottom row y, w the ego lane's width there).
 // Then ONE verification, the shadow detector's (verify.hpp, verify_one): the vehicle width expected
 // at the bottom row (road_prior.hpp, from the lane model or the flat-road camera), two vertical-edge
 // sides standing out against the road, the road's texture under the bottom edge (standing on the
@@ -33,6 +35,7 @@ struct MergeParams {
     double span_iou = 0.5;           // 1-D IoU of the column spans, at least, for one vehicle
     double appearance_weight = 1.0;  // w: share of the cascade's score added as independent evidence
     double min_appearance = 1.0;     // a vehicle without a shadow edge, found by one detector: its cascade score, at least (1: never)
+    int appearance_lanes = 4;        // lanes; such a vehicle stands on the ego lane or at most this many lanes beside it
 
     void bind(ParamMap &m) {
         m.add("bottom_tol", bottom_tol, 0.0, 2.0,
@@ -47,6 +50,12 @@ struct MergeParams {
               "a vehicle among whose hypotheses is no shadow edge and that one detector alone found (the cascade or "
               "the parallax difference) is kept only if its cascade score c reaches this (a parallax region alone has "
               "c = 0); two detectors agreeing, or a shadow edge, need no appearance; 0 keeps every verified vehicle");
+        m.add("appearance_lanes", appearance_lanes, 0, 4,
+              "lanes; a vehicle kept by min_appearance alone (no shadow edge, one detector) must stand on the ego lane "
+              "or at most this many lane widths beside it (its bottom centre, the ego lane's width at that row; not "
+              "checked without a lane model); 4: not narrower than the scan (shadow.adjacent_lanes 2). Preset "
+              "cascade_shadow_phd sets 2: with 4 the cascade's boxes on the synthetic roadside bushes beyond the verge "
+              "became vehicles, with 1 a pre-warning came back on solidWhiteRight (docs/RESULTS.md)");
     }
 };
 

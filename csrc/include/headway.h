@@ -188,7 +188,8 @@ void hw_pipeline_destroy(hw_pipeline *p);
 /* The effective configuration (every key the core knows, with the value in use) as JSON, written
  * into buf with its terminating zero. *needed receives the size required; HW_ERR_INVALID_ARGUMENT
  * if buf_len is smaller. p NULL: every key described ({section: {key: {default, type, min, max, doc}}})
- * and "moved_keys": {"old_section.key": "new_section.key"}. */
+ * "moved_keys": {"old_section.key": "new_section.key"} and "presets": {name: {"detectors": [...],
+ * "tracker": "...", "keys": {section: {key: value}}}} (the keys a preset sets unless the configuration does). */
 int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *needed);
 
 /* Offline: run the same per-frame code as the real-time loop on one 8-bit gray frame.
