@@ -242,15 +242,21 @@ SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.
 # split (docs/cascade.md); the HOG network stays shipped as the alternative (cascade.verifier: its path).
 SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.onnx"
 SHIPPED_HOG_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml.gz"
+# The verifier of a tracked pipeline: session 3's CNN, on which the trackers were tuned (cascade.tracked_verifier;
+# docs/cascade.md, sessions 5-6: session 5's network, better on single images, made the cascade presets warn).
+SHIPPED_TRACKED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier_tracked.onnx"
 
 
 def core_sections(cfg: dict) -> dict:
-    """The part of a validated configuration that the C++ core takes (cascade.model empty: the shipped one)."""
+    """The part of a validated configuration that the C++ core takes (cascade.model, verifier and tracked_verifier
+    empty: the shipped ones)."""
     core = {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
     if "cascade" in core and not core["cascade"].get("model"):
         core["cascade"]["model"] = str(SHIPPED_CASCADE)
     if "cascade" in core and not core["cascade"].get("verifier"):
         core["cascade"]["verifier"] = str(SHIPPED_VERIFIER)
+    if "cascade" in core and not core["cascade"].get("tracked_verifier"):
+        core["cascade"]["tracked_verifier"] = str(SHIPPED_TRACKED_VERIFIER)
     return core
 
 

@@ -112,7 +112,8 @@ def test_core_and_cv2_dnn_give_the_trainers_probability():
     supp = data_path("tusimple", "supp")
     entry = json.loads((supp / "annotation.json").read_text())[0]
     gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
-    cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": str(SHIPPED_CNN), "nms_iou": 1.0}}))
+    cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": str(SHIPPED_CNN), "nms_iou": 1.0,
+                                                                "rejudge_refined": False}}))
     off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
         r = pipe.run_stage("cascade", gray)
@@ -168,7 +169,7 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     supp = data_path("tusimple", "supp")
     entry = json.loads((supp / "annotation.json").read_text())[0]
     gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
-    over = {"verifier": str(path), "nms_iou": 1.0}
+    over = {"verifier": str(path), "nms_iou": 1.0, "rejudge_refined": False}
     cfg = tusimple_config(configuration.load(None, {"cascade": over}))
     kept = tusimple_config(configuration.load(None, {"cascade": {**over, "refine_boxes": False}}))
     off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
@@ -197,6 +198,108 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     pd, dd, margin = net.forward(["p", "box", "margin"])
     assert np.abs(pd.ravel() - p).max() < 1e-4 and np.abs(dd - d).max() < 1e-4
     assert np.allclose(margin, 0.2)
+
+
+def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
+    """`cascade.rejudge_refined` (default): each box the box output moved and the first look believes (p >=
+    `rejudge_min_p`) is judged again on its new crop and keeps the lower of the two probabilities; the core's
+    figures are the trainer's forward pass on the group's crop and on the moved box's crop."""
+    pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
+    from app.eval.tusimple_boxes import tusimple_config
+    from app.train.verifier import geometry_features
+
+    path = tmp_path / "box.onnx"
+    vo.save_onnx(_random_params(np.random.default_rng(2)), str(path))
+    supp = data_path("tusimple", "supp")
+    entry = json.loads((supp / "annotation.json").read_text())[0]
+    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": str(path), "nms_iou": 1.0}}))
+    off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
+    assert cfg["cascade"]["rejudge_refined"] is True
+    with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
+        core, horizon = pipe.stage_boxes("cascade", gray)
+        groups, _ = plain.stage_boxes("cascade", gray)
+    n = np.rint(off["cascade"]["neighbors_half"] * groups[:, 4] / (1 - groups[:, 4]))
+    params = vo.load_onnx(str(path))
+    h = cfg["camera"]["height_m"]
+
+    def judge(boxes):
+        z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(params)))
+        return vo.forward(params, z, geometry_features(boxes, n, horizon, h), box=True)
+
+    p, d = judge(groups[:, :4].astype(float))
+    moved = vo.refine(groups[:, :4], d)
+    flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
+    moved[flat] = groups[flat, :4]   # a box the output would turn inside out keeps the group's own (the core's rule)
+    again, _ = judge(moved)
+    assert np.abs(moved - core[:, :4]).max() < 0.05   # px
+    believed = p >= cfg["cascade"]["rejudge_min_p"]   # judged again: what the first look believes
+    assert np.abs(np.where(believed, np.minimum(p, again), p) - core[:, 4]).max() < 1e-3
+    assert (believed & (again < p - 1e-3)).sum() >= 5   # the second look lowers some (so the min is not the first look)
+
+
+def _udacity_frames(name: str):
+    """The clip's first 15 gray frames, its frame rate and the camera fitted to them, as the real-video evaluation
+    (app/eval/real_video_fcw.py) sets it up."""
+    from app.eval.road_motion import fit_horizon, read_video, udacity_camera
+
+    frames, fps = read_video(data_path("udacity", "clips", name), 15)
+    return frames, fps, fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames)
+
+
+def test_an_empty_road_box_the_verifier_believes_is_refused_once_moved():
+    """project_video_cut.mp4, frame 3: the ego lane ahead is empty, yet the shipped verifier judges a group on the
+    road 9 m ahead a vehicle (0.95), and its box output moves it to a box 400 px wide across the lane. Judged again
+    where it stands, that box is refused (measured: nothing >= 0.5 wider than 300 px on frames 2-5)."""
+    frames, _, cam = _udacity_frames("project_video_cut.mp4")
+    values = {"camera": cam, "pipeline": {"preset": "cascade"}}
+    wide = {}
+    for rejudge in (False, True):
+        cfg = configuration.core_sections(configuration.load(None, {**values, "cascade": {"rejudge_refined": rejudge}}))
+        with Pipeline(cfg) as pipe:
+            wide[rejudge] = [[b for b in pipe.stage_boxes("detect", f)[0]
+                              if b[4] >= 0.5 and b[2] - b[0] > 300] for f in frames[2:6]]
+    assert any(b[4] >= 0.9 for boxes in wide[False] for b in boxes), wide[False]
+    assert all(not boxes for boxes in wide[True]), wide[True]
+
+
+def _tracks(frames, fps, values: dict, cascade: dict) -> list:
+    """Every frame's tracks (id, box) of a tracked pipeline over the frames, with the `cascade` keys given."""
+    cfg = configuration.core_sections(configuration.load(None, {**values, "cascade": cascade}))
+    with Pipeline(cfg) as pipe:
+        return [[(t.id, tuple(np.round(t.box, 3))) for t in pipe.process(f, i / fps).tracks]
+                for i, f in enumerate(frames)]
+
+
+def test_tracked_pipelines_judge_with_the_tracked_verifier():
+    """A tracked pipeline judges with `cascade.tracked_verifier` (default: session 3's network, on which the trackers
+    were tuned), single images with `cascade.verifier`: the cascade preset's tracks on a real clip are those of
+    tracked_verifier set to the shipped tracked file, and differ from those with the single-image verifier ("same")."""
+    frames, fps, cam = _udacity_frames("test_small2.mp4")
+    values = {"camera": cam, "pipeline": {"preset": "cascade"}}
+    default = _tracks(frames, fps, values, {})
+    assert sum(len(f) for f in default) >= 10
+    assert default == _tracks(frames, fps, values, {"tracked_verifier": str(configuration.SHIPPED_TRACKED_VERIFIER)})
+    assert default != _tracks(frames, fps, values, {"tracked_verifier": "same"})
+
+
+def test_trackers_get_the_groups_boxes_unless_refine_tracked():
+    """With a tracked verifier that has a box output (here the single-image one, `tracked_verifier: same`), the box
+    output places the detections (their probability and the suppression) but a tracker gets each group's own box:
+    the tracks on a real clip differ both from those with `cascade.refine_boxes: false` (nothing placed) and from
+    those with `cascade.refine_tracked` (the placed boxes given to the tracker), and no track box of the first two
+    frames is one the moved boxes' run has."""
+    frames, fps, cam = _udacity_frames("test_small2.mp4")
+    values = {"camera": cam, "pipeline": {"preset": "cascade"}}
+    same = {"tracked_verifier": "same"}
+    default = _tracks(frames, fps, values, same)
+    unmoved = _tracks(frames, fps, values, {**same, "refine_boxes": False})
+    moved = _tracks(frames, fps, values, {**same, "refine_tracked": True})
+    assert sum(len(f) for f in default) >= 10
+    assert default != unmoved and default != moved
+    first_default = {b for _, b in default[0]} | {b for _, b in default[1]}
+    first_moved = {b for _, b in moved[0]} | {b for _, b in moved[1]}
+    assert first_default and not first_default & first_moved
 
 
 @pytest.mark.parametrize("outputs", [3, 5])

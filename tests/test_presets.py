@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from app import config as configuration
-from app.config import SHIPPED_CASCADE, SHIPPED_VERIFIER
+from app.config import SHIPPED_CASCADE, SHIPPED_TRACKED_VERIFIER, SHIPPED_VERIFIER
 from app.core import ConfigError, Pipeline
 from app.eval.lane_clips import lane_config
 from tests.test_parts import _boxes
@@ -19,7 +19,7 @@ PRESET = "cascade_shadow_phd"
 def _core(values: dict) -> dict:
     """The core's effective configuration for a partial one given to the core directly (no YAML loader)."""
     cfg = {**values, "cascade": {"model": str(SHIPPED_CASCADE), "verifier": str(SHIPPED_VERIFIER),
-                                 **values.get("cascade", {})}}
+                                 "tracked_verifier": str(SHIPPED_TRACKED_VERIFIER), **values.get("cascade", {})}}
     with Pipeline(cfg) as p:
         return p.config
 
@@ -84,7 +84,8 @@ def test_config_doc_lists_the_presets_and_their_keys():
 
 def _run(name: str, n: int, **sections) -> list:
     cfg = {**config(name), **sections}
-    cfg["cascade"] = {"model": str(SHIPPED_CASCADE), "verifier": str(SHIPPED_VERIFIER)}
+    cfg["cascade"] = {"model": str(SHIPPED_CASCADE), "verifier": str(SHIPPED_VERIFIER),
+                      "tracked_verifier": str(SHIPPED_TRACKED_VERIFIER)}
     with Pipeline(cfg) as p:
         return [p.process(f.image, f.t_s) for f in frames(name)[:n]]
 

@@ -133,7 +133,7 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
         // The composition's single-image detectors (those that need no road motion): each alone, or, in a
         // composition of several detectors, their hypotheses merged and verified once.
         std::vector<Hypothesis> hyps;
-        const RoadContext ctx{gray, 0.0, out.lanes, cfg_.camera, nullptr};
+        const RoadContext ctx{gray, 0.0, out.lanes, cfg_.camera, nullptr, true};
         const auto &merge = parts_.detectors.merge;
         int ran = 0;
         for (auto &d : parts_.detectors.parts) {

@@ -27,6 +27,9 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
         win_ = haar_->window();
     }
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier);
+    tracked_same_ = p_.tracked_verifier == "same";
+    if (!tracked_same_ && !p_.tracked_verifier.empty() && p_.tracked_verifier != "off")
+        tracked_ = make_vehicle_verifier(p_.tracked_verifier);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }
@@ -44,7 +47,7 @@ struct Raw {
 } // namespace
 
 std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const LaneModel &lanes,
-                                                      const CameraParams &cam) const {
+                                                      const CameraParams &cam, bool single_image) const {
     CV_Assert(gray.type() == CV_8UC1);
     const RoadPrior prior = make_road_prior(gray.size(), lanes, cam, p_.road);
     std::vector<Raw> raw;
@@ -142,10 +145,12 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
         d.confidence = float(n / (n + p_.neighbors_half));
+        d.placed = d.box;
         out.push_back(d);
         if (p_.max_groups > 0 && int(out.size()) >= p_.max_groups) break;  // the seeds come strongest first
     }
-    if (verifier_) {  // every group of the frame at once (the CNN verifier runs them as one batch)
+    const VehicleVerifier *verifier = single_image || tracked_same_ ? verifier_.get() : tracked_.get();
+    if (verifier) {  // every group of the frame at once (the CNN verifier runs them as one batch)
         std::vector<cv::Rect2f> boxes;
         std::vector<int> ns;
         std::vector<size_t> judged;  // groups of fewer than verify_min_neighbors windows keep n / (n + half)
@@ -155,11 +160,33 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             boxes.push_back(out[i].box);
             ns.push_back(out[i].neighbors);
         }
-        const std::vector<float> p = p_.refine_boxes ? verifier_->judge(gray, boxes, ns, cam.horizon_row(), hc)
-                                                     : verifier_->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
+        // The box output places every box (its probability and the suppression go by where it is placed); the
+        // box reported is the placed one on single images, the group's own mean box for a tracker unless
+        // refine_tracked (cascade_detector.hpp, refine_tracked).
+        const bool refine = p_.refine_boxes && verifier->has_box_output();
+        std::vector<float> p = refine ? verifier->judge(gray, boxes, ns, cam.horizon_row(), hc)
+                                      : verifier->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
+        if (refine && p_.rejudge_refined) {
+            // only what the first look believes: the second can only lower a probability (min of the two)
+            std::vector<cv::Rect2f> second;
+            std::vector<int> second_n;
+            std::vector<size_t> which;
+            for (size_t k = 0; k < p.size(); ++k)
+                if (p[k] >= p_.rejudge_min_p) {
+                    which.push_back(k);
+                    second.push_back(boxes[k]);
+                    second_n.push_back(ns[k]);
+                }
+            if (!which.empty()) {
+                const std::vector<float> again = verifier->probabilities(gray, second, second_n, cam.horizon_row(), hc);
+                for (size_t j = 0; j < which.size(); ++j) p[which[j]] = std::min(p[which[j]], again[j]);
+            }
+        }
+        const bool report_placed = single_image || p_.refine_tracked;
         for (size_t k = 0; k < judged.size(); ++k) {
             out[judged[k]].confidence = p[k];
-            out[judged[k]].box = boxes[k];  // moved by the box output when the verifier has one (refine_boxes)
+            out[judged[k]].placed = boxes[k];  // moved by the box output when the verifier has one and `refine`
+            if (report_placed) out[judged[k]].box = boxes[k];
         }
     }
     if (p_.nms_iou >= 1.0) return out;
@@ -169,7 +196,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     std::vector<CascadeDetection> kept;
     for (const auto &d : out) {
         bool dup = false;
-        for (const auto &k : kept) dup = dup || box_iou(d.box, k.box) >= p_.nms_iou;
+        for (const auto &k : kept) dup = dup || box_iou(d.placed, k.placed) >= p_.nms_iou;
         if (!dup) kept.push_back(d);
     }
     return kept;

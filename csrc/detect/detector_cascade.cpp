@@ -6,7 +6,7 @@ namespace hw {
 
 bool CascadeDetectorPart::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
     Stopwatch sw;
-    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera)) {
+    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera, ctx.single_image)) {
         Hypothesis h = hypothesis_of(d.box, d.confidence, d.stage_sum, "cascade");
         h.appearance = d.confidence;
         out.push_back(h);

@@ -41,6 +41,8 @@ public:
                                      const std::vector<int> &neighbors, double horizon_row, double cam_height_m) const {
         return probabilities(gray, boxes, neighbors, horizon_row, cam_height_m);
     }
+    // true when judge() moves boxes (a box output)
+    virtual bool has_box_output() const { return false; }
 };
 
 // The verifier the file holds (.onnx: CnnVerifier, else HogVerifier); throws std::invalid_argument naming it.

@@ -32,7 +32,7 @@ public:
                                      double cam_height_m) const override;
     std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
                              double horizon_row, double cam_height_m) const override;
-    bool has_box_output() const { return has_box_; }
+    bool has_box_output() const override { return has_box_; }
     // The standardised crop of one box (kCropH x kCropW, float) widened by `margin` each side, as the network takes it.
     static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box, double margin);
 
