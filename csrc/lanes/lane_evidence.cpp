@@ -43,6 +43,31 @@ float boundary_support(const LaneBoundary &b, const std::vector<MarkingPoint> &p
     return visible > 0 ? float(n) / float(visible) : 0.f;
 }
 
+float boundary_row_coverage(const LaneBoundary &b, const std::vector<MarkingPoint> &pts,
+                            const std::vector<cv::Rect2f> &hidden, float y_h, const ScanBand &band,
+                            const CameraParams &cam, const LaneEvidenceParams &p) {
+    if (!b.valid || !std::isfinite(y_h) || band.rows() < 1) return 0.f;
+    // the scanned rows y_top + i step nearer than far_m, where the boundary is inside the image
+    const float y_far = row_at_range(cam, y_h, float(p.far_m));
+    const int n_rows = band.rows();
+    std::vector<char> hit(size_t(n_rows), 0), counted(size_t(n_rows), 0);
+    for (int i = 0; i < n_rows; ++i) {
+        const float y = float(band.y_top + i * band.step), x = b.curve_x(y);
+        counted[size_t(i)] = y >= y_far && x >= 0.f && x < float(cam.width);
+    }
+    for (const auto &q : pts) {
+        const int i = int(std::lround((q.y - float(band.y_top)) / float(band.step)));
+        if (i < 0 || i >= n_rows || !counted[size_t(i)]) continue;
+        const float tol = std::max(float(p.min_tolerance_px), float(p.tolerance_m) * px_per_m(cam, y_h, q.y));
+        if (!(std::fabs(q.x - b.curve_x(q.y)) <= tol)) continue;
+        if (std::any_of(hidden.begin(), hidden.end(), [&](const cv::Rect2f &r) { return r.contains({q.x, q.y}); }))
+            continue;
+        hit[size_t(i)] = 1;
+    }
+    const long n = std::count(counted.begin(), counted.end(), char(1));
+    return n > 0 ? float(std::count(hit.begin(), hit.end(), char(1))) / float(n) : 0.f;
+}
+
 void drop_unsupported_outer(LaneModel &m, const std::vector<MarkingPoint> &pts, const std::vector<cv::Rect2f> &hidden,
                             float y_h, float y_near, const CameraParams &cam, const LaneEvidenceParams &p) {
     const float need = float(p.min_outer_support);
