@@ -96,7 +96,10 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("refine_up_frac", refine_up_frac, 0.0, 2.0,
           "expected widths above the lowest hot row searched for the shadow step that is the vehicle's bottom");
     m.add("refine_down_frac", refine_down_frac, 0.0, 2.0,
-          "expected widths below it: a vehicle standing still on the road shows no parallax at its contact zone");
+          "expected widths below it: a vehicle standing still on the road shows no parallax at its contact zone; "
+          "the search stops bottom_margin_px above the road area's bottom (the bonnet's edge is a strong step: on "
+          "Udacity test_video the near shoulder's and the solid line's residuals took it for their bottom, became "
+          "near 'vehicles' and held the particle filter's one transitory period while the car ahead waited)");
     m.add("refine_min_step", refine_min_step, 0.0, 255.0,
           "gray levels; weakest dark-above / bright-below step taken as the bottom; otherwise the hot row stays");
     m.add("bottom_margin_px", bottom_margin_px, 0.0, 1000.0,
@@ -431,8 +434,11 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         if (w < float(p.min_width_frac) * w_exp || w > float(p.max_width_frac) * w_exp) continue;
         ParallaxMeasurement m;
         float row = yb;
+        // The step is searched on the road only: below road_bottom lies the bonnet, whose edge is a strong
+        // dark-above / bright-below step of its own.
+        const int refine_y1 = int(std::min(yb + float(p.refine_down_frac) * w_exp, road_bottom - float(p.bottom_margin_px)));
         if (bottom_step(cur_full, int(x0 + 0.2f * w), int(x1 - 0.2f * w), int(yb - float(p.refine_up_frac) * w_exp),
-                        int(yb + float(p.refine_down_frac) * w_exp), float(p.refine_min_step), row)) {
+                        refine_y1, float(p.refine_min_step), row)) {
             yb = row;
             m.refined = true;
         }

@@ -188,7 +188,8 @@ void LaneTracker::carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignm
 // boxes), smoothed; a track not measured this frame keeps its value (a hidden marking is still one).
 // The ego boundaries are judged by their curves; the model is certain when both are believed.
 void LaneTracker::update_support(const LaneMeasurement &m, const std::vector<TrackState> &vehicles, float y_h,
-                                 float y_near, LaneModel &out) {
+                                 const ScanBand &band, LaneModel &out) {
+    const float y_near = float(band.y_bottom);
     std::vector<cv::Rect2f> boxes;
     for (const auto &v : vehicles)
         if (v.confirmed) boxes.push_back(v.box);
@@ -212,6 +213,15 @@ void LaneTracker::update_support(const LaneMeasurement &m, const std::vector<Tra
     const float need = float(p_.evidence.min_support);
     out.certain = out.valid && ego_support[0] >= need && ego_support[1] >= need;
     drop_unsupported_outer(out, m.points, boxes, y_h, y_near, cam_, p_.evidence);
+    // The carriageway ends at a solid ego boundary (lane_evidence.hpp, solid_edge_min_rows).
+    if (p_.evidence.solid_min_rows > 0.0) {
+        const float need_rows = float(p_.evidence.solid_min_rows);
+        auto solid = [&](const LaneBoundary &b) {
+            return boundary_row_coverage(b, m.points, boxes, y_h, band, cam_, p_.evidence) >= need_rows;
+        };
+        if (solid(out.ego_left)) out.adj_left = out.out_left = LaneBoundary();
+        if (solid(out.ego_right)) out.adj_right = out.out_right = LaneBoundary();
+    }
 }
 
 void LaneTracker::update(const cv::Mat &gray, LaneModel &out, const std::vector<TrackState> &vehicles) {
@@ -254,7 +264,7 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out, const std::vector<
     const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
     fit_lane_curves(m.points, y_h, cam_, float(p_.assembly.road.lane_width_m), p_.curve, curve_, out);
     ego_lane_metrics(cam_, out);
-    update_support(m, vehicles, y_h, float(scan_band(gray.size(), cam_, hp, p_.filter).y_bottom), out);
+    update_support(m, vehicles, y_h, scan_band(gray.size(), cam_, hp, p_.filter), out);
 }
 
 } // namespace hw

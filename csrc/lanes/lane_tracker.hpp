@@ -127,7 +127,7 @@ private:
     std::vector<LaneCandidate> candidates() const;
     void carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignment &a, cv::Point2f vp);
     void update_support(const LaneMeasurement &m, const std::vector<TrackState> &vehicles, float y_h,
-                        float y_near, LaneModel &out);
+                        const ScanBand &band, LaneModel &out);
 
     LaneParams p_;
     CameraParams cam_;

@@ -186,7 +186,7 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
                 // ... and be one painted line wide: a wide bright patch with texture inside (concrete between
                 // two seams, a tyre-polished strip) is not worn paint.
                 if (crosses && f - r > w_cross * std::sqrt(1.f + k * k)) continue;
-                out.push_back({full_x(0.5f * (r + f)), float(y), contrast});
+                out.push_back({full_x(0.5f * (r + f)), float(y), contrast, (f - r) * scale});
                 bar_end = f;
                 break;
             }

@@ -30,7 +30,7 @@ struct MarkingFilterParams {
     int max_scan_rows = 200;         // rows; at most this many rows are filtered (cost bound)
     int min_run_rows = 2;            // scanned rows; a marking point needs neighbours to make a run this long
     int work_width_px = 640;         // px; wider rows are block-averaged down to about this width
-    bool cross_inner_edges = false;  // a bar may contain weaker inner edges (worn, textured paint)
+    bool cross_inner_edges = true;   // a bar may contain weaker inner edges (worn, textured paint)
     double cross_max_m = 0.20;       // m; widest bar that may contain inner edges (one painted line)
 
     void bind(ParamMap &m) {
@@ -67,13 +67,12 @@ struct MarkingFilterParams {
         m.add("cross_inner_edges", cross_inner_edges,
               "a marking's bar may contain inner edges weaker than its own two edges, if it stays brighter than "
               "both sides everywhere and is at most cross_max_m wide (worn or textured paint, common on concrete; "
-              "without this the bar ends at the first inner edge and fails the contrast test). Measured with the "
-              "shipped curve fit (docs/RESULTS.md, lanes, lanes4 round): TuSimple's lane clips 0.930 / 0.118 / 0.090 "
-              "(accuracy / FP / FN) and the 10-image sample 0.831 / 0.175 / 0.242, against 0.864 / 0.208 / 0.208 and "
-              "0.832 / 0.158 / 0.217 without; false (default) because two tests move with it, neither for a worse lane "
-              "model: the parallax black-car test fits its camera to the single-image lanes' vanishing point, which "
-              "moves 0.55 px (0.03 deg), and that car's tracking is not monotonic in pitch at that scale; the phd preset "
-              "wins steady_following's range against the thesis preset by 0.4 % without it and loses by 0.3 % with it");
+              "without this the bar ends at the first inner edge and fails the contrast test). TuSimple's lane clips "
+              "0.930 / 0.097 / 0.090 (accuracy / FP / FN, issue 13's bar) and the 10-image sample 0.831 / 0.175 / "
+              "0.242, against 0.864 / 0.208 / 0.208 and 0.832 / 0.158 / 0.217 without. On by default since the lanes6 "
+              "round: the synthetic unmarked road it made believed (25 of 330 frames of congestion_no_markings) was "
+              "believed on the gaps between dark vehicles, wide bars that lanes.evidence_max_width_m no longer counts "
+              "as paint (0 frames); docs/RESULTS.md, lanes, lanes4-lanes6 rounds");
         m.add("cross_max_m", cross_max_m, 0.01, 2.0,
               "m; with cross_inner_edges, the widest bar that may contain inner edges: one worn painted line "
               "(0.10-0.15 m plus blur); a wider bright patch with texture inside (concrete between two seams) is "
@@ -86,6 +85,7 @@ struct MarkingFilterParams {
 struct MarkingPoint {
     float x = 0.f, y = 0.f;
     float contrast = 0.f;  // gray levels above the brighter side
+    float width = 0.f;     // px (full frame); the bar's width along the row
 };
 
 // The rows that are scanned: y_top..y_bottom inclusive, every `step` rows.
