@@ -248,9 +248,10 @@ def _udacity_frames(name: str):
 
 
 def test_an_empty_road_box_the_verifier_believes_is_refused_once_moved():
-    """project_video_cut.mp4, frame 3: the ego lane ahead is empty, yet the shipped verifier judges a group on the
-    road 9 m ahead a vehicle (0.95), and its box output moves it to a box 400 px wide across the lane. Judged again
-    where it stands, that box is refused (measured: nothing >= 0.5 wider than 300 px on frames 2-5)."""
+    """project_video_cut.mp4, frames 2-5: the ego lane ahead is empty, yet the shipped verifier judges a group on the
+    road 9 m ahead a vehicle, and its box output moves it to a box 400-490 px wide across the lane (measured with the
+    lanes' defaults of session 6: 0.62 and 0.87 on frames 4 and 5; 0.95 on frame 3 before them). Judged again where
+    it stands, that box is refused (measured: nothing >= 0.5 wider than 300 px on frames 2-5)."""
     frames, _, cam = _udacity_frames("project_video_cut.mp4")
     values = {"camera": cam, "pipeline": {"preset": "cascade"}}
     wide = {}
@@ -259,7 +260,7 @@ def test_an_empty_road_box_the_verifier_believes_is_refused_once_moved():
         with Pipeline(cfg) as pipe:
             wide[rejudge] = [[b for b in pipe.stage_boxes("detect", f)[0]
                               if b[4] >= 0.5 and b[2] - b[0] > 300] for f in frames[2:6]]
-    assert any(b[4] >= 0.9 for boxes in wide[False] for b in boxes), wide[False]
+    assert any(boxes for boxes in wide[False]), wide[False]
     assert all(not boxes for boxes in wide[True]), wide[True]
 
 

@@ -29,16 +29,18 @@ from app.sim.world import Motion1D
 EGO_SPEED_MPS = 27.0
 
 
-def recordings(data: Path) -> list[tuple[Path, dict, float, bool]]:
-    """(source, camera, frame rate, is an image folder) for every recording; pitch and yaw fitted to the
-    lanes as in app/eval/road_motion.py."""
+def recordings(data: Path, only: Optional[str] = None) -> list[tuple[Path, dict, float, bool]]:
+    """(source, camera, frame rate, is an image folder) for every recording (or the one named `only`); pitch and
+    yaw fitted to the lanes as in app/eval/road_motion.py."""
     out = []
     folder = data / "udacity"
     for clip in sorted((folder / "clips").glob("*.mp4")) + [folder / "test_video.mp4"]:
+        if only not in (None, clip.name):
+            continue
         frames, fps = read_video(clip, 15)
         out.append((clip, fit_horizon(udacity_camera(frames[0].shape[1], frames[0].shape[0]), frames), fps, False))
     tme = data / "tme"
-    if (tme / "tme08").exists():
+    if (tme / "tme08").exists() and only in (None, "tme08"):
         frames, fps = read_tme(tme / "tme08")
         out.append((tme / "tme08", fit_horizon(tme_camera(tme / "calibration.ini"), frames), fps, True))
     return out
@@ -52,10 +54,13 @@ def recording_config(camera: dict, preset: str, config_path: Optional[str] = Non
     return configuration.load(config_path, cfg) if config_path else cfg
 
 
-def evaluate(data: str, preset: str = "thesis", config_path: Optional[str] = None) -> list[dict]:
+def evaluate(data: str, preset: str = "thesis", config_path: Optional[str] = None,
+             only: Optional[str] = None) -> list[dict]:
+    """One row per recording (or for the one named `only`, e.g. "tme08"): frames, vehicles confirmed, warnings,
+    pre-warnings and every FCW event (time, level, TTC)."""
     out = []
     with tempfile.TemporaryDirectory() as tmp:
-        for source, camera, fps, is_folder in recordings(Path(data)):
+        for source, camera, fps, is_folder in recordings(Path(data), only):
             log = Path(tmp) / f"{source.stem}.log"
             write_ego_speed_log(log, Motion1D(0.0, EGO_SPEED_MPS, []), 60.0)
             cfg_path = Path(tmp) / "config.yaml"
