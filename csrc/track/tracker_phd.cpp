@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <ctime>
+#include <limits>
 
 namespace hw {
 
@@ -64,6 +65,13 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "frames; a confirmed vehicle whose PHD weight falls under end_weight (eq. 12: every feature lost at once, "
           "as when it drives into a shadow) is carried this long by its UKF's prediction while new corners in its "
           "box become its features, before it ends; 0 = it ends at once (the paper's rule)");
+    m.add("coast_min_hits", coast_min_hits, 1, 1000,
+          "detections a vehicle needs (and one at the detector's last run) before it may coast (coast_frames): a "
+          "vehicle the detector has seen this often is a vehicle; a young track that loses its features is more "
+          "often none (the cascade preset's near false box on project_video_cut.mp4 coasted at 3 hits and pre-warned)");
+    m.add("coast_max_hidden", coast_max_hidden, 0.0, 1.0,
+          "share of a vehicle's box that a nearer vehicle's box may cover while it coasts (coast_frames); more: it "
+          "is being hidden, which explains its lost features, and it ends as without coasting");
     m.add("max_dt_s", max_dt_s, 0.01, 100.0, "s; a longer gap between frames drops all vehicles");
 }
 
@@ -334,8 +342,18 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
             if (a.duplicate || b.duplicate || box_iou(a.box(), b.box()) < p_.duplicate_iou) continue;
             (a.hits > b.hits || (a.hits == b.hits && a.id < b.id) ? b : a).duplicate = true;
         }
-    for (Vehicle &v : vehicles_)  // eq. 12: its features lost, a vehicle coasts (or ends, below)
+    // Eq. 12: its features lost, a vehicle coasts (or ends, below); one hidden by a nearer vehicle ends.
+    for (Vehicle &v : vehicles_) {
         v.coast = v.age > 1 && v.phd.weight_in(cv::Rect2d(v.box())) < p_.end_weight ? v.coast + 1 : 0;
+        // only a vehicle the detector has found often, and at its last run, starts to coast
+        if (v.coast == 1 && (v.hits < p_.coast_min_hits || v.detection_misses > 0))
+            v.coast = std::numeric_limits<int>::max() / 2;
+        const cv::Rect2f b = v.box();
+        for (const Vehicle &u : vehicles_)
+            if (v.coast > 0 && &u != &v && u.ukf->range() < v.ukf->range() &&
+                (u.box() & b).area() > p_.coast_max_hidden * b.area())
+                v.coast = std::numeric_limits<int>::max() / 2;
+    }
     const cv::Size size = ctx.gray.size();
     const auto gone = [&](const Vehicle &v) {
         const cv::Rect2f b = v.box();
