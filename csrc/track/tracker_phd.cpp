@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <ctime>
+#include <limits>
 
 namespace hw {
 
@@ -60,6 +61,17 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("max_detection_misses", max_detection_misses, 1, 1000,
           "detector runs in a row that may miss a confirmed vehicle before it is deleted (a tentative one: 1); "
           "at detect_every_n 3 the features alone carry a vehicle for 15 frames");
+    m.add("coast_frames", coast_frames, 0, 1000,
+          "frames; a confirmed vehicle whose PHD weight falls under end_weight (eq. 12: every feature lost at once, "
+          "as when it drives into a shadow) is carried this long by its UKF's prediction while new corners in its "
+          "box become its features, before it ends; 0 = it ends at once (the paper's rule)");
+    m.add("coast_min_hits", coast_min_hits, 1, 1000,
+          "detections a vehicle needs (and one at the detector's last run) before it may coast (coast_frames): a "
+          "vehicle the detector has seen this often is a vehicle; a young track that loses its features is more "
+          "often none (the cascade preset's near false box on project_video_cut.mp4 coasted at 3 hits and pre-warned)");
+    m.add("coast_max_hidden", coast_max_hidden, 0.0, 1.0,
+          "share of a vehicle's box that a nearer vehicle's box may cover while it coasts (coast_frames); more: it "
+          "is being hidden, which explains its lost features, and it ends as without coasting");
     m.add("max_dt_s", max_dt_s, 0.01, 100.0, "s; a longer gap between frames drops all vehicles");
 }
 
@@ -197,9 +209,16 @@ void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const
     }
     v.motion = {t[0], t[1]};
     v.phd.predict(s, c, t);
-    const cv::Vec2d b0(v.contact.x, v.contact.y), b1 = c + t + s * (b0 - c);
-    v.contact = {b1[0], b1[1]};
-    v.width *= s;
+    if (v.coast > 0) {
+        // Coasting (no feature measures it): the UKF's predicted contact, the width at the predicted range.
+        const double z0 = v.prev_range;
+        v.contact = v.ukf->predicted_contact(horizon);
+        if (z0 > 0.0 && v.ukf->range() > 0.0) v.width *= z0 / v.ukf->range();
+    } else {
+        const cv::Vec2d b0(v.contact.x, v.contact.y), b1 = c + t + s * (b0 - c);
+        v.contact = {b1[0], b1[1]};
+        v.width *= s;
+    }
 
     // The measurement set: followed points that move with the vehicle, and new corners.
     std::vector<cv::Vec2d> Z;
@@ -323,11 +342,23 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
             if (a.duplicate || b.duplicate || box_iou(a.box(), b.box()) < p_.duplicate_iou) continue;
             (a.hits > b.hits || (a.hits == b.hits && a.id < b.id) ? b : a).duplicate = true;
         }
+    // Eq. 12: its features lost, a vehicle coasts (or ends, below); one hidden by a nearer vehicle ends.
+    for (Vehicle &v : vehicles_) {
+        v.coast = v.age > 1 && v.phd.weight_in(cv::Rect2d(v.box())) < p_.end_weight ? v.coast + 1 : 0;
+        // only a vehicle the detector has found often, and at its last run, starts to coast
+        if (v.coast == 1 && (v.hits < p_.coast_min_hits || v.detection_misses > 0))
+            v.coast = std::numeric_limits<int>::max() / 2;
+        const cv::Rect2f b = v.box();
+        for (const Vehicle &u : vehicles_)
+            if (v.coast > 0 && &u != &v && u.ukf->range() < v.ukf->range() &&
+                (u.box() & b).area() > p_.coast_max_hidden * b.area())
+                v.coast = std::numeric_limits<int>::max() / 2;
+    }
     const cv::Size size = ctx.gray.size();
     const auto gone = [&](const Vehicle &v) {
         const cv::Rect2f b = v.box();
         const int limit = v.confirmed ? p_.max_detection_misses : 1;
-        const bool ended = v.age > 1 && v.phd.weight_in(cv::Rect2d(b)) < p_.end_weight;  // eq. 12
+        const bool ended = v.coast > (v.confirmed ? p_.coast_frames : 0);  // eq. 12, after coasting
         return v.duplicate || ended || v.detection_misses >= limit || !(v.width >= 3.0) ||
                v.contact.y <= horizon + 1.0 || b.x + b.width < 0.f || b.x > size.width || b.y > size.height ||
                !(v.ukf->range() > 0.5);
@@ -373,6 +404,7 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
     for (const Vehicle &v : vehicles_) boxes.push_back(v.box());
     const double horizon = pitch_.update(ctx.gray, flow_, lane_horizon, boxes);
     for (Vehicle &v : vehicles_) {
+        v.prev_range = v.ukf->range();
         v.ukf->predict(dt);
         v.age++;
     }

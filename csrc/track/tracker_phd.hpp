@@ -30,7 +30,15 @@
 //      contact point (UKF update), pulls its width and features' offsets towards the detected box, and
 //      counts as a hit (confirmation); an unexplained detection starts a vehicle.
 //   6. A vehicle ends when the PHD weight inside its box falls under end_weight (eq. 12), when the
-//      detector has missed it max_detection_misses times in a row, or when it leaves the image.
+//      detector has missed it max_detection_misses times in a row, or when it leaves the image. A confirmed
+//      vehicle whose weight falls under end_weight first coasts for up to coast_frames frames: a sudden change
+//      of its appearance (it drives into a bridge's shadow) fails every LK feature's forward-backward check
+//      at once, while the vehicle moves on as before. While coasting its contact point is the UKF's
+//      prediction (constant velocity on the road, eq. 19) and its width follows the predicted range
+//      (w Z constant); the corners found in its box each birth_every_n frames are its new features, and
+//      once their weight is back over end_weight it is followed by them again. A vehicle whose box a nearer
+//      vehicle's box covers (more than coast_max_hidden of it) does not coast: being hidden explains the lost
+//      features, and it is gone from view.
 // Range, lateral offset and range rate are the UKF's; the geometry stage adds the TTCs.
 #pragma once
 
@@ -66,6 +74,10 @@ struct PhdTrackerParams {
     double birth_min_appearance = 0.9;  // a detection with a learned appearance score (the cascade's) under this
                                         // starts no vehicle (it may still re-anchor one); others are not affected
     int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
+    int coast_frames = 3;              // frames a confirmed vehicle whose features were lost (eq. 12) is carried by
+                                       // its UKF alone before it ends (0 = it ends at once, the paper's rule)
+    int coast_min_hits = 6;            // detections (the last run's included) a vehicle needs before it may coast
+    double coast_max_hidden = 0.25;    // share of its box a nearer vehicle's box may cover for a vehicle to coast
     double max_dt_s = 1.0;             // s; a longer gap between frames restarts tracking
     BoxFeatureParams features;         // corners and LK (section phd_features)
     GmPhdParams phd;                   // the GM-PHD filter (section gmphd)
@@ -92,6 +104,8 @@ private:
         double width = 0.0, aspect = 0.8;  // box width px, height / width
         cv::Point2d motion{0, 0};      // image shift of the last frame, px
         int age = 1, hits = 1, detection_misses = 0;
+        int coast = 0;                 // frames in a row its PHD weight has been under end_weight (coasting)
+        double prev_range = 0.0;       // m; the UKF's range before this frame's prediction
         bool confirmed = false, duplicate = false;
         int stable = 0;                // stable features this frame
         float confidence = 0.5f;
