@@ -102,7 +102,7 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     out.frames_since_observed = out.valid ? 0 : 1;
     LaneCurveState curve;  // one image: no curvature history
     fit_lane_curves(m.points, std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row, cam,
-                    float(p.assembly.road.lane_width_m), p.curve, curve, out);
+                    float(p.assembly.road.lane_width_m), p.curve, curve, out, p.curve.single_shared_a);
     ego_lane_metrics(cam, out);
     // One image: outer boundaries need paint along the road in this frame, and nothing is reported beyond a
     // solid ego boundary (the carriageway's edge line), as over frames (lane_tracker.cpp): on TuSimple's 10-image
