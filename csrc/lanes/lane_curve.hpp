@@ -7,8 +7,10 @@
 // (road_geometry.hpp's straight line is c = 0). Every boundary of one road shares a and c; b is its
 // own lateral offset. Near the car (large d) c / d vanishes and the boundaries are the straight
 // lines the Hough stage and the tracker find; far away c / d bends them.
-// The joint least-squares fit over the marking points near all boundaries gives a and c (a dashed
-// marking takes its bend from a solid one); c is smoothed over frames (a pseudo-measurement of last
+// The joint least-squares fit over the marking points near all boundaries gives c (a dashed marking
+// takes its bend from a solid one) and, over frames, one a per boundary (a curve that tightens is not
+// one c / d, and a wrong boundary would pull the shared a of all); one image alone shares a as the model
+// says (curve_single_shared_a: a boundary with few points of its own is not rotated by a vehicle's); c is smoothed over frames (a pseudo-measurement of last
 // frame's value), bounded by the tightest curve radius. Points are taken in two passes: near rows
 // around the tracked lines first, then every scanned row around the first fit, so the bend does not
 // pull in points of another marking. Each point weighs by min(1, its bar contrast / the fitted points'
