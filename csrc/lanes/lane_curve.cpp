@@ -26,9 +26,11 @@ struct Curve {
 // so that the normal equations are well conditioned (d^2 and 1/d differ by 10 orders at 720 rows);
 // b = b' / D, e = e' / D^2, c = c' D. Normal equations N u = r, u = (a_0, b'_0, e'_0, a_1, ..., c').
 bool solve(const std::vector<MarkingPoint> &pts, const std::vector<int> &owner, int n, float y_h, float D,
-           float c_prior, float w_prior, float w_e, float contrast_power, std::array<Curve, kMaxBoundaries> &curves,
-           float &c) {
-    const int dim = 3 * n + 1;
+           float c_prior, float w_prior, float w_e, float contrast_power, bool shared_a,
+           std::array<Curve, kMaxBoundaries> &curves, float &c) {
+    // shared_a: one a for every boundary (the flat road's x_c + fx psi), unknowns (a, b'_0, e'_0, b'_1, e'_1, ...,
+    // c'); else one a per boundary, (a_0, b'_0, e'_0, a_1, ..., c').
+    const int dim = shared_a ? 2 * n + 2 : 3 * n + 1;
     cv::Mat N = cv::Mat::zeros(dim, dim, CV_64F), r = cv::Mat::zeros(dim, 1, CV_64F);
     // Point weights: w_j = min(1, contrast_j / median contrast of the fitted points)^power (power 0: all 1). A
     // seam's bright lip or the texture beside the paint weighs less than the paint; a point brighter than the
@@ -44,20 +46,26 @@ bool solve(const std::vector<MarkingPoint> &pts, const std::vector<int> &owner, 
         if (i < 0) continue;
         const double w = std::pow(std::min(1.0, double(pts[j].contrast) / c_med), double(contrast_power));
         const double t = (pts[j].y - y_h) / D, g[4] = {1.0, t, t * t, 1.0 / t};
-        const int idx[4] = {3 * i, 3 * i + 1, 3 * i + 2, dim - 1};
+        int idx[4] = {3 * i, 3 * i + 1, 3 * i + 2, dim - 1};
+        if (shared_a) { idx[0] = 0; idx[1] = 1 + 2 * i; idx[2] = 2 + 2 * i; }
         for (int u = 0; u < 4; ++u) {
             r.at<double>(idx[u]) += w * g[u] * pts[j].x;
             for (int v = 0; v < 4; ++v) N.at<double>(idx[u], idx[v]) += w * g[u] * g[v];
         }
     }
-    for (int i = 0; i < n; ++i) N.at<double>(3 * i + 2, 3 * i + 2) += w_e;
+    for (int i = 0; i < n; ++i) {
+        const int ie = shared_a ? 2 + 2 * i : 3 * i + 2;
+        N.at<double>(ie, ie) += w_e;
+    }
     N.at<double>(dim - 1, dim - 1) += w_prior;
     r.at<double>(dim - 1) += w_prior * c_prior / D;
     cv::Mat u;
     if (!cv::solve(N, r, u, cv::DECOMP_CHOLESKY)) return false;
-    for (int i = 0; i < n; ++i)
-        curves[size_t(i)] = {float(u.at<double>(3 * i)), float(u.at<double>(3 * i + 1) / D),
-                             float(u.at<double>(3 * i + 2) / (double(D) * D))};
+    for (int i = 0; i < n; ++i) {
+        const int ia = shared_a ? 0 : 3 * i, ib = shared_a ? 1 + 2 * i : 3 * i + 1;
+        curves[size_t(i)] = {float(u.at<double>(ia)), float(u.at<double>(ib) / D),
+                             float(u.at<double>(ib + 1) / (double(D) * D))};
+    }
     c = float(u.at<double>(dim - 1) * D);
     return std::isfinite(c);
 }
@@ -65,7 +73,7 @@ bool solve(const std::vector<MarkingPoint> &pts, const std::vector<int> &owner, 
 } // namespace
 
 void fit_lane_curves(const std::vector<MarkingPoint> &pts, float y_h, const CameraParams &cam, float lane_width_m,
-                     const LaneCurveParams &p, LaneCurveState &state, LaneModel &m) {
+                     const LaneCurveParams &p, LaneCurveState &state, LaneModel &m, bool shared_a) {
     LaneBoundary *all[kMaxBoundaries] = {&m.out_left, &m.adj_left, &m.ego_left, &m.ego_right, &m.adj_right, &m.out_right};
     std::array<LaneBoundary *, kMaxBoundaries> bs{};
     int n = 0;
@@ -120,7 +128,7 @@ void fit_lane_curves(const std::vector<MarkingPoint> &pts, float y_h, const Came
         float cs;
         // e' = 1 (1 px at the bottom row) weighs as much as prior_e_points points; c' likewise.
         if (!solve(pts, o, m_fit, y_h, float(cam.height) - y_h, c_prior, float(p.prior_points),
-                   float(p.prior_e_points), float(p.contrast_power), sol, cs))
+                   float(p.prior_e_points), float(p.contrast_power), shared_a, sol, cs))
             return false;
         c = std::clamp(cs, -c_max, c_max);
         for (int i = 0; i < n; ++i)

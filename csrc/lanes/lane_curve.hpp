@@ -7,8 +7,10 @@
 // (road_geometry.hpp's straight line is c = 0). Every boundary of one road shares a and c; b is its
 // own lateral offset. Near the car (large d) c / d vanishes and the boundaries are the straight
 // lines the Hough stage and the tracker find; far away c / d bends them.
-// The joint least-squares fit over the marking points near all boundaries gives a and c (a dashed
-// marking takes its bend from a solid one); c is smoothed over frames (a pseudo-measurement of last
+// The joint least-squares fit over the marking points near all boundaries gives c (a dashed marking
+// takes its bend from a solid one) and, over frames, one a per boundary (a curve that tightens is not
+// one c / d, and a wrong boundary would pull the shared a of all); one image alone shares a as the model
+// says (curve_single_shared_a: a boundary with few points of its own is not rotated by a vehicle's); c is smoothed over frames (a pseudo-measurement of last
 // frame's value), bounded by the tightest curve radius. Points are taken in two passes: near rows
 // around the tracked lines first, then every scanned row around the first fit, so the bend does not
 // pull in points of another marking. Each point weighs by min(1, its bar contrast / the fitted points'
@@ -41,6 +43,7 @@ struct LaneCurveParams {
     double residual_sigma_px = 2.0;    // px; residuals beyond 3 sigma are dropped in the refit
     double prior_e_points = 20.0;      // points; weight keeping the image second-order term at 0
     double contrast_power = 3.0;       // 1; points weigh by min(1, contrast / median)^power (0: alike)
+    bool single_shared_a = true;       // one image alone: every boundary crosses the horizon row at one column
     double far_range_m = 80.0;         // m; the reported boundaries reach this range (extrapolated beyond road_range_m)
 
     void bind(ParamMap &m) {
@@ -88,6 +91,15 @@ struct LaneCurveParams {
               "0.815 / 0.225 / 0.275; the rendered scenarios' ego boundaries within 12 px (tests/test_lanes.py) in "
               "100 % of the frames of all four against 97-99 % with 0; 1, 2, 2.5, 3 and 4 tried, chosen on the clips "
               "and the sample");
+        m.add("curve_single_shared_a", single_shared_a,
+              "one image alone (the \"lanes\" stage, no tracking): the curve fit gives every boundary the same a, the "
+              "column where the flat road's markings cross the horizon row (x_c + fx psi), as the road model says, instead "
+              "of one a each; a line partly hidden by a vehicle (0313-1/33600's and 0313-2/520's left adjacent lines behind "
+              "a pickup) was rotated by the vehicle's points inside its corridor and missed. Measured (sample7 round, "
+              "docs/RESULTS.md, lane sample): TuSimple's 10-image sample 0.829 / 0.100 / 0.183 (accuracy / FP / FN) against "
+              "0.831 / 0.158 / 0.242 with one a each. Not in lane tracking: the clips read 0.906 / 0.118 / 0.118 with it "
+              "there against 0.930 / 0.097 / 0.090 (0531/...793's tightening curve: one shared a with the constant-curvature "
+              "c / d cannot follow it, and a wrong boundary pulls every other one with it)");
         m.add("curve_far_range_m", far_range_m, 10.0, 10000.0,
               "m; the boundaries reported (ABI points, tracks file, TuSimple predictions) reach this range, "
               "the fitted curve extrapolated beyond the lane model's end (lanes.road_range_m, 80 m) when farther; 80 "
@@ -107,9 +119,10 @@ struct LaneCurveState {
 
 // Bends the valid boundaries of `m` (straight lines from bottom to top) to the road's curvature,
 // measured on `pts`, with the horizon at row y_h. Writes curve / curve_row of each boundary and the
-// boundaries' top points (now on the curve). Updates `state`.
+// boundaries' top points (now on the curve). Updates `state`. shared_a: every fitted boundary has the same a
+// (the flat road's x_c + fx psi, where all markings of one road cross the horizon row); false: one a each.
 void fit_lane_curves(const std::vector<MarkingPoint> &pts, float y_h, const CameraParams &cam, float lane_width_m,
-                     const LaneCurveParams &p, LaneCurveState &state, LaneModel &m);
+                     const LaneCurveParams &p, LaneCurveState &state, LaneModel &m, bool shared_a = false);
 
 // Row of the far end of the reported boundaries: far_range_m on a horizon at y_h (NaN if unknown).
 float far_row(const CameraParams &cam, float y_h, const LaneCurveParams &p);

@@ -102,14 +102,18 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     out.frames_since_observed = out.valid ? 0 : 1;
     LaneCurveState curve;  // one image: no curvature history
     fit_lane_curves(m.points, std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row, cam,
-                    float(p.assembly.road.lane_width_m), p.curve, curve, out);
+                    float(p.assembly.road.lane_width_m), p.curve, curve, out, p.curve.single_shared_a);
     ego_lane_metrics(cam, out);
-    // One image: outer boundaries need paint along the road in this frame. The ego pair's evidence is
-    // judged over frames (lane_tracker.cpp): one image has no confirmed vehicles to mask and no smoothing over
-    // dash gaps (a dashed line can miss two of the three range bins), so a single image's model is believed.
+    // One image: outer boundaries need paint along the road in this frame, and nothing is reported beyond a
+    // solid ego boundary (the carriageway's edge line), as over frames (lane_tracker.cpp): on TuSimple's 10-image
+    // sample the right shoulder's edge beyond 0313-2/520's solid right line was a false lane (sample FP 0.175 ->
+    // 0.158, nothing else moved; docs/RESULTS.md, lane sample). The ego pair's evidence is judged over frames:
+    // one image has no confirmed vehicles to mask and no smoothing over dash gaps (a dashed line can miss two of
+    // the three range bins), so a single image's model is believed.
     const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
-    const float y_near = float(scan_band(gray.size(), cam, hp, p.filter).y_bottom);
-    drop_unsupported_outer(out, m.points, {}, y_h, y_near, cam, p.evidence);
+    const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
+    drop_unsupported_outer(out, m.points, {}, y_h, float(band.y_bottom), cam, p.evidence);
+    drop_beyond_solid_edges(out, m.points, {}, y_h, band, cam, p.evidence);
     out.certain = out.valid;
     return out;
 }

@@ -91,4 +91,14 @@ void drop_unsupported_outer(LaneModel &m, const std::vector<MarkingPoint> &pts, 
         if (b->valid && boundary_support(*b, pts, hidden, y_h, y_near, cam, any_width, true) < need) *b = LaneBoundary();
 }
 
+void drop_beyond_solid_edges(LaneModel &m, const std::vector<MarkingPoint> &pts, const std::vector<cv::Rect2f> &hidden,
+                             float y_h, const ScanBand &band, const CameraParams &cam, const LaneEvidenceParams &p) {
+    if (p.solid_min_rows <= 0.0) return;
+    auto solid = [&](const LaneBoundary &b) {
+        return boundary_row_coverage(b, pts, hidden, y_h, band, cam, p) >= float(p.solid_min_rows);
+    };
+    if (solid(m.ego_left)) m.adj_left = m.out_left = LaneBoundary();
+    if (solid(m.ego_right)) m.adj_right = m.out_right = LaneBoundary();
+}
+
 } // namespace hw

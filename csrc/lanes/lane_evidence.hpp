@@ -79,8 +79,10 @@ struct LaneEvidenceParams {
               "lane lines are broken (dashes of 3 m every 12 m, a quarter of the rows); 0 disables. TuSimple's lane "
               "clips with lanes.cross_inner_edges: 0.930 / 0.097 / 0.090 (accuracy / FP / FN) against 0.930 / 0.118 / "
               "0.090 with 0, the same for 0.5-0.9 (0313-1/60's shoulder edge beyond the solid right edge line no "
-              "longer reported), 0.4 loses a labelled lane; without cross_inner_edges and on the 10-image "
-              "sample no change (0.864 / 0.208 / 0.208, 0.832 / 0.158 / 0.217); docs/RESULTS.md, lanes, lanes5 round");
+              "longer reported), 0.4 loses a labelled lane; without cross_inner_edges no change (0.864 / 0.208 / 0.208). "
+              "Applied to single images too since the sample7 round (it was only in lane tracking): TuSimple's 10-image "
+              "sample 0.831 / 0.158 / 0.242 against 0.831 / 0.175 / 0.242 (0313-2/520's right shoulder edge no longer "
+              "reported), the clips unchanged; docs/RESULTS.md, lanes, lanes5 and sample7 rounds");
     }
 };
 
@@ -104,5 +106,11 @@ float boundary_row_coverage(const LaneBoundary &b, const std::vector<MarkingPoin
 // foot or a seam as the next marking, and only paint along the road tells them apart.
 void drop_unsupported_outer(LaneModel &m, const std::vector<MarkingPoint> &pts, const std::vector<cv::Rect2f> &hidden,
                             float y_h, float y_near, const CameraParams &cam, const LaneEvidenceParams &p);
+
+// The carriageway ends at a solid ego boundary (solid_min_rows; 0 disables): the adjacent and outer boundaries
+// beyond an ego boundary painted on at least that share of the scanned rows are dropped (a shoulder's or
+// pavement's edge, a barrier's foot: TuSimple labels none of them).
+void drop_beyond_solid_edges(LaneModel &m, const std::vector<MarkingPoint> &pts, const std::vector<cv::Rect2f> &hidden,
+                             float y_h, const ScanBand &band, const CameraParams &cam, const LaneEvidenceParams &p);
 
 } // namespace hw

@@ -214,14 +214,7 @@ void LaneTracker::update_support(const LaneMeasurement &m, const std::vector<Tra
     out.certain = out.valid && ego_support[0] >= need && ego_support[1] >= need;
     drop_unsupported_outer(out, m.points, boxes, y_h, y_near, cam_, p_.evidence);
     // The carriageway ends at a solid ego boundary (lane_evidence.hpp, solid_edge_min_rows).
-    if (p_.evidence.solid_min_rows > 0.0) {
-        const float need_rows = float(p_.evidence.solid_min_rows);
-        auto solid = [&](const LaneBoundary &b) {
-            return boundary_row_coverage(b, m.points, boxes, y_h, band, cam_, p_.evidence) >= need_rows;
-        };
-        if (solid(out.ego_left)) out.adj_left = out.out_left = LaneBoundary();
-        if (solid(out.ego_right)) out.adj_right = out.out_right = LaneBoundary();
-    }
+    drop_beyond_solid_edges(out, m.points, boxes, y_h, band, cam_, p_.evidence);
 }
 
 void LaneTracker::update(const cv::Mat &gray, LaneModel &out, const std::vector<TrackState> &vehicles) {
