@@ -22,9 +22,11 @@ from app.sim.frames import scenario_camera
 
 @functools.lru_cache(maxsize=None)
 def _run(name: str, preset: str, sections_json: str = "{}") -> tuple:
-    cam = scenario_camera(load_scenario(name)).to_dict()
+    values = {"pipeline": {"preset": preset}, "camera": scenario_camera(load_scenario(name)).to_dict(),
+              **json.loads(sections_json)}
     fr = frames(name)
-    with Pipeline({"pipeline": {"preset": preset}, "camera": cam, **json.loads(sections_json)}) as p:
+    # through the configuration: a preset's own keys and the shipped models (the cascade presets) filled in
+    with Pipeline(configuration.core_sections(configuration.load(None, values))) as p:
         return fr, tuple(p.process(f.image, f.t_s) for f in fr)
 
 
@@ -123,11 +125,7 @@ def test_no_false_warning_through_phd(scenario, phd_config):
 def _ids_following(name: str, preset: str, vehicle: int, sections_json: str = "{}") -> tuple[list, int]:
     """The confirmed track id matched (IoU >= 0.5) to one truth vehicle on each frame it is fully visible within
     60 m (None where nothing matches), and the number of those frames."""
-    values = {"pipeline": {"preset": preset}, "camera": scenario_camera(load_scenario(name)).to_dict(),
-              **json.loads(sections_json)}
-    fr = frames(name)
-    with Pipeline(configuration.core_sections(configuration.load(None, values))) as p:
-        results = [p.process(f.image, f.t_s) for f in fr]
+    fr, results = _run(name, preset, sections_json)
     ids = []
     for f, r in zip(fr, results):
         g = next((g for g in f.truth if g["id"] == vehicle), None)

@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <ctime>
-#include <limits>
 
 namespace hw {
 
@@ -342,17 +341,21 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
             if (a.duplicate || b.duplicate || box_iou(a.box(), b.box()) < p_.duplicate_iou) continue;
             (a.hits > b.hits || (a.hits == b.hits && a.id < b.id) ? b : a).duplicate = true;
         }
-    // Eq. 12: its features lost, a vehicle coasts (or ends, below); one hidden by a nearer vehicle ends.
+    // Eq. 12: a vehicle whose features are all lost ends, or first coasts (coast_frames, counted in `coast`): only
+    // one the detector has found often and at its last run, and that no nearer vehicle hides (being hidden explains
+    // the lost features). One that may not coast is put past its allowance, so it ends below.
     for (Vehicle &v : vehicles_) {
-        v.coast = v.age > 1 && v.phd.weight_in(cv::Rect2d(v.box())) < p_.end_weight ? v.coast + 1 : 0;
-        // only a vehicle the detector has found often, and at its last run, starts to coast
-        if (v.coast == 1 && (v.hits < p_.coast_min_hits || v.detection_misses > 0))
-            v.coast = std::numeric_limits<int>::max() / 2;
+        const bool lost = v.age > 1 && v.phd.weight_in(cv::Rect2d(v.box())) < p_.end_weight;
+        if (!lost) {
+            v.coast = 0;
+            continue;
+        }
+        const bool found_often = v.coast > 0 || (v.hits >= p_.coast_min_hits && v.detection_misses == 0);
         const cv::Rect2f b = v.box();
-        for (const Vehicle &u : vehicles_)
-            if (v.coast > 0 && &u != &v && u.ukf->range() < v.ukf->range() &&
-                (u.box() & b).area() > p_.coast_max_hidden * b.area())
-                v.coast = std::numeric_limits<int>::max() / 2;
+        const bool hidden = std::any_of(vehicles_.begin(), vehicles_.end(), [&](const Vehicle &u) {
+            return &u != &v && u.ukf->range() < v.ukf->range() && (u.box() & b).area() > p_.coast_max_hidden * b.area();
+        });
+        v.coast = found_often && !hidden ? v.coast + 1 : p_.coast_frames + 1;
     }
     const cv::Size size = ctx.gray.size();
     const auto gone = [&](const Vehicle &v) {
