@@ -36,6 +36,8 @@ struct Hypothesis {
     const char *source = ""; // the registry name of the detector that made it
     float road_gray = kNaN;  // gray level of the road where the detector measured the bottom edge (shadow); NaN: not measured
     float appearance = kNaN; // 0..1; a learned appearance model's score (the cascade's); NaN: the detector has none
+    bool top_measured = true;  // false: the box's height is the verification's fixed-aspect guess (no top cue
+                               // found); a tracker takes its bottom and sides, not its height
 };
 
 // A hypothesis measured at the bottom centre of its box.

@@ -70,6 +70,7 @@ bool verify_one(const cv::Mat &gray, const ShadowHypothesis &h, const VerifyPara
     const float top = p.find_top ? vehicle_top(gray, left, right, bottom, p.top) : kNaN;
     const float box_h = std::isfinite(top) ? bottom - top : float(p.aspect_ratio) * width;
     out.box = cv::Rect2f(left, bottom - box_h, width, box_h);
+    out.top_measured = std::isfinite(top);
     // Score: 0.5 when the weaker side just reaches its threshold, towards 1 as it grows, scaled
     // down for a faint shadow (strength = shadow step / road level; 0.5 is a deep shadow).
     const float side_excess = s.weaker() / std::max(1e-3f, t_side);

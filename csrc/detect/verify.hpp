@@ -80,6 +80,7 @@ struct VerifyParams {
 struct Detection {
     cv::Rect2f box;
     float score = 0.f;  // 0..1
+    bool top_measured = true;  // false: no top cue, the height is the fixed aspect's guess (aspect_ratio x width)
 };
 
 // Verifies hypotheses; detections are returned strongest first, overlaps suppressed.

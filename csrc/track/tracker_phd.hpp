@@ -69,6 +69,10 @@ struct PhdTrackerParams {
     double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
     double anchor_gain = 0.5;          // share of a matched detection's box taken into width and offsets
     double match_iou = 0.3;            // detection <-> vehicle box overlap that is the same vehicle
+    double tall_aspect = 1.2;          // height / width above which a vehicle is a truck or bus (no car is): its
+                                       // measured height is kept against a detection whose height was guessed
+    int tall_hits = 2;                 // measured tops in a row (guessed ones skipped) that make a vehicle tall: a
+                                       // near car's top search sometimes climbs onto what stands behind it
     double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
     int confirm_hits = 2;              // detections before a vehicle is confirmed
     double birth_min_appearance = 0.9;  // a detection with a learned appearance score (the cascade's) under this
@@ -105,6 +109,7 @@ private:
         cv::Point2d motion{0, 0};      // image shift of the last frame, px
         int age = 1, hits = 1, detection_misses = 0;
         int coast = 0;                 // frames in a row its PHD weight has been under end_weight (coasting)
+        int tall = 0;                  // detections in a row whose measured top made it taller than tall_aspect
         double prev_range = 0.0;       // m; the UKF's range before this frame's prediction
         bool confirmed = false, duplicate = false;
         int stable = 0;                // stable features this frame
