@@ -92,30 +92,32 @@ void add_dot_markings(const cv::Mat &gray, const std::vector<MarkingPoint> &shor
         const float rows = float(p.max_length_m) * d * d / float(cam.fy * cam.height_m) + 2.f;
         if (o.y_last - o.y_first <= rows) cand.push_back(int(k));
     }
-    // On the road: the brightest of the four pixels 4 px left, right, above and below the blob's centre is at least
-    // road_frac of its row's median (the road, sampled every 4 px); bright specks on a dark vehicle's body are not.
-    if (p.road_frac > 0.0) {
-        std::vector<uint8_t> samples;
-        auto on_road = [&](const Blob &o) {
-            const int x = int(std::lround(o.x())), y = int(std::lround(o.y()));
-            if (x < 4 || x >= gray.cols - 4 || y < 3 || y >= gray.rows - 3) return false;
-            const uint8_t *row = gray.ptr<uint8_t>(y);
+    // The strongest candidates (summed contrast) on the road, at most max_candidates. On the road: the brightest of
+    // the four pixels 4 px left, right, above and below the blob's centre is at least road_frac of its row's median
+    // (the road, sampled every 8 px); bright specks on a dark vehicle's body are not.
+    std::sort(cand.begin(), cand.end(), [&](int a, int b) { return blobs[size_t(a)].sc > blobs[size_t(b)].sc; });
+    std::vector<int> row_median(size_t(gray.rows), -1);  // computed once per row that holds a candidate
+    std::vector<uint8_t> samples;
+    auto on_road = [&](const Blob &o) {
+        const int x = int(std::lround(o.x())), y = int(std::lround(o.y()));
+        if (x < 4 || x >= gray.cols - 4 || y < 3 || y >= gray.rows - 3) return false;
+        const uint8_t *row = gray.ptr<uint8_t>(y);
+        int &median = row_median[size_t(y)];
+        if (median < 0) {
             samples.clear();
-            for (int i = 0; i < gray.cols; i += 4) samples.push_back(row[i]);
+            for (int i = 0; i < gray.cols; i += 8) samples.push_back(row[i]);
             std::nth_element(samples.begin(), samples.begin() + long(samples.size() / 2), samples.end());
-            const int ring = std::max({int(row[x - 4]), int(row[x + 4]), int(gray.at<uint8_t>(y - 3, x)),
-                                       int(gray.at<uint8_t>(y + 3, x))});
-            return float(ring) >= float(p.road_frac) * float(samples[samples.size() / 2]);
-        };
-        cand.erase(std::remove_if(cand.begin(), cand.end(), [&](int k) { return !on_road(blobs[size_t(k)]); }),
-                   cand.end());
-    }
+            median = samples[samples.size() / 2];
+        }
+        const int ring = std::max({int(row[x - 4]), int(row[x + 4]), int(gray.at<uint8_t>(y - 3, x)),
+                                   int(gray.at<uint8_t>(y + 3, x))});
+        return float(ring) >= float(p.road_frac) * float(median);
+    };
+    size_t kept = 0;
+    for (size_t c = 0; c < cand.size() && kept < size_t(p.max_candidates); ++c)
+        if (p.road_frac <= 0.0 || on_road(blobs[size_t(cand[c])])) cand[kept++] = cand[c];
+    cand.resize(kept);
     if (cand.size() < size_t(p.min_dots)) return;
-    if (cand.size() > size_t(p.max_candidates)) {
-        std::partial_sort(cand.begin(), cand.begin() + p.max_candidates, cand.end(),
-                          [&](int a, int b) { return blobs[size_t(a)].sc > blobs[size_t(b)].sc; });
-        cand.resize(size_t(p.max_candidates));
-    }
 
     // Lines through two candidates that pass the expected vanishing point as a marking's does (within vp_tol_px of
     // it: |x(vp.y) - vp.x| / sqrt(1 + k^2), the Hough stage's wide window). Every candidate within tol of such a
@@ -137,10 +139,13 @@ void add_dot_markings(const cv::Mat &gray, const std::vector<MarkingPoint> &shor
             const float k = (cx[j] - cx[i]) / dy;  // x(y) = cx[i] + k (y - cy[i])
             if (std::fabs(k) > kMaxMarkingSlope) continue;
             if (std::fabs(cx[i] + k * (vp.y - cy[i]) - vp.x) > vp_tol_px * std::sqrt(1.f + k * k)) continue;
+            const float x0 = cx[i] - k * cy[i];  // x(y) = x0 + k y
+            int near = 0;  // a branch-free count first: most lines hold only their two candidates
+            for (size_t m = 0; m < n; ++m) near += std::fabs(cx[m] - x0 - k * cy[m]) <= tol;
+            if (near < p.min_dots) continue;
             on_line.clear();
             for (size_t m = 0; m < n; ++m)
-                if (std::fabs(cx[m] - cx[i] - k * (cy[m] - cy[i])) <= tol) on_line.push_back(m);
-            if (on_line.size() < size_t(p.min_dots)) continue;
+                if (std::fabs(cx[m] - x0 - k * cy[m]) <= tol) on_line.push_back(m);
             std::sort(on_line.begin(), on_line.end(), [&](size_t a, size_t b) { return cy[a] < cy[b]; });
             // Dots along the road, each at least min_gap_m in range beyond the last counted (Z = fy h / (y - y_vp)):
             // bright specks bunched on one vehicle (lamps, trim) count once.
