@@ -50,24 +50,31 @@ bool keep_consensus(std::vector<LaneCandidate> &lines, const HorizonPrior &hp, c
 // when the caller knows it), then every marking is searched in a narrow window around it.
 LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam,
                                    const HorizonPrior &hp, const cv::Point2f *known_vp,
-                                   const std::vector<cv::Rect2f> *vehicles) {
+                                   const std::vector<cv::Rect2f> *vehicles, bool tracking) {
     check_frame(gray, cam);
     LaneMeasurement m;
     const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
     if (band.rows() < 2) return m;
     std::vector<MarkingPoint> &pts = m.points;
-    find_marking_points(gray, band, cam, hp, p.filter, pts);
+    const bool dots = p.dots.enabled && (!tracking || p.dots.in_tracking);
+    std::vector<MarkingPoint> short_bars;
+    find_marking_points(gray, band, cam, hp, p.filter, pts, dots ? &short_bars : nullptr);
     const float frac = float(p.vehicle_mask_frac);  // upper part of each box: the vehicle's body
-    if (vehicles && !vehicles->empty())
-        pts.erase(std::remove_if(pts.begin(), pts.end(),
-                                 [&](const MarkingPoint &q) {
-                                     for (const auto &b : *vehicles)
-                                         if (q.x >= b.x && q.x <= b.x + b.width && q.y >= b.y && q.y <= b.y + frac * b.height)
-                                             return true;
-                                     return false;
-                                 }),
-                  pts.end());
+    auto on_vehicle = [&](const MarkingPoint &q) {
+        for (const auto &b : *vehicles)
+            if (q.x >= b.x && q.x <= b.x + b.width && q.y >= b.y && q.y <= b.y + frac * b.height) return true;
+        return false;
+    };
+    if (vehicles && !vehicles->empty()) {
+        pts.erase(std::remove_if(pts.begin(), pts.end(), on_vehicle), pts.end());
+        short_bars.erase(std::remove_if(short_bars.begin(), short_bars.end(), on_vehicle), short_bars.end());
+    }
 
+    // Botts' dots lined up toward the expected vanishing point (the wide search's window) join the points, so the
+    // wide search's consensus and the narrow search both see dotted lines.
+    if (dots)
+        add_dot_markings(gray, short_bars, band, cam, hp, p.dots,
+                         float(p.hough.max_vp_offset_frac * gray.cols) + hp.tol_px, pts);
     // Narrow search around vp: the lines through it, with the vanishing point refined by them.
     auto narrow = [&](cv::Point2f vp, bool tracked) {
         m.lines = hough_candidates(pts, band, gray.size(), cam, hp, p, vp_window(vp, tracked, gray.size(), p.hough));

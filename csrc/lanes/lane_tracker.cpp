@@ -225,7 +225,7 @@ void LaneTracker::update(const cv::Mat &gray, LaneModel &out, const std::vector<
     if (p_.reject_in_vehicles)
         for (const auto &v : vehicles)
             if (v.confirmed) hidden_.push_back(v.box);
-    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp, have_vp ? &known_vp : nullptr, &hidden_);
+    const LaneMeasurement m = measure_lane_lines(gray, p_, cam_, hp, have_vp ? &known_vp : nullptr, &hidden_, true);
     associate(m, hp);
 
     std::vector<LaneCandidate> cands = candidates();

@@ -16,6 +16,7 @@
 #include "base/params.hpp"
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
+#include "lanes/dot_markings.hpp"
 #include "lanes/hough_lines.hpp"
 #include "lanes/lane_assembly.hpp"
 #include "lanes/lane_curve.hpp"
@@ -32,6 +33,7 @@ struct LaneParams {
     LaneAssemblyParams assembly;
     LaneCurveParams curve;
     LaneEvidenceParams evidence;
+    DotMarkingParams dots;
     int max_missing_frames = 15;         // frames a boundary is carried after it was last measured
     double marking_sigma_px = 1.0;       // px; noise of one marking point (measurement model)
     double process_accel_frac = 0.0015;  // fraction of width per frame^2; how fast a boundary may move
@@ -47,6 +49,7 @@ struct LaneParams {
         assembly.bind(m);
         curve.bind(m);
         evidence.bind(m);
+        dots.bind(m);
         m.add("max_missing_frames", max_missing_frames, 0, 1000,
               "frames; how long a boundary that is no longer measured is kept by lane tracking; 15 "
               "(0.5 s at 30 fps) bridges dash gaps, worn paint and a vehicle passing over the marking");
@@ -89,10 +92,11 @@ struct LaneMeasurement {
 // One frame's lines (lane_detection.cpp): the wide search and consensus find the vanishing point,
 // the narrow search around it every marking. known_vp: a vanishing point already known (tracking),
 // which skips the wide search unless the narrow one finds fewer than two lines; null: this frame's.
-// vehicles: image boxes whose marking points are dropped (null or empty: none).
+// vehicles: image boxes whose marking points are dropped (null or empty: none). tracking: the frame is one of a
+// video (Botts' dots are looked for only with dots_in_tracking).
 LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam,
                                    const HorizonPrior &hp, const cv::Point2f *known_vp = nullptr,
-                                   const std::vector<cv::Rect2f> *vehicles = nullptr);
+                                   const std::vector<cv::Rect2f> *vehicles = nullptr, bool tracking = false);
 
 // Lane markings of one image alone (no history).
 LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraParams &cam);

@@ -19,11 +19,11 @@ float peak_offset(int l, int c, int r) {
     return std::clamp(0.5f * float(l - r) / float(den), -0.5f, 0.5f);
 }
 
-constexpr float kMaxSlope = 6.f;  // |dx/dy| of the flattest marking considered (80 deg from vertical)
-
 // Keeps the points that continue into the previous or next scanned row: within 1.5 px of where a
 // line through the vanishing point would put them, plus |k| px per row for the slope uncertainty.
-void keep_runs(std::vector<MarkingPoint> &pts, const ScanBand &band, const HorizonPrior &hp) {
+// The points dropped are appended to `dropped` when given.
+void keep_runs(std::vector<MarkingPoint> &pts, const ScanBand &band, const HorizonPrior &hp,
+               std::vector<MarkingPoint> *dropped) {
     const size_t n = pts.size();
     std::vector<char> keep(n, 0);
     size_t prev_lo = 0, prev_hi = 0;  // points of the previous scanned row: [prev_lo, prev_hi)
@@ -33,7 +33,7 @@ void keep_runs(std::vector<MarkingPoint> &pts, const ScanBand &band, const Horiz
         while (j < n && pts[j].y == pts[i].y) ++j;  // this row: [i, j)
         if (prev_hi > prev_lo && pts[prev_lo].y == pts[i].y - float(band.step)) {
             for (size_t a = i; a < j; ++a) {
-                const float k = std::min(kMaxSlope, std::fabs(pts[a].x - hp.vp_x) /
+                const float k = std::min(kMaxMarkingSlope, std::fabs(pts[a].x - hp.vp_x) /
                                                         std::max(1.f, pts[a].y - (hp.row + hp.tol_px)));
                 const float tol = 1.5f + k * float(band.step);
                 for (size_t b = prev_lo; b < prev_hi; ++b)
@@ -47,6 +47,7 @@ void keep_runs(std::vector<MarkingPoint> &pts, const ScanBand &band, const Horiz
     size_t o = 0;
     for (size_t a = 0; a < n; ++a)
         if (keep[a]) pts[o++] = pts[a];
+        else if (dropped) dropped->push_back(pts[a]);
     pts.resize(o);
 }
 
@@ -65,12 +66,13 @@ ScanBand scan_band(cv::Size size, const CameraParams &cam, const HorizonPrior &h
 
 void find_marking_points(const cv::Mat &gray, const ScanBand &band, const CameraParams &cam,
                          const HorizonPrior &hp, const MarkingFilterParams &p,
-                         std::vector<MarkingPoint> &out) {
+                         std::vector<MarkingPoint> &out, std::vector<MarkingPoint> *short_bars) {
     if (gray.empty() || gray.type() != CV_8UC1)
         throw std::invalid_argument("find_marking_points: expected a non-empty 8-bit gray image");
     if (band.y_top < 0 || band.y_bottom >= gray.rows || band.step < 1)
         throw std::invalid_argument("find_marking_points: scan band outside the image");
     out.clear();
+    if (short_bars) short_bars->clear();
     // Rows of frames wider than the working width are averaged over blocks of `dec` pixels first:
     // the masks then see a marking as in a 640-wide frame, with less noise, at a fraction of the cost.
     const int dec = std::max(1, gray.cols / p.work_width_px);
@@ -150,15 +152,19 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
         for (size_t i = 0; i < rising.size(); ++i) {
             const float r = rising[i];
             if (r < bar_end) continue;
+            bool short_kept = false;  // a bar narrower than w_min from this edge went to short_bars
             while (j0 < falling.size() && falling[j0] <= r) ++j0;
             if (j0 == falling.size()) break;
-            const float w_far = w_max * std::sqrt(1.f + kMaxSlope * kMaxSlope);  // widest at any slant
+            const float w_far = w_max * std::sqrt(1.f + kMaxMarkingSlope * kMaxMarkingSlope);  // widest at any slant
             for (size_t j = j0; j < falling.size() && falling[j] - r <= w_far; ++j) {
                 const float f = falling[j];
                 // A slanted marking is wider along the row by sqrt(1 + k^2), k = dx/dy of the line from
                 // the vanishing point through it.
-                const float k = std::min(kMaxSlope, std::fabs(full_x(0.5f * (r + f)) - hp.vp_x) / dy_vp);
-                if (f - r < w_min || f - r > w_max * std::sqrt(1.f + k * k)) continue;
+                const float k = std::min(kMaxMarkingSlope, std::fabs(full_x(0.5f * (r + f)) - hp.vp_x) / dy_vp);
+                if (f - r > w_max * std::sqrt(1.f + k * k)) continue;
+                // Narrower than a marking may be: a Botts' dot or a speck, judged by dot_markings (short_bars).
+                const bool narrow = f - r < w_min;
+                if (narrow && !short_bars) continue;
                 // Bar: pixels strictly between the edges; sides: one pixel beyond each edge pixel.
                 int a = int(std::floor(r)) + 1, b = int(std::ceil(f)) - 1;
                 if (b < a) a = b = int(std::lround(0.5f * (r + f)));
@@ -186,13 +192,22 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
                 // ... and be one painted line wide: a wide bright patch with texture inside (concrete between
                 // two seams, a tyre-polished strip) is not worn paint.
                 if (crosses && f - r > w_cross * std::sqrt(1.f + k * k)) continue;
+                if (narrow) {  // a wider bar from this edge may still be a marking: look on
+                    if (!short_kept)
+                        short_bars->push_back({full_x(0.5f * (r + f)), float(y), contrast, (f - r) * scale});
+                    short_kept = true;
+                    continue;
+                }
+                if (short_kept) short_bars->pop_back();  // the edge starts a marking, not a dot
                 out.push_back({full_x(0.5f * (r + f)), float(y), contrast, (f - r) * scale});
                 bar_end = f;
                 break;
             }
         }
     }
-    if (p.min_run_rows >= 2) keep_runs(out, band, hp);
+    if (p.min_run_rows >= 2) keep_runs(out, band, hp, short_bars);
+    if (short_bars)  // by row, then column, as the marking points
+        std::sort(short_bars->begin(), short_bars->end(), row_order);
 }
 
 } // namespace hw

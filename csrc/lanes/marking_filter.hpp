@@ -88,6 +88,11 @@ struct MarkingPoint {
     float width = 0.f;     // px (full frame); the bar's width along the row
 };
 
+// The order of the marking points: by row, then column.
+inline bool row_order(const MarkingPoint &a, const MarkingPoint &b) { return a.y < b.y || (a.y == b.y && a.x < b.x); }
+
+constexpr float kMaxMarkingSlope = 6.f;  // |dx/dy| of the flattest marking considered (80 deg from vertical)
+
 // The rows that are scanned: y_top..y_bottom inclusive, every `step` rows.
 struct ScanBand {
     int y_top = 0, y_bottom = 0, step = 1;
@@ -98,9 +103,11 @@ struct ScanBand {
 ScanBand scan_band(cv::Size size, const CameraParams &cam, const HorizonPrior &hp,
                    const MarkingFilterParams &p);
 
-// Marking centres on the rows of `band`; appends to `out` (cleared first).
+// Marking centres on the rows of `band`; appends to `out` (cleared first). short_bars (cleared first, when
+// given) receives the bars that pass the contrast tests but are no marking: narrower than marking_min_m allows,
+// or alone on their row (min_run_rows); Botts' dots are such bars at low resolution (dot_markings.hpp).
 void find_marking_points(const cv::Mat &gray, const ScanBand &band, const CameraParams &cam,
                          const HorizonPrior &hp, const MarkingFilterParams &p,
-                         std::vector<MarkingPoint> &out);
+                         std::vector<MarkingPoint> &out, std::vector<MarkingPoint> *short_bars = nullptr);
 
 } // namespace hw
