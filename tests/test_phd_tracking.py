@@ -154,10 +154,11 @@ def test_a_truck_keeps_its_measured_height_against_car_shaped_guesses():
     """cut_in, preset cascade_shadow_phd: the truck 20-37 m ahead in the left lane (about 60 x 90 px, height 1.5
     widths). On many detection runs the verification finds no top on its side and guesses a car's height
     (verify.aspect_ratio 0.8); averaged into the vehicle's box, those guesses halved it (IoU under 0.5 with the truck,
-    and from frame 255 a second, car-shaped track). A vehicle whose measured tops said taller than phd.tall_aspect
-    twice in a row keeps its height against guessed ones, and is matched to them as if they were as tall."""
+    and from frame 255 a second, car-shaped track). A vehicle whose measured tops said taller than
+    vehicle_height.tall_aspect twice in a row keeps its height against guessed ones, and is matched to them as if
+    they were as tall (track/vehicle_height.hpp; the Kalman tracker shares the rule)."""
     ids, visible = _ids_following("cut_in", "cascade_shadow_phd", 3)
     followed = [i for i in ids if i is not None]
     assert visible >= 250 and len(set(followed)) == 1 and len(followed) >= 0.98 * visible, (set(followed), len(followed), visible)
-    ids0, _ = _ids_following("cut_in", "cascade_shadow_phd", 3, json.dumps({"phd": {"tall_aspect": 10}}))
+    ids0, _ = _ids_following("cut_in", "cascade_shadow_phd", 3, json.dumps({"vehicle_height": {"tall_aspect": 10}}))
     assert sum(i is not None for i in ids0) < 0.95 * visible, "the truck was followed without the rule: the test no longer tests it"

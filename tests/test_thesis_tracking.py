@@ -188,3 +188,29 @@ def test_reset_starts_ids_again():
         again = [p.process(f.image, f.t_s) for f in fr]
     assert sorted(t.id for t in first[-1].tracks) == sorted(t.id for t in again[-1].tracks)
     assert min(t.id for t in again[0].tracks) == 1
+
+
+def _frames_on(name: str, vehicle_id: int, sections: dict) -> tuple[int, int]:
+    """Frames a confirmed track is on the vehicle (IoU >= 0.5 with its visible box) and frames the evaluation scores
+    it (at least half visible, within 60 m)."""
+    from app.eval.track_score import _box
+    fr, results = tracked(name, json.dumps(sections))
+    on = scored = 0
+    for f, r in zip(fr, results):
+        g = next((g for g in f.truth if g["id"] == vehicle_id), None)
+        if g is None or g["visible_fraction"] < 0.5 or g["longitudinal_m"] > 60.0:
+            continue
+        scored += 1
+        on += best_match([t.box for t in _confirmed(r)], _box(g))[1] >= 0.5
+    return on, scored
+
+
+def test_a_truck_keeps_its_measured_height_in_the_box_tracker():
+    """dense_traffic: the truck 28-40 m ahead in the left lane (vehicle 5, 1.5 widths tall). The Kalman tracker takes
+    each detection's aspect into the box (0.4 of it); detections whose top the verification could not find carry a
+    car's guessed 0.8 and pulled the truck's box down to IoU < 0.5 with it. A vehicle measured taller than
+    vehicle_height.tall_aspect twice in a row keeps its measured height (track/vehicle_height.hpp, shared with phd)."""
+    on, scored = _frames_on("dense_traffic", 5, {})
+    off, _ = _frames_on("dense_traffic", 5, {"vehicle_height": {"tall_aspect": 10}})
+    assert scored == 300 and on >= 215, (on, scored)
+    assert off < 205, f"the truck was followed on {off} frames without the rule: the test no longer tests it"

@@ -33,6 +33,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("phd_features", c.phd.features);
     fn("phd_ukf", c.phd.ukf);
     fn("phd_pitch", c.phd.pitch);
+    fn("vehicle_height", c.vehicle_height);
 }
 
 // Keys that moved to one shared definition (issue 11): {old section, old key, new "section.key"}. A
@@ -122,6 +123,7 @@ Config Config::from_json(const std::string &text) {
         throw ConfigError("road.lane_width_m: must lie within [road.min_lane_width_m, road.max_lane_width_m], or "
                           "lead selection disbelieves every lane of the nominal width");
     share_road(c);
+    c.kalman.height = c.phd.height = c.vehicle_height;  // one section for both trackers that keep a box height
     composition_of(c.pipeline);  // the parts exist and fit together
     return c;
 }

@@ -20,6 +20,7 @@
 #include "track/particle_filter.hpp"
 #include "track/tracker_kalman.hpp"
 #include "track/tracker_phd.hpp"
+#include "track/vehicle_height.hpp"
 
 #include <string>
 
@@ -89,6 +90,7 @@ struct Config {
     FuseParams fuse;                  // fused stage: cascade + shadow detections merged
     MergeParams merge;                // several detector parts: hypotheses merged, verified once
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
+    VehicleHeightParams vehicle_height;  // a tracked vehicle's height (trucks); handed to kalman and phd by from_json
 
     // Parses the JSON text; throws ConfigError naming the key on any problem (a key that moved to
     // another section: naming the new one).

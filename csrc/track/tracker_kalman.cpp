@@ -94,15 +94,14 @@ float side_quality(float side_excess) { return 1.f - 0.5f / std::sqrt(std::max(1
 
 } // namespace
 
-cv::Rect2f KalmanTracker::box_of(const KalmanBox::Vec3 &z, float aspect) const {
-    const float w = float(z[2] - z[0]), h = aspect * w;
+cv::Rect2f KalmanTracker::box_of(const KalmanBox::Vec3 &z, double aspect) const {
+    const float w = float(z[2] - z[0]), h = float(aspect * w);
     return {float(z[0]), float(z[1]) - h, w, h};
 }
 
-// The height is not tracked by the filter: each detection of the vehicle refines its aspect ratio.
-void KalmanTracker::take_aspect(Track &t, const Hypothesis &d) const {
-    if (d.box.width > 0.f) t.aspect = 0.6f * t.aspect + 0.4f * d.box.height / d.box.width;
-}
+// The height is not tracked by the filter: each detection of the vehicle refines its aspect ratio (a truck's only
+// by measured tops: track/vehicle_height.hpp).
+void KalmanTracker::take_aspect(Track &t, const Hypothesis &d) const { t.height.take(d, cols_, 0.4, kalman_.height); }
 
 KalmanBox::Vec3 KalmanTracker::sigma_of(const Track &t) const {
     const KalmanBox::Vec3 z = t.kf.measurement();
@@ -170,7 +169,7 @@ bool KalmanTracker::measure_by_detection(Track &t, std::vector<Hypothesis> &dets
     int best = -1;
     float best_iou = float(kalman_.match_iou);
     for (size_t i = 0; i < dets.size(); ++i) {
-        const float o = box_iou(pred, dets[i].box);
+        const float o = box_iou(pred, t.height.compared_box(dets[i], pred, kalman_.height));
         if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
     }
     if (best < 0) return false;
@@ -185,7 +184,7 @@ bool KalmanTracker::measure_by_template(const cv::Mat &gray, Track &t) {
     if (!t.appearance.usable()) return false;
     // Move the template's box with the predicted motion of the bottom-left corner since it was cut.
     const KalmanBox::Vec3 z = t.kf.measurement();
-    const cv::Rect2f last = box_of(t.appearance_z, t.aspect);
+    const cv::Rect2f last = box_of(t.appearance_z, t.height.aspect);
     const float dx = float(z[0]) - last.x, dy = float(z[1]) - (last.y + last.height);
     const cv::Rect2f at(t.appearance.box.x + dx, t.appearance.box.y + dy, t.appearance.box.width,
                         t.appearance.box.height);
@@ -227,7 +226,7 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
         Track t(next_id_++, KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
                                       kalman_.init_speed_mps * w / shadow_.road.road.vehicle_width_m));
         t.confidence = dets[i].score;
-        t.aspect = b.height / b.width;
+        t.height.start(dets[i], gray.cols, kalman_.height);
         t.appearance = make_template(gray, b, kalman_.ncc_template_px, kalman_.ncc_min_std_gray);
         t.appearance_z = z;
         t.updated = true;
@@ -256,7 +255,7 @@ void KalmanTracker::prune(const FrameContext &ctx) {
         const float w_exp = expected_vehicle_width(float(z[1]), gray.size(), ctx.lanes, ctx.camera, shadow_.road);
         const bool implausible = w_exp > 0.f && (w < kalman_.min_width_ratio * w_exp || w > kalman_.max_width_ratio * w_exp);
         return t.duplicate || implausible || t.misses >= limit || !(w >= 3.0) || z[1] <= horizon + 1.0 || z[2] < 0.0 || z[0] > gray.cols ||
-               z[1] - t.aspect * w > gray.rows;
+               z[1] - t.height.aspect * w > gray.rows;
     };
     tracks_.erase(std::remove_if(tracks_.begin(), tracks_.end(), gone), tracks_.end());
 }
@@ -287,6 +286,7 @@ void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::v
     }
     started_ = true;
     last_t_s_ = ctx.t_s;
+    cols_ = ctx.gray.cols;
 
     // Predict, then re-find each vehicle in the ROI around its prediction.
     predict_all(dt, vanishing_point(ctx.gray.size(), ctx.lanes, ctx.camera));
@@ -309,7 +309,7 @@ void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::v
             }
             const cv::Rect2f tb = box_of(t);
             for (size_t i = 0; i < dets.size(); ++i)
-                if (!used[i] && box_iou(tb, dets[i].box) >= kalman_.match_iou) {
+                if (!used[i] && box_iou(tb, t.height.compared_box(dets[i], tb, kalman_.height)) >= kalman_.match_iou) {
                     used[i] = true;
                     take_aspect(t, dets[i]);
                 }

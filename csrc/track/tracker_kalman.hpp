@@ -23,6 +23,7 @@
 #include "track/roi_search.hpp"
 #include "track/template_check.hpp"
 #include "track/tracker.hpp"
+#include "track/vehicle_height.hpp"
 
 #include <vector>
 
@@ -55,6 +56,7 @@ struct KalmanBoxParams {
     double min_width_ratio = 0.35;    // track width / expected width at its row, at least
     double max_width_ratio = 2.5;     // ... at most
     double max_dt_s = 1.0;            // s; a longer gap between frames restarts tracking
+    VehicleHeightParams height;       // section "vehicle_height", handed in by the configuration (core/config.cpp)
 
     void bind(ParamMap &m);
 };
@@ -77,7 +79,7 @@ private:
         bool confirmed = false;
         float max_side_change = 0.f;  // two-threshold rule memory (px)
         float confidence = 0.5f;
-        float aspect = 0.8f;          // box height / width, from the detections
+        VehicleHeight height;         // box height / width, from the detections (a truck keeps its measured one)
         VehicleTemplate appearance;   // last measured box, for the correlation check
         KalmanBox::Vec3 appearance_z = KalmanBox::Vec3::Zero();  // the corners it was cut at
         bool updated = false;         // measured (edges or detection) this frame
@@ -95,8 +97,8 @@ private:
     TrackState report(const Track &t) const;
 
     void apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality);
-    cv::Rect2f box_of(const KalmanBox::Vec3 &z, float aspect) const;
-    cv::Rect2f box_of(const Track &t) const { return box_of(t.kf.measurement(), t.aspect); }
+    cv::Rect2f box_of(const KalmanBox::Vec3 &z, double aspect) const;
+    cv::Rect2f box_of(const Track &t) const { return box_of(t.kf.measurement(), t.height.aspect); }
     void take_aspect(Track &t, const Hypothesis &d) const;
     KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
     double accel_bound(const Track &t) const;
@@ -109,6 +111,7 @@ private:
     int frames_since_detection_ = 0;
     double last_t_s_ = 0.0;
     bool started_ = false;
+    int cols_ = 0;                    // width of the frame being tracked (a box the image side cuts: track/vehicle_height.hpp)
 };
 
 } // namespace hw

@@ -49,13 +49,6 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "share of a matched detection's box (width, contact point) taken into the vehicle's box and its "
           "features' offsets: the detector keeps the feature cloud's scale from drifting");
     m.add("match_iou", match_iou, 0.0, 1.0, "IoU of a detection with a vehicle's box above which it is that vehicle");
-    m.add("tall_aspect", tall_aspect, 0.5, 10.0,
-          "height / width above which a vehicle is a truck or a bus (no car is); such a vehicle keeps its measured "
-          "height against a detection whose height the verification only guessed (no top found: verify.aspect_ratio, "
-          "a car's shape), which also matches it as if it were as tall as the vehicle");
-    m.add("tall_hits", tall_hits, 1, 100,
-          "detections in a row whose measured top says taller than tall_aspect (detections with a guessed top are "
-          "skipped) before a vehicle is taken as tall: one such top may be what stands behind a car");
     m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
           "IoU above which two vehicles are the same; the one with fewer detections goes");
     m.add("confirm_hits", confirm_hits, 1, 100, "detections (the first included) before a vehicle is confirmed");
@@ -168,7 +161,7 @@ void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const
             py.push_back(prev[i].y);
         }
     double s = 1.0;
-    cv::Vec2d t(v.motion.x, v.motion.y), c(v.contact.x, v.contact.y - 0.5 * v.aspect * v.width);
+    cv::Vec2d t(v.motion.x, v.motion.y), c(v.contact.x, v.contact.y - 0.5 * v.height.aspect * v.width);
     if (idx.size() >= 2) {
         t = {median(dx), median(dy)};
         c = {median(px), median(py)};
@@ -282,8 +275,7 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double 
     v.ukf = std::make_unique<VehicleUkf>(p_.ukf, cam_, contact.x, contact.y, horizon);
     v.contact = contact;
     v.width = d.box.width;
-    v.aspect = d.box.height / std::max(1.f, d.box.width);
-    v.tall = d.top_measured && v.aspect > p_.tall_aspect ? 1 : 0;
+    v.height.start(d, gray.cols, p_.height);
     v.confidence = d.score;
     // The first features: every corner is a birth (no draw) and measured once.
     const std::vector<cv::Vec2d> corners = box_corners(gray, d.box, {}, p_.features);
@@ -299,14 +291,10 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
     std::vector<bool> used(dets.size(), false);
     for (Vehicle &v : vehicles_) {
         const cv::Rect2f vb = v.box();
-        // A truck meets a detection whose height was only guessed (a car's) as if it were as tall as the truck.
-        const bool tall = v.tall >= p_.tall_hits;
         int best = -1;
         float best_iou = float(p_.match_iou);
         for (size_t i = 0; i < dets.size(); ++i) {
-            const cv::Rect2f &b = dets[i].box;
-            const bool guessed = tall && !dets[i].top_measured;
-            const float o = box_iou(vb, guessed ? cv::Rect2f(b.x, b.y + b.height - vb.height, b.width, vb.height) : b);
+            const float o = box_iou(vb, v.height.compared_box(dets[i], vb, p_.height));
             if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
         }
         if (best < 0) {
@@ -322,10 +310,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         const double g = p_.anchor_gain;
         v.width = (1.0 - g) * v.width + g * d.box.width;
         v.contact = (1.0 - g) * v.contact + g * dc;
-        // A height the verification only guessed (no top found: a car's aspect) says nothing of a truck's.
-        if (d.top_measured) v.tall = d.box.height > p_.tall_aspect * d.box.width ? v.tall + 1 : 0;
-        if (d.top_measured || !tall)
-            v.aspect = (1.0 - g) * v.aspect + g * d.box.height / std::max(1.f, d.box.width);
+        v.height.take(d, ctx.gray.cols, g, p_.height);
         for (GmComponent &c : v.phd.components())
             c.tag = (1.0 - g) * c.tag + g * tag_of(c.m, dc, horizon);
         v.hits++;

@@ -47,6 +47,7 @@
 #include "track/gmphd.hpp"
 #include "track/scene_pitch.hpp"
 #include "track/tracker.hpp"
+#include "track/vehicle_height.hpp"
 #include "track/vehicle_ukf.hpp"
 
 #include <memory>
@@ -69,10 +70,6 @@ struct PhdTrackerParams {
     double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
     double anchor_gain = 0.5;          // share of a matched detection's box taken into width and offsets
     double match_iou = 0.3;            // detection <-> vehicle box overlap that is the same vehicle
-    double tall_aspect = 1.2;          // height / width above which a vehicle is a truck or bus (no car is): its
-                                       // measured height is kept against a detection whose height was guessed
-    int tall_hits = 2;                 // measured tops in a row (guessed ones skipped) that make a vehicle tall: a
-                                       // near car's top search sometimes climbs onto what stands behind it
     double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
     int confirm_hits = 2;              // detections before a vehicle is confirmed
     double birth_min_appearance = 0.9;  // a detection with a learned appearance score (the cascade's) under this
@@ -87,6 +84,7 @@ struct PhdTrackerParams {
     GmPhdParams phd;                   // the GM-PHD filter (section gmphd)
     VehicleUkfParams ukf;              // the UKF (section phd_ukf)
     ScenePitchParams pitch;            // the horizon followed through the car's pitch (section phd_pitch)
+    VehicleHeightParams height;        // section "vehicle_height", handed in by the configuration (core/config.cpp)
 
     void bind(ParamMap &m);
 };
@@ -105,17 +103,18 @@ private:
         GmPhd phd;
         std::unique_ptr<VehicleUkf> ukf;
         cv::Point2d contact;           // bottom centre of the box, px
-        double width = 0.0, aspect = 0.8;  // box width px, height / width
+        double width = 0.0;            // box width px
+        VehicleHeight height;          // box height / width, from the detections (a truck keeps its measured one)
         cv::Point2d motion{0, 0};      // image shift of the last frame, px
         int age = 1, hits = 1, detection_misses = 0;
         int coast = 0;                 // frames in a row its PHD weight has been under end_weight (coasting)
-        int tall = 0;                  // detections in a row whose measured top made it taller than tall_aspect
         double prev_range = 0.0;       // m; the UKF's range before this frame's prediction
         bool confirmed = false, duplicate = false;
         int stable = 0;                // stable features this frame
         float confidence = 0.5f;
         cv::Rect2f box() const {
-            return {float(contact.x - 0.5 * width), float(contact.y - aspect * width), float(width), float(aspect * width)};
+            const double h = height.aspect * width;
+            return {float(contact.x - 0.5 * width), float(contact.y - h), float(width), float(h)};
         }
     };
 
