@@ -56,6 +56,8 @@ struct KalmanBoxParams {
     double min_width_ratio = 0.35;    // track width / expected width at its row, at least
     double max_width_ratio = 2.5;     // ... at most
     double max_dt_s = 1.0;            // s; a longer gap between frames restarts tracking
+    double max_width_depth_change = 0.3;   // |width / depth below the horizon of an ROI or template measurement
+                                           // against the detections' - 1|, at most (flat road: w = W d / h)
     VehicleHeightParams height;       // section "vehicle_height", handed in by the configuration (core/config.cpp)
 
     void bind(ParamMap &m);
@@ -80,6 +82,7 @@ private:
         float max_side_change = 0.f;  // two-threshold rule memory (px)
         float confidence = 0.5f;
         VehicleHeight height;         // box height / width, from the detections (a truck keeps its measured one)
+        double width_per_depth = 0.0;  // width / (bottom row - horizon) at its detections: W / h on a flat road
         VehicleTemplate appearance;   // last measured box, for the correlation check
         KalmanBox::Vec3 appearance_z = KalmanBox::Vec3::Zero();  // the corners it was cut at
         bool updated = false;         // measured (edges or detection) this frame
@@ -91,6 +94,7 @@ private:
     bool measure_by_roi(const cv::Mat &gray, Track &t);
     bool measure_by_detection(Track &t, std::vector<Hypothesis> &dets, std::vector<bool> &used);
     bool measure_by_template(const cv::Mat &gray, Track &t);
+    bool keeps_width_per_depth(const Track &t, double x1, double y, double x2) const;
     bool occluded(const Track &t) const;
     void start_tracks(const cv::Mat &gray, const std::vector<Hypothesis> &dets, const std::vector<bool> &used);
     void prune(const FrameContext &ctx);
@@ -99,7 +103,7 @@ private:
     void apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality);
     cv::Rect2f box_of(const KalmanBox::Vec3 &z, double aspect) const;
     cv::Rect2f box_of(const Track &t) const { return box_of(t.kf.measurement(), t.height.aspect); }
-    void take_aspect(Track &t, const Hypothesis &d) const;
+    void take_shape(Track &t, const Hypothesis &d) const;
     KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
     double accel_bound(const Track &t) const;
 
@@ -111,6 +115,7 @@ private:
     int frames_since_detection_ = 0;
     double last_t_s_ = 0.0;
     bool started_ = false;
+    float horizon_ = 0.f;             // this frame's horizon row (width per depth of the detections)
     int cols_ = 0;                    // width of the frame being tracked (a box the image side cuts: track/vehicle_height.hpp)
 };
 
