@@ -19,6 +19,16 @@ def data_path(*parts: str) -> Path:
     return p
 
 
+def tme08_sequence(preset: str) -> tuple[list, float, dict]:
+    """TME's tme08 (50 real motorway frames; skipped when absent): the frames, their rate, and the configuration
+    values `headway eval` runs it with (camera pitch and yaw fitted to the lanes, the hood line, the preset)."""
+    from app.eval import road_motion
+
+    frames, fps = road_motion.read_tme(data_path("tme", "tme08"))
+    cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
+    return frames, fps, {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}, "pipeline": {"preset": preset}}
+
+
 def write_video(path: Path, n: int = 30, size=(640, 480), fps: float = 30.0, fourcc: str = "mp4v") -> Path:
     """A short video whose frame i has a bright square at x = 10 * i (so frames are distinguishable)."""
     w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, size)

@@ -6,15 +6,12 @@ from __future__ import annotations
 import pytest
 
 from app.eval import road_motion
-from tests.conftest import data_path
+from tests.conftest import data_path, tme08_sequence
 
 
 @pytest.fixture(scope="module")
 def tme08():
-    frames, fps = road_motion.read_tme(data_path("tme", "tme08"))
-    cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
-    values = {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}, "pipeline": {"preset": "cascade"}}
-    return frames, fps, values
+    return tme08_sequence("cascade")
 
 
 def test_the_two_cars_ahead_are_tracked_and_few_other_tracks_born(tme08):

@@ -10,17 +10,14 @@ import json
 import pytest
 
 from app.eval import road_motion
-from tests.conftest import data_path
+from tests.conftest import data_path, tme08_sequence
 
 OFF = {"kalman": {"max_width_depth_change": 100.0}}
 
 
 @pytest.fixture(scope="module")
 def tme08():
-    frames, fps = road_motion.read_tme(data_path("tme", "tme08"))
-    cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
-    values = {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}, "pipeline": {"preset": "thesis"}}
-    return frames, fps, values
+    return tme08_sequence("thesis")
 
 
 def _tracked_frames(tme08, extra: dict) -> dict:
