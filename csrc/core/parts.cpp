@@ -50,10 +50,7 @@ const std::map<std::string, Preset> &presets() {
     static const std::map<std::string, Preset> r{
         {"thesis", {{{"shadow"}, "kalman"}}},
         {"parallax", {{{"parallax"}, "particles"}}},
-        // The parallax detector's regions give no steady width per depth: the box tracker's check of it
-        // (kalman.max_width_depth_change) cost this composition identity (IDF1 0.78 -> 0.68; docs/RESULTS.md,
-        // session 8), so it stays off here.
-        {"parallax_kalman", {{{"parallax"}, "kalman"}, {{"kalman", {{"max_width_depth_change", 100.0}}}}}},
+        {"parallax_kalman", {{{"parallax"}, "kalman"}}},
         {"shadow_particles", {{{"shadow"}, "particles"}}},
         {"phd", {{{"shadow"}, "phd"}}},
         {"cascade", {{{"cascade"}, "phd"}}},
