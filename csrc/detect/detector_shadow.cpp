@@ -13,10 +13,7 @@ bool ShadowDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &out
     const float verify_ms = sv.ms();
     times.add("hypotheses", hyp_ms);
     times.add("verify", verify_ms);
-    for (const Detection &d : dets) {
-        out.push_back(hypothesis_of(d.box, d.score, d.score, "shadow"));
-        out.back().top_measured = d.top_measured;
-    }
+    for (const Detection &d : dets) out.push_back(hypothesis_of(d, "shadow"));
     return true;
 }
 

@@ -101,10 +101,7 @@ std::vector<Hypothesis> HypothesisMerge::merge_and_verify(const RoadContext &ctx
     }
     // Thinned as the shadow detector does; each kept detection keeps its anchor's source name.
     std::vector<Hypothesis> out;
-    for (size_t i : strongest_apart(found, verify_.nms_iou)) {
-        out.push_back(hypothesis_of(found[i].box, found[i].score, found[i].score, source[i]));
-        out.back().top_measured = found[i].top_measured;
-    }
+    for (size_t i : strongest_apart(found, verify_.nms_iou)) out.push_back(hypothesis_of(found[i], source[i]));
     return out;
 }
 

@@ -8,6 +8,7 @@
 // width that fits the row, standing on smooth road. The top follows from an aspect ratio (no consistent cue marks the roof).
 #pragma once
 
+#include "detect/detector.hpp"
 #include "detect/shadow.hpp"
 #include "detect/vehicle_top.hpp"
 
@@ -82,6 +83,13 @@ struct Detection {
     float score = 0.f;  // 0..1
     bool top_measured = true;  // false: no top cue, the height is the fixed aspect's guess (aspect_ratio x width)
 };
+
+// A verified detection as a detector part's hypothesis (its score also its strength; whether its top was measured).
+inline Hypothesis hypothesis_of(const Detection &d, const char *source) {
+    Hypothesis h = hypothesis_of(d.box, d.score, d.score, source);
+    h.top_measured = d.top_measured;
+    return h;
+}
 
 // Verifies hypotheses; detections are returned strongest first, overlaps suppressed.
 std::vector<Detection> verify_hypotheses(const cv::Mat &gray, const std::vector<ShadowHypothesis> &hyps,

@@ -110,11 +110,15 @@ cv::Rect2f KalmanTracker::box_of(const KalmanBox::Vec3 &z, double aspect) const 
 // by measured tops: track/vehicle_height.hpp), and its width per depth below the horizon (keeps_width_per_depth).
 void KalmanTracker::take_shape(Track &t, const Hypothesis &d) const {
     t.height.take(d, cols_, 0.4, kalman_.height);
-    const double depth = d.box.y + d.box.height - horizon_;
-    if (depth > 1.0) {
-        const double wpd = d.box.width / depth;
-        t.width_per_depth = t.width_per_depth > 0.0 ? 0.6 * t.width_per_depth + 0.4 * wpd : wpd;
-    }
+    note_width_per_depth(t, d.box);
+}
+
+// A detection's width per depth below the horizon: the first sets the vehicle's, later ones blend in (0.4 each).
+void KalmanTracker::note_width_per_depth(Track &t, const cv::Rect2f &b) const {
+    const double depth = b.y + b.height - horizon_;
+    if (depth <= 1.0) return;
+    const double wpd = b.width / depth;
+    t.width_per_depth = t.width_per_depth > 0.0 ? 0.6 * t.width_per_depth + 0.4 * wpd : wpd;
 }
 
 KalmanBox::Vec3 KalmanTracker::sigma_of(const Track &t) const {
@@ -254,7 +258,7 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
                                       kalman_.init_speed_mps * w / shadow_.road.road.vehicle_width_m));
         t.confidence = dets[i].score;
         t.height.start(dets[i], gray.cols, kalman_.height);
-        if (b.y + b.height - horizon_ > 1.f) t.width_per_depth = b.width / (b.y + b.height - horizon_);
+        note_width_per_depth(t, b);
         t.appearance = make_template(gray, b, kalman_.ncc_template_px, kalman_.ncc_min_std_gray);
         t.appearance_z = z;
         t.updated = true;
@@ -265,7 +269,7 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
 
 void KalmanTracker::prune(const FrameContext &ctx) {
     const cv::Mat &gray = ctx.gray;
-    const float horizon = horizon_row(gray.size(), ctx.lanes, ctx.camera);
+    const float horizon = horizon_;  // this frame's (step)
     // Same vehicle twice (two tracks converged): keep the one with more measurements.
     for (size_t i = 0; i < tracks_.size(); ++i)
         for (size_t j = i + 1; j < tracks_.size(); ++j) {

@@ -104,6 +104,7 @@ private:
     cv::Rect2f box_of(const KalmanBox::Vec3 &z, double aspect) const;
     cv::Rect2f box_of(const Track &t) const { return box_of(t.kf.measurement(), t.height.aspect); }
     void take_shape(Track &t, const Hypothesis &d) const;
+    void note_width_per_depth(Track &t, const cv::Rect2f &b) const;
     KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
     double accel_bound(const Track &t) const;
 
