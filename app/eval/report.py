@@ -47,7 +47,13 @@ def markdown(report: dict) -> str:
         best = tu.get("best_at_precision_0.8")
         out += ["", "Best recall at precision >= 0.8 for boxes >= 40 px, keeping only detections above a score: " +
                 ("none reaches that precision" if not best else
-                 f"{best['recall']:.3f} at score >= {best['threshold']:.2f} (precision {best['precision']:.3f})") + ".", ""]
+                 f"{best['recall']:.3f} at score >= {best['threshold']:.2f} (precision {best['precision']:.3f})") + "."]
+        op = tu.get("operating_point")
+        if op:
+            out += ["", f"At the detector's operating point (what `headway detect` writes; score >= {op['threshold']:.2f}, "
+                    f"chosen on held-out training images), boxes >= 40 px: recall {_f(op['recall'])}, precision "
+                    f"{_f(op['precision'])}."]
+        out.append("")
     ln = report.get("lanes")
     if ln:
         out += [f"### TuSimple lane sample ({ln['images']} images)", "",

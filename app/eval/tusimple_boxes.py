@@ -15,6 +15,7 @@ import cv2
 
 from app import config as configuration
 from app.core import Pipeline
+from app.detect_images import OPERATING_POINT
 from app.eval.matching import match
 
 BANDS = ((0, 20), (20, 40), (40, 80), (80, 10_000))
@@ -124,6 +125,9 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
     # that the best recall reachable at precision >= 0.8 by a stricter threshold is known too.
     # (a learned verifier's probabilities crowd near 1: the curve is finer there)
     curve = operating_curve(entries, scored, [i / 20 for i in range(19)] + [0.95, 0.96, 0.97, 0.98, 0.99])
+    # what `headway detect` writes: only detections at the detector's operating point, chosen on held-out
+    # training images (not here)
+    point = operating_curve(entries, scored, [OPERATING_POINT[stage if stage != "detect" else "thesis"]])[0]
     return {"images": len(entries), "bands": band_counts(entries, [[d[:4] for d in det] for det in scored]),
             "curve_ge40": curve, "best_at_precision_0.8": recall_at_precision(curve, 0.8),
-            "best_at_precision_0.85": recall_at_precision(curve, 0.85)}
+            "best_at_precision_0.85": recall_at_precision(curve, 0.85), "operating_point": point}
