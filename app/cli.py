@@ -123,7 +123,7 @@ def _cmd_train(args) -> int:
         raise ValueError(f"--window {args.window}: at least 6 px each way (OpenCV ignores a 1-px border)")
     p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
                     features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
-                    seed=args.seed, max_minutes=args.max_minutes, resume=args.resume or "")
+                    seed=args.seed, max_minutes=args.max_minutes, resume=args.resume or "", booster=args.boost)
     log = _line_logger(args.log)
     try:
         train(args.data, args.out, p, log=log)
@@ -260,6 +260,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-false-alarm", type=float, default=0.5, help="per stage (default 0.5)")
     t.add_argument("--max-minutes", type=float, default=55.0, help="no stage starts after this (default 55)")
     t.add_argument("--resume", help="a cascade XML written by this trainer: keep its stages and train more")
+    t.add_argument("--boost", choices=["gentle", "discrete"], default="gentle",
+                   help="gentle: Gentle AdaBoost, real-valued stump leaves (default, the shipped model); discrete: "
+                        "Discrete AdaBoost as in paper 004, leaves +-alpha (docs/cascade.md compares them)")
     t.add_argument("--log", help="also write the per-stage log here")
     t = ts.add_parser("verifier", help="a network judging the cascade's detections: a small CNN on the box's crop "
                       "(--out X.onnx, needs pip install '.[train]') or HOG + one hidden layer (--out X.yml[.gz])")

@@ -48,15 +48,24 @@ def _dataset(folder, n, seed):
     return folder
 
 
-@pytest.fixture(scope="module")
-def tiny_cascade(tmp_path_factory):
+def _tiny(tmp_path_factory, booster: str):
     folder = _dataset(tmp_path_factory.mktemp("tiny") / "data", 40, 1)
-    out = tmp_path_factory.mktemp("model") / "tiny.xml"
+    out = tmp_path_factory.mktemp("model") / f"tiny-{booster}.xml"
     p = TrainParams(width=W, height=H, stages=3, num_pos=200, num_neg=200, features=400, min_box_height=10,
-                    max_weak=20, seed=0)
+                    max_weak=20, seed=0, booster=booster)
     lines = []
     cascade = train([str(folder)], str(out), p, log=lines.append)
     return cascade, out, lines
+
+
+@pytest.fixture(scope="module")
+def tiny_cascade(tmp_path_factory):
+    return _tiny(tmp_path_factory, "gentle")
+
+
+@pytest.fixture(scope="module")
+def tiny_discrete(tmp_path_factory):
+    return _tiny(tmp_path_factory, "discrete")
 
 
 def test_tiny_cascade_trains_with_a_log_line_per_stage(tiny_cascade):
@@ -69,7 +78,47 @@ def test_tiny_cascade_trains_with_a_log_line_per_stage(tiny_cascade):
 
 
 def test_opencv_accepts_exactly_the_windows_the_trainer_accepts(tiny_cascade):
-    cascade, out, _ = tiny_cascade
+    _check_opencv_agrees(*tiny_cascade[:2])
+
+
+def test_a_discrete_adaboost_cascade_loads_in_opencv_and_agrees_with_the_trainer(tiny_discrete):
+    """`--boost discrete` (paper 004's booster): leaves +-alpha, written as boostType DAB; OpenCV runs it exactly
+    as the trainer's evaluator does."""
+    cascade, out, _ = tiny_discrete
+    assert "<boostType>DAB</boostType>" in out.read_text() and len(cascade.stages) >= 2
+    for st in cascade.stages:
+        assert all(a == pytest.approx(-b) and a != 0 for a, b in zip(st.left, st.right))
+    _check_opencv_agrees(cascade, out)
+
+
+def test_discrete_stump_has_the_least_weighted_error_and_alpha_from_it():
+    """One round of Discrete AdaBoost on random responses: the stump is the split and polarity of least weighted
+    error over every feature (checked by brute force), and its leaves are +-ln((1 - e) / e) / 2."""
+    from app.train.cascade.boost import train_stage
+
+    rng = np.random.default_rng(5)
+    y = np.r_[np.ones(30), -np.ones(50)]
+    values = (rng.normal(0, 1, (6, 80)) + np.outer(rng.normal(0, 0.8, 6), y)).astype(np.float32)
+    w = np.where(y > 0, 0.5 / 30, 0.5 / 50)
+    best = 1.0
+    for f in range(6):
+        xs = np.unique(values[f])
+        for t in (xs[1:] + xs[:-1]) / 2:
+            e = w[(values[f] < t) & (y < 0)].sum() + w[(values[f] >= t) & (y > 0)].sum()
+            best = min(best, e, 1 - e)
+    st, _, _ = train_stage(values, np.arange(6), y, 0.9, 0.0, 1, booster="discrete")
+    f, t = st.features[0], st.thresholds[0]
+    left = values[f] < t
+    e = w[left & (y < 0)].sum() + w[~left & (y > 0)].sum()
+    assert min(e, 1 - e) == pytest.approx(best, abs=1e-9)
+    alpha = 0.5 * np.log((1 - best) / best)
+    assert abs(st.left[0]) == pytest.approx(alpha, rel=1e-5) and st.right[0] == pytest.approx(-st.left[0])
+    assert (st.left[0] > 0) == (e < 0.5)  # the side where the vehicles are gets +alpha
+    with pytest.raises(ValueError, match="booster"):
+        train_stage(values, np.arange(6), y, 0.9, 0.0, 1, booster="real")
+
+
+def _check_opencv_agrees(cascade, out):
     cc = cv2.CascadeClassifier(str(out))
     assert not cc.empty() and tuple(cc.getOriginalWindowSize()) == (W, H)
     fs = FeatureSet(W, H)

@@ -1,11 +1,15 @@
 """One cascade stage by Gentle AdaBoost over regression stumps (Friedman, Hastie, Tibshirani 2000), the
-booster OpenCV's traincascade used by default.
+booster OpenCV's traincascade used by default, or by Discrete AdaBoost as paper 004 (Viola-Jones) has it.
 
 Each round fits the stump h(x) = (f(x) < t ? a : b) that minimises the weighted squared error
 sum_i w_i (y_i - h(x_i))^2, y in {-1, +1}; for a split of the sorted responses into L and R the optimum
 is a = sum_L w y / sum_L w, b = sum_R w y / sum_R w and the error falls by (sum_L w y)^2 / sum_L w +
 (sum_R w y)^2 / sum_R w, found for every feature and split at once from cumulative sums over the
-responses sorted once per stage. Weights then become w_i exp(-y_i h(x_i)), normalised. The stage
+responses sorted once per stage. Discrete AdaBoost instead takes the split and polarity of least weighted
+error e = sum of the weights of the samples on the wrong side; with W_L y = sum_L w y over the left part
+and W y the total, e = (sum w)/2 - |W_L y - W y / 2|, so the best split maximises |W_L y - W y / 2|, from the
+same cumulative sums; its leaves are +-alpha, alpha = ln((1 - e) / e) / 2, the sign of the side's majority.
+Either way the weights then become w_i exp(-y_i h(x_i)), normalised. The stage
 threshold T is the largest that keeps `min_hit_rate` of the positives (sum >= T); rounds are added until
 the negatives passing fall to `max_false_alarm` or `max_weak` stumps are used.
 """
@@ -18,8 +22,13 @@ import numpy as np
 from .model import Stage, stage_passes
 
 
-def _best_stumps(xs: np.ndarray, order: np.ndarray, w: np.ndarray, wy: np.ndarray, chunk: int = 512):
-    """Best split of every feature: (gain, position k: left = the k+1 smallest) per feature row."""
+BOOSTERS = ("gentle", "discrete")
+
+
+def _best_stumps(xs: np.ndarray, order: np.ndarray, w: np.ndarray, wy: np.ndarray, discrete: bool = False,
+                 chunk: int = 512):
+    """Best split of every feature: (gain, position k: left = the k+1 smallest) per feature row. The gain is the
+    fall of the weighted squared error (Gentle) or, `discrete`, how far the weighted error lies below half."""
     nf, n = xs.shape
     gains = np.full(nf, -np.inf)
     pos = np.zeros(nf, np.int64)
@@ -30,7 +39,7 @@ def _best_stumps(xs: np.ndarray, order: np.ndarray, w: np.ndarray, wy: np.ndarra
         cwy = np.cumsum(wy[o], axis=1)[:, :-1]
         rw = tw - cw
         with np.errstate(divide="ignore", invalid="ignore"):
-            g = cwy * cwy / cw + (twy - cwy) ** 2 / rw
+            g = np.abs(cwy - twy / 2) if discrete else cwy * cwy / cw + (twy - cwy) ** 2 / rw
         x = xs[a:a + chunk]
         g[(x[:, 1:] <= x[:, :-1]) | (cw <= 0) | (rw <= 0)] = -np.inf
         k = np.argmax(g, axis=1)
@@ -41,10 +50,15 @@ def _best_stumps(xs: np.ndarray, order: np.ndarray, w: np.ndarray, wy: np.ndarra
 
 def train_stage(values: np.ndarray, feature_ids: np.ndarray, y: np.ndarray, min_hit_rate: float,
                 max_false_alarm: float, max_weak: int,
-                on_round: Optional[Callable[[int, float, float], None]] = None) -> tuple[Stage, float, float]:
-    """Boost one stage on (F, N) responses of candidate features `feature_ids` for labels `y` (+1/-1).
+                on_round: Optional[Callable[[int, float, float], None]] = None,
+                booster: str = "gentle") -> tuple[Stage, float, float]:
+    """Boost one stage on (F, N) responses of candidate features `feature_ids` for labels `y` (+1/-1), by
+    `booster` (BOOSTERS).
 
     Returns the stage, its hit rate and false-alarm rate on these samples."""
+    if booster not in BOOSTERS:
+        raise ValueError(f"booster {booster!r}: one of {', '.join(BOOSTERS)}")
+    discrete = booster == "discrete"
     order = np.argsort(values, axis=1, kind="stable").astype(np.int32)
     xs = np.take_along_axis(values, order, axis=1)
     pos, neg = y > 0, y < 0
@@ -53,7 +67,7 @@ def train_stage(values: np.ndarray, feature_ids: np.ndarray, y: np.ndarray, min_
     st = Stage()
     hit = fa = 1.0
     for r in range(max_weak):
-        gains, k = _best_stumps(xs, order, w, w * y)
+        gains, k = _best_stumps(xs, order, w, w * y, discrete)
         f = int(np.argmax(gains))
         kk = int(k[f])
         lo, hi = xs[f, kk], xs[f, kk + 1]
@@ -61,8 +75,14 @@ def train_stage(values: np.ndarray, feature_ids: np.ndarray, y: np.ndarray, min_
         if not lo < t <= hi:
             t = hi
         left = values[f] < t
-        a = np.float32((w * y)[left].sum() / w[left].sum())
-        b = np.float32((w * y)[~left].sum() / w[~left].sum())
+        if discrete:
+            # weighted error with the left side called a vehicle (the weights sum to 1)
+            e = w[left & neg].sum() + w[~left & pos].sum()
+            alpha = 0.5 * np.log((1.0 - min(e, 1.0 - e)) / max(min(e, 1.0 - e), 1e-12))
+            a, b = (np.float32(alpha), np.float32(-alpha)) if e <= 0.5 else (np.float32(-alpha), np.float32(alpha))
+        else:
+            a = np.float32((w * y)[left].sum() / w[left].sum())
+            b = np.float32((w * y)[~left].sum() / w[~left].sum())
         h = np.where(left, a, b).astype(np.float64)
         total += h
         w = w * np.exp(-y * h)

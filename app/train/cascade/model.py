@@ -76,7 +76,7 @@ class Cascade:
         out = ['<?xml version="1.0"?>', "<opencv_storage>", "<cascade>",
                "  <stageType>BOOST</stageType>", "  <featureType>HAAR</featureType>",
                f"  <height>{self.height}</height>", f"  <width>{self.width}</width>", "  <stageParams>",
-               "    <boostType>GAB</boostType>",
+               f"    <boostType>{'DAB' if self.params.get('booster') == 'discrete' else 'GAB'}</boostType>",
                f"    <minHitRate>{self.params.get('min_hit_rate', 0.995)}</minHitRate>",
                f"    <maxFalseAlarm>{self.params.get('max_false_alarm', 0.5)}</maxFalseAlarm>",
                "    <weightTrimRate>1.</weightTrimRate>", "    <maxDepth>1</maxDepth>",

@@ -37,6 +37,7 @@ class TrainParams:
     seed: int = 0
     max_minutes: float = 55.0       # no new stage starts after this (the whole run fits in an hour)
     resume: str = ""                # cascade XML written by this trainer: its stages are kept, more are added
+    booster: str = "gentle"         # gentle (OpenCV's default, shipped) or discrete (paper 004); docs/cascade.md
 
 
 def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str], None] = print) -> Cascade:
@@ -101,7 +102,8 @@ def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str],
                     bar.update(1)
                     bar.set_postfix(hit=f"{hit:.4f}", fa=f"{fa:.3f}")
 
-                stage, hit, fa = train_stage(values, feats, y, p.min_hit_rate, p.max_false_alarm, p.max_weak, on_round)
+                stage, hit, fa = train_stage(values, feats, y, p.min_hit_rate, p.max_false_alarm, p.max_weak, on_round,
+                                             p.booster)
             cascade.stages.append(stage)
             fa_rate *= fa
             cascade.save(fs, out_xml)
