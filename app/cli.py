@@ -123,7 +123,11 @@ def _cmd_train(args) -> int:
         raise ValueError(f"--window {args.window}: at least 6 px each way (OpenCV ignores a 1-px border)")
     p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
                     features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
-                    seed=args.seed, max_minutes=args.max_minutes, resume=args.resume or "", booster=args.boost)
+                    seed=args.seed, max_minutes=args.max_minutes, resume=args.resume or "", booster=args.boost,
+                    min_aspect=args.min_aspect, max_aspect=args.max_aspect)
+    if not 0 <= p.min_aspect < p.max_aspect:
+        raise ValueError(f"--min-aspect {p.min_aspect:g} --max-aspect {p.max_aspect:g}: give 0 <= min < max (box "
+                         f"width / height)")
     log = _line_logger(args.log)
     try:
         train(args.data, args.out, p, log=log)
@@ -260,6 +264,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-false-alarm", type=float, default=0.5, help="per stage (default 0.5)")
     t.add_argument("--max-minutes", type=float, default=55.0, help="no stage starts after this (default 55)")
     t.add_argument("--resume", help="a cascade XML written by this trainer: keep its stages and train more")
+    t.add_argument("--min-aspect", type=float, default=0.0,
+                   help="boxes narrower than this (width / height) are not positives (default 0; one view only)")
+    t.add_argument("--max-aspect", type=float, default=3.0,
+                   help="boxes wider than this (width / height) are not positives (default 3: long side views)")
     t.add_argument("--boost", choices=["gentle", "discrete"], default="gentle",
                    help="gentle: Gentle AdaBoost, real-valued stump leaves (default, the shipped model); discrete: "
                         "Discrete AdaBoost as in paper 004, leaves +-alpha (docs/cascade.md compares them)")

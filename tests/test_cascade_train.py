@@ -196,3 +196,20 @@ def test_training_resumes_from_a_written_cascade(tiny_cascade, tmp_path):
     assert [ln[:8] for ln in lines if ln.startswith("stage")] == ["stage  1"]
     with pytest.raises(ValueError, match="window"):
         Cascade.from_xml(FeatureSet(W + 2, H), str(out))
+
+
+def test_positives_of_one_view_only(tmp_path):
+    """--min-aspect / --max-aspect keep only the boxes of one shape (a cascade per view, docs/cascade.md): the
+    synthetic vehicles are 1.5 times as wide as high."""
+    from app.train.cascade.samples import load_folders, positives
+
+    items = load_folders([str(_dataset(tmp_path / "data", 6, 2))])
+    every = positives(items, W, H, 10, 3.0)
+    assert len(every) > 0
+    assert len(positives(items, W, H, 10, 3.0, min_aspect=1.4)) == len(every)
+    assert len(positives(items, W, H, 10, 3.0, min_aspect=1.6)) == 0
+    assert len(positives(items, W, H, 10, 1.4)) == 0
+    r = subprocess.run([sys.executable, "-m", "app.cli", "train", "cascade", "--data", str(tmp_path / "data"),
+                        "--out", str(tmp_path / "m.xml"), "--min-aspect", "2", "--max-aspect", "1"],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and "--min-aspect 2 --max-aspect 1" in r.stderr and "Traceback" not in r.stderr

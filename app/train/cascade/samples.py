@@ -78,12 +78,13 @@ def window_around(box, width: int, height: int) -> tuple:
 
 
 def positives(items: list[Annotated], width: int, height: int, min_height: float, max_aspect: float,
-              flip: bool = True, progress=None) -> np.ndarray:
-    """Every box at least `min_height` px high with width/height <= `max_aspect` and its window inside the
-    image, as a window (and its mirror image)."""
+              flip: bool = True, progress=None, min_aspect: float = 0.0) -> np.ndarray:
+    """Every box at least `min_height` px high with `min_aspect` <= width/height <= `max_aspect` and its window
+    inside the image, as a window (and its mirror image)."""
     out = []
     for it in items:
-        keep = [b for b in it.boxes if b[3] - b[1] >= min_height and (b[2] - b[0]) <= max_aspect * (b[3] - b[1])]
+        keep = [b for b in it.boxes if b[3] - b[1] >= min_height
+                and min_aspect * (b[3] - b[1]) <= (b[2] - b[0]) <= max_aspect * (b[3] - b[1])]
         if keep:
             g = read_gray(it.path)
             for b in keep:

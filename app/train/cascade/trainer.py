@@ -34,6 +34,7 @@ class TrainParams:
     features: int = 3000            # candidate features per stage, drawn at random from all of them
     min_box_height: float = 24.0    # px: smaller boxes are too blurred to be positives
     max_aspect: float = 3.0         # width/height above this: a long side view, not used as positive
+    min_aspect: float = 0.0         # width/height below this not used as positive (a cascade for one view only)
     seed: int = 0
     max_minutes: float = 55.0       # no new stage starts after this (the whole run fits in an hour)
     resume: str = ""                # cascade XML written by this trainer: its stages are kept, more are added
@@ -47,11 +48,12 @@ def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str],
     fs = FeatureSet(p.width, p.height)
     bar_opts = dict(file=sys.stderr, disable=not sys.stderr.isatty(), leave=False)
     with tqdm(total=len(items), desc="positives", unit="img", **bar_opts) as bar:
-        pool = positives(items, p.width, p.height, p.min_box_height, p.max_aspect, progress=bar.update)
+        pool = positives(items, p.width, p.height, p.min_box_height, p.max_aspect, progress=bar.update,
+                         min_aspect=p.min_aspect)
     _, ok = variance_norm(pool)
     pool = pool[ok]
     log(f"data: {len(items)} images from {', '.join(folders)}; {len(pool)} positive windows "
-        f"({p.width}x{p.height}, boxes >= {p.min_box_height:g} px, mirrored, contrast > 10 grey levels); "
+        f"({p.width}x{p.height}, boxes >= {p.min_box_height:g} px, width/height {p.min_aspect:g}-{p.max_aspect:g}, mirrored, contrast > 10 grey levels); "
         f"{len(fs)} Haar features; params {asdict(p)}")
     cascade = Cascade(p.width, p.height, params=asdict(p))
     # the cascade's false alarms per window scanned, measured while mining (resumed: each stage's nominal rate)
