@@ -60,11 +60,11 @@ def udacity_camera(width: int, height: int) -> dict:
             "height_m": 1.5, "pitch_deg": 0.0, "yaw_deg": 0.0}
 
 
-def fit_horizon(camera: dict, frames: list[np.ndarray], n: int = 15) -> dict:
+def fit_horizon(camera: dict, frames: list[np.ndarray], n: int = 15, lanes: Optional[dict] = None) -> dict:
     """Pitch and yaw from the median lane vanishing point of the first n frames (row = cy - fy tan(pitch),
-    column = cx - fx tan(yaw))."""
+    column = cx - fx tan(yaw)); `lanes`: keys of the lanes section other than the defaults."""
     vps = []
-    with Pipeline({"camera": camera, "pipeline": {"preset": "none"}}) as p:
+    with Pipeline({"camera": camera, "pipeline": {"preset": "none"}, **({"lanes": lanes} if lanes else {})}) as p:
         for img in frames[:n]:
             vp = p.run_stage("lanes", img).vanishing_point
             if vp is not None:

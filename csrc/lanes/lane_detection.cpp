@@ -58,7 +58,7 @@ LaneMeasurement measure_lane_lines(const cv::Mat &gray, const LaneParams &p, con
     std::vector<MarkingPoint> &pts = m.points;
     const bool dots = p.dots.enabled && (!tracking || p.dots.in_tracking);
     std::vector<MarkingPoint> short_bars;
-    find_marking_points(gray, band, cam, hp, p.filter, pts, dots ? &short_bars : nullptr);
+    find_marking_points(gray, band, cam, hp, p.filter, pts, dots ? &short_bars : nullptr, !tracking);
     const float frac = float(p.vehicle_mask_frac);  // upper part of each box: the vehicle's body
     auto on_vehicle = [&](const MarkingPoint &q) {
         for (const auto &b : *vehicles)

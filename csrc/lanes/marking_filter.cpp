@@ -66,7 +66,7 @@ ScanBand scan_band(cv::Size size, const CameraParams &cam, const HorizonPrior &h
 
 void find_marking_points(const cv::Mat &gray, const ScanBand &band, const CameraParams &cam,
                          const HorizonPrior &hp, const MarkingFilterParams &p,
-                         std::vector<MarkingPoint> &out, std::vector<MarkingPoint> *short_bars) {
+                         std::vector<MarkingPoint> &out, std::vector<MarkingPoint> *short_bars, bool single_image) {
     if (gray.empty() || gray.type() != CV_8UC1)
         throw std::invalid_argument("find_marking_points: expected a non-empty 8-bit gray image");
     if (band.y_top < 0 || band.y_bottom >= gray.rows || band.step < 1)
@@ -141,6 +141,15 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
         const float w_min = std::max(1.f, 0.7f * float(p.marking_min_m) * ppm_lo / scale);
         const float w_max = (1.2f * float(p.marking_max_m) * ppm_hi + 2.f) / scale;
         const float w_cross = (1.2f * float(p.cross_max_m) * ppm_hi + 2.f) / scale;
+        // The bound along the row of a bar on a line of slope k (slant = sqrt(1 + k^2)). A stripe W wide along the
+        // road crosses a row over fx W / Z px whatever its slope (x = x_vp + fx X / Z, Z fixed by the row); only the
+        // blur across a slanted edge is slant times longer along the row (row_width_single, one image alone). Lane
+        // tracking keeps the whole bound times slant, computed as before to the last bit (docs/RESULTS.md, lanes, the
+        // lanes9 round).
+        const bool row_width = single_image && p.row_width_single;
+        auto row_bound = [&](double width_m, float w_slanted, float slant) {
+            return row_width ? (1.2f * float(width_m) * ppm_hi + 2.f * slant) / scale : w_slanted * slant;
+        };
         const float dy_vp = std::max(1.f, float(y) - (hp.row + hp.tol_px));
 
         // Pair each dark-to-bright edge with the nearest bright-to-dark edge after it that closes a
@@ -158,10 +167,10 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
             const float w_far = w_max * std::sqrt(1.f + kMaxMarkingSlope * kMaxMarkingSlope);  // widest at any slant
             for (size_t j = j0; j < falling.size() && falling[j] - r <= w_far; ++j) {
                 const float f = falling[j];
-                // A slanted marking is wider along the row by sqrt(1 + k^2), k = dx/dy of the line from
-                // the vanishing point through it.
+                // k = dx/dy of the line from the vanishing point through the bar (row_bound above).
                 const float k = std::min(kMaxMarkingSlope, std::fabs(full_x(0.5f * (r + f)) - hp.vp_x) / dy_vp);
-                if (f - r > w_max * std::sqrt(1.f + k * k)) continue;
+                const float slant = std::sqrt(1.f + k * k);
+                if (f - r > row_bound(p.marking_max_m, w_max, slant)) continue;
                 // Narrower than a marking may be: a Botts' dot or a speck, judged by dot_markings (short_bars).
                 const bool narrow = f - r < w_min;
                 if (narrow && !short_bars) continue;
@@ -191,7 +200,7 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
                 if (crosses && (!p.cross_inner_edges || !inner_weak || float(lowest) <= side)) continue;
                 // ... and be one painted line wide: a wide bright patch with texture inside (concrete between
                 // two seams, a tyre-polished strip) is not worn paint.
-                if (crosses && f - r > w_cross * std::sqrt(1.f + k * k)) continue;
+                if (crosses && f - r > row_bound(p.cross_max_m, w_cross, slant)) continue;
                 if (narrow) {  // a wider bar from this edge may still be a marking: look on
                     if (!short_kept)
                         short_bars->push_back({full_x(0.5f * (r + f)), float(y), contrast, (f - r) * scale});
