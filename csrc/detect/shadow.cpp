@@ -201,6 +201,98 @@ bool part_of_band(const cv::Mat &gray, const RoadPrior &road, const Edge &e, con
     return (left < 0.f || left >= p.band_dark_frac) && (right < 0.f || right >= p.band_dark_frac);
 }
 
+// What lies just above a shadow edge in one column, seen from below: up from the edge's dark row over the dark
+// band (at most 0.3 expected widths), one blurred row skipped, the mean gray of `rows` rows.
+enum class Above : char {
+    road,     // within beside_rel of the road level: lit road (a shadow cast beside a vehicle lies on the road)
+    vehicle,  // dark all the way up: a tyre, a dark body
+    none,     // no shadow in this column (a gap between the edge's runs, a lane marking across it)
+    bright,   // brighter than lit road: a lane marking, a light bumper, lights
+    other,    // darker than lit road, not dark: a vehicle's body
+};
+
+Above above_shadow(const cv::Mat &gray, const Edge &e, int x, int rows, int max_dark, const ShadowParams &p) {
+    const int dark = int(p.dark_rel * e.road_gray);
+    // The band's lowest dark row in this column: the edge's runs lie on rows up to merge_rows apart.
+    int y = e.y_bottom - 1;
+    while (y > e.y_bottom - 2 - p.merge_rows && y > 0 && gray.at<uint8_t>(y, x) > dark) --y;
+    if (gray.at<uint8_t>(y, x) > dark) return Above::none;
+    while (y > e.y_bottom - 1 - max_dark && y > 0 && gray.at<uint8_t>(y, x) <= dark) --y;
+    if (y <= e.y_bottom - 1 - max_dark) return Above::vehicle;
+    y -= 1;
+    if (y - rows + 1 < 0) return Above::vehicle;
+    float sum = 0.f;
+    for (int r = y; r > y - rows; --r) sum += gray.at<uint8_t>(r, x);
+    const float rel = sum / float(rows) / std::max(1.f, e.road_gray) - 1.f;
+    return rel > p.beside_rel ? Above::bright : rel >= -p.beside_rel ? Above::road : Above::other;
+}
+
+// Columns of a stretch with lit road above, from the end `from` inwards (step +-1): it starts within `lead`
+// columns of the end, past no vehicle column (only lit road, brighter columns or columns without a shadow:
+// the lane marking where the cast shadow often ends), goes on over gaps of at most `max_gap` columns (brighter
+// ones are no gap: a marking above the cast shadow) and ends at the vehicle (a dark or body column follows);
+// the deepest such stretch. 0 when there is none.
+int road_stretch(const std::vector<Above> &col, int from, int step, int lead, int max_gap) {
+    const int n = int(col.size());
+    int depth = 0;
+    for (int s = from; std::abs(s - from) < lead && s >= 0 && s < n; s += step) {
+        const Above c = col[size_t(s)];
+        if (c == Above::vehicle || c == Above::other) break;
+        if (c != Above::road) continue;
+        int last = s;
+        for (int i = s, gap = 0; i >= 0 && i < n && gap <= max_gap; i += step) {
+            const Above ci = col[size_t(i)];
+            gap = ci == Above::road ? 0 : ci == Above::bright ? gap : gap + 1;
+            if (ci == Above::road) last = i;
+        }
+        // It must end at the vehicle (a dark or body column right after it) and be mostly lit road where
+        // no marking lies above it.
+        bool at_vehicle = false;
+        for (int i = last + step; std::abs(i - last) <= max_gap + 1 && i >= 0 && i < n; i += step)
+            at_vehicle = at_vehicle || col[size_t(i)] == Above::vehicle || col[size_t(i)] == Above::other;
+        int road = 0, unlit = 0;
+        for (int i = s; i != last + step; i += step) {
+            road += col[size_t(i)] == Above::road;
+            unlit += col[size_t(i)] != Above::road && col[size_t(i)] != Above::bright;
+        }
+        if (at_vehicle && 3 * road >= 2 * (road + unlit)) depth = std::max(depth, std::abs(last - from) + 1);
+    }
+    return depth;
+}
+
+// A low sun casts a vehicle's shadow past one of its sides onto the road, where it often ends only at the
+// next lane marking, and verification took the marking for that side (tme08). The stretch at one end of the
+// edge with lit road above it (road_stretch, at least beside_min_frac expected widths) is cut off when at least
+// beside_rest_frac of them remain under the vehicle; the sun
+// shines under the vehicle's other side, where the shadow begins inside the vehicle, so the edge then reaches
+// at least beside_reach expected widths from the cut towards the sun. Lit road at both ends is no shadow cast
+// to one side (a vehicle as gray as the road): the edge is left whole, as is a long one (beside_max_ratio).
+void cut_shadow_beside(const cv::Mat &gray, Edge &e, float w_exp, const ShadowParams &p) {
+    if (!(p.beside_rel > 0.0) || e.width() > p.beside_max_ratio * w_exp) return;
+    const int rows = std::max(2, int(std::lround(p.beside_rows_frac * w_exp)));
+    const int max_dark = std::max(3, int(std::lround(0.3f * w_exp)));
+    const int n = e.width(), lead = std::max(2, int(std::lround(0.2f * w_exp))), max_gap = p.merge_rows + 1;
+    std::vector<Above> col(size_t(n), Above::vehicle);
+    for (int x = e.x1; x <= e.x2; ++x) col[size_t(x - e.x1)] = above_shadow(gray, e, x, rows, max_dark, p);
+    const float min_cut = float(p.beside_min_frac) * w_exp;
+    int l = road_stretch(col, 0, 1, lead, max_gap), r = road_stretch(col, n - 1, -1, lead, max_gap);
+    l = l >= min_cut ? l : 0;
+    r = r >= min_cut ? r : 0;
+    if ((l > 0) == (r > 0) || n - l - r < p.beside_rest_frac * w_exp) return;
+    // Above the rest, the vehicle: lit road there too is a vehicle as gray as the road, not a cast shadow.
+    int road_rest = 0;
+    for (int i = l; i < n - r; ++i) road_rest += col[size_t(i)] == Above::road;
+    if (road_rest > 0.2 * (n - l - r)) return;
+    const int reach = int(std::lround(p.beside_reach * w_exp));
+    if (r > 0) {
+        e.x2 -= r;
+        e.x1 = std::max(0, std::min(e.x1, e.x2 - reach + 1));
+    } else {
+        e.x1 += l;
+        e.x2 = std::min(gray.cols - 1, std::max(e.x2, e.x1 + reach - 1));
+    }
+}
+
 // One bottom edge per vehicle: lowest first; an edge above a kept one, overlapping it by half the
 // shorter of the two and within reduce_height_ratio vehicle widths above it (the vehicle's width:
 // the edge's own, but at most 1.5 expected widths for a long shadow), lies on the same vehicle.
@@ -272,6 +364,7 @@ std::vector<ShadowHypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneM
         e.road_gray = levels.level(levels.cell(e.y_bottom, (e.x1 + e.x2) / 2, road.left(e.y_bottom),
                                                road.right(e.y_bottom)));
         if (part_of_band(gray, road, e, p)) continue;
+        cut_shadow_beside(gray, e, w_exp, p);
         e.bottom = boundary_row(gy, road.y_top, xmin, e);
         kept.push_back(e);
     }

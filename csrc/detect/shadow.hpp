@@ -12,7 +12,8 @@
 // much wider than a vehicle (an overpass or tree shadow across the road) is dropped here, also when
 // lane markings break it into vehicle-sized pieces (its dark side goes on past their ends); an edge
 // moderately wider than a vehicle (a long shadow at low sun) is kept for verification to find the
-// vehicle's sides inside it.
+// vehicle's sides inside it. A shadow that a low sun casts past one side of its vehicle onto the road (lit
+// road just above its dark band there, up to the next lane marking) is cut back to the vehicle's side.
 #pragma once
 
 #include "base/params.hpp"
@@ -39,6 +40,12 @@ struct ShadowParams {
     int level_columns = 3;          // cells across the road per band
     double band_dark_frac = 0.5;    // dark share beside both ends that marks a piece of a band across the road
     double reduce_height_ratio = 0.8;  // edges up to this many widths above a lower edge belong to its vehicle
+    double beside_rel = 0.25;       // lit road above a shadow's end (within this fraction of the road level): cut off
+    double beside_rows_frac = 0.1;  // rows sampled above the shadow's dark band, in expected widths
+    double beside_min_frac = 0.25;  // shortest stretch cut off an end, in expected widths
+    double beside_rest_frac = 0.5;  // what remains of a cut edge, at least, in expected widths
+    double beside_max_ratio = 1.5;  // edges wider than this many expected widths are left whole
+    double beside_reach = 0.8;      // with one end cut, the edge reaches this many expected widths from it
     int max_hypotheses = 48;        // cap per frame (strongest kept), bounds the verification cost
 
     void bind(ParamMap &m) {
@@ -81,6 +88,32 @@ struct ShadowParams {
         m.add("reduce_height_ratio", reduce_height_ratio, 0.0, 3.0,
               "vehicle widths; an edge this far above a lower, overlapping edge is part of the same "
               "vehicle (bumper, window) and is dropped, leaving one bottom edge per vehicle");
+        m.add("beside_rel", beside_rel, 0.0, 1.0,
+              "fraction of the road gray level; a stretch at one end of a shadow edge with lit road just "
+              "above its dark band (gray within this fraction of the road level) is shadow cast beside the "
+              "vehicle by a low sun, not under it, and is cut off, so that the verification looks for the "
+              "vehicle's side there and not at the lane marking where the cast shadow ends (tme08's dark "
+              "car: tracked on 48 of 50 frames, 13 with 0); 0 switches it off");
+        m.add("beside_rows_frac", beside_rows_frac, 0.01, 1.0,
+              "expected vehicle widths; rows above a shadow column's dark band whose mean gray tells lit road "
+              "from a vehicle's body (at least 2 rows)");
+        m.add("beside_min_frac", beside_min_frac, 0.0, 1.0,
+              "expected vehicle widths; shortest lit stretch cut off an end: a low sun's shadow reaches half a "
+              "car past its side (tme08), a few pixels of lit road are blur or a road-gray bumper (0.15 cut "
+              "into tme08's silver car, then tracked on 40 of 50 frames against 47)");
+        m.add("beside_rest_frac", beside_rest_frac, 0.0, 2.0,
+              "expected vehicle widths; an edge is cut only when at least this much of it remains under the "
+              "vehicle (verify.shadow_min_ratio: a vehicle's own shadow is at least half its width); a "
+              "shorter rest is a far piece of road shade that the cut would make a vehicle of");
+        m.add("beside_max_ratio", beside_max_ratio, 0.5, 10.0,
+              "expected vehicle widths; an edge wider than this is left whole: more than one vehicle's shadow "
+              "cast past its side (a long shadow, or one run into the shade along the road's edge), whose "
+              "vehicle the verification searches inside it at the expected width (verify.shadow_max_ratio)");
+        m.add("beside_reach", beside_reach, 0.0, 2.0,
+              "expected vehicle widths; with one end of an edge cut (its vehicle's shaded side), the edge "
+              "reaches at least this far from that end towards the sun, whose light enters under the "
+              "vehicle's sunny side and starts the shadow inside it; 0.8 leaves the verification's margin to "
+              "find that side from a small car's width on (tme08: 0.7-0.9 the same, 1.0 reached a van beside)");
         m.add("max_hypotheses", max_hypotheses, 1, 1000,
               "hypotheses per frame, strongest first; bounds the cost of verification");
     }
