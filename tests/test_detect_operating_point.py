@@ -64,8 +64,8 @@ def test_fused_at_its_operating_point_keeps_what_the_docs_say(fused_scores):
 
 
 @pytest.mark.xfail(strict=True, reason="issue 12's fused bar (recall >= 0.80 at precision >= 0.85) is not reached: "
-                                       "0.66-0.67 at 0.85-0.90; every detection kept holds 0.83 of the vehicles "
-                                       "(docs/cascade.md)")
+                                       "0.679 at 0.869 at the operating point, 0.697 at 0.828 at best; "
+                                       "every detection kept holds 0.83 of the vehicles (docs/RESULTS.md)")
 def test_fused_meets_the_issue_bar(fused_scores):
     best = fused_scores["best_at_precision_0.85"]
     assert best is not None and best["recall"] >= 0.80

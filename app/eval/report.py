@@ -49,10 +49,13 @@ def markdown(report: dict) -> str:
                 ("none reaches that precision" if not best else
                  f"{best['recall']:.3f} at score >= {best['threshold']:.2f} (precision {best['precision']:.3f})") + "."]
         op = tu.get("operating_point")
-        if op:
+        if op and op["threshold"] > 0:
             out += ["", f"At the detector's operating point (what `headway detect` writes; score >= {op['threshold']:.2f}, "
                     f"chosen on held-out training images), boxes >= 40 px: recall {_f(op['recall'])}, precision "
                     f"{_f(op['precision'])}."]
+        elif op:
+            out += ["", "`headway detect` writes every detection of this detector (no score reaches precision 0.85 "
+                    "on held-out training images)."]
         out.append("")
     ln = report.get("lanes")
     if ln:
