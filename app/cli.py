@@ -183,7 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("images", nargs="+", help="image files")
     s.add_argument("--out", required=True, help="output JSON file")
     s.add_argument("--config", help="configuration YAML")
-    s.add_argument("--detector", choices=["thesis", "cascade", "fused"], default="fused",
+    s.add_argument("--detector", choices=["thesis", "cascade", "fused"],
                    help="fused: the trained Haar cascade and shadows + vertical edges, merged (default); cascade: "
                         "the cascade alone; thesis: shadows + vertical edges alone")
     s.add_argument("--min-score", type=float, default=None,

@@ -81,7 +81,8 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
 
 def main(args) -> int:
     bad: list[str] = []
-    result = detect_images(args.images, args.config, bad=bad, detector=args.detector, min_score=args.min_score)
+    result = detect_images(args.images, args.config, bad=bad, detector=args.detector or DEFAULT_DETECTOR,
+                           min_score=args.min_score)
     if not result and bad:
         raise DetectError(bad[0] if len(bad) == 1 else f"none of the {len(bad)} images can be used: " + "; ".join(bad[:5]))
     Path(args.out).write_text(json.dumps(result, indent=1))

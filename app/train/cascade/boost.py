@@ -78,8 +78,10 @@ def train_stage(values: np.ndarray, feature_ids: np.ndarray, y: np.ndarray, min_
         if discrete:
             # weighted error with the left side called a vehicle (the weights sum to 1)
             e = w[left & neg].sum() + w[~left & pos].sum()
-            alpha = 0.5 * np.log((1.0 - min(e, 1.0 - e)) / max(min(e, 1.0 - e), 1e-12))
-            a, b = (np.float32(alpha), np.float32(-alpha)) if e <= 0.5 else (np.float32(-alpha), np.float32(alpha))
+            err = min(e, 1.0 - e)  # of the better polarity
+            alpha = 0.5 * np.log((1.0 - err) / max(err, 1e-12))
+            a = np.float32(alpha if e <= 0.5 else -alpha)  # the side holding the vehicles gets +alpha
+            b = -a
         else:
             a = np.float32((w * y)[left].sum() / w[left].sum())
             b = np.float32((w * y)[~left].sum() / w[~left].sum())
