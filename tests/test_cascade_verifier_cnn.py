@@ -213,7 +213,8 @@ def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
     supp = data_path("tusimple", "supp")
     entry = json.loads((supp / "annotation.json").read_text())[0]
     gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
-    cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": str(path), "nms_iou": 1.0}}))
+    over = {"verifier": str(path), "nms_iou": 1.0, "rejudge_move": 0.0, "verify_mirrored": False}
+    cfg = tusimple_config(configuration.load(None, {"cascade": over}))
     off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
     assert cfg["cascade"]["rejudge_refined"] is True
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
@@ -236,6 +237,112 @@ def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
     believed = p >= cfg["cascade"]["rejudge_min_p"]   # judged again: what the first look believes
     assert np.abs(np.where(believed, np.minimum(p, again), p) - core[:, 4]).max() < 1e-3
     assert (believed & (again < p - 1e-3)).sum() >= 5   # the second look lowers some (so the min is not the first look)
+
+
+def test_the_second_look_moves_a_believed_box_again_by_rejudge_move(tmp_path):
+    """`cascade.rejudge_move` s: the second look's box output moves each box it judges (those the first look
+    believes) again, by s of its offsets: l'' = l' + s d0' w', ... (the others stay where the first look put them);
+    the probabilities are those of the second look without the move (it judges the crop of the first move)."""
+    pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
+    from app.eval.tusimple_boxes import tusimple_config
+    from app.train.verifier import geometry_features
+
+    path = tmp_path / "box.onnx"
+    vo.save_onnx(_random_params(np.random.default_rng(2)), str(path))
+    supp = data_path("tusimple", "supp")
+    entry = json.loads((supp / "annotation.json").read_text())[0]
+    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    over = {"verifier": str(path), "nms_iou": 1.0, "verify_mirrored": False}
+    still = tusimple_config(configuration.load(None, {"cascade": {**over, "rejudge_move": 0.0}}))
+    half = tusimple_config(configuration.load(None, {"cascade": {**over, "rejudge_move": 0.5}}))
+    off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
+    with Pipeline(configuration.core_sections(still)) as a, Pipeline(configuration.core_sections(half)) as b, \
+            Pipeline(configuration.core_sections(off)) as plain:
+        first, horizon = a.stage_boxes("cascade", gray)
+        second, _ = b.stage_boxes("cascade", gray)
+        groups, _ = plain.stage_boxes("cascade", gray)
+    n = np.rint(off["cascade"]["neighbors_half"] * groups[:, 4] / (1 - groups[:, 4]))
+    params = vo.load_onnx(str(path))
+    z = vo.standardise(vo.crop_boxes(gray, first[:, :4], vo.crop_margin(params)))
+    _, d = vo.forward(params, z, geometry_features(first[:, :4], n, horizon, half["camera"]["height_m"]), box=True)
+    p0, _ = vo.forward(params, vo.standardise(vo.crop_boxes(gray, groups[:, :4], vo.crop_margin(params))),
+                       geometry_features(groups[:, :4], n, horizon, half["camera"]["height_m"]), box=True)
+    believed = p0 >= half["cascade"]["rejudge_min_p"]
+    again = vo.refine(first[:, :4], d)
+    flat = (again[:, 2] - again[:, 0] < 1) | (again[:, 3] - again[:, 1] < 1)
+    again[flat] = first[flat, :4]   # a box the output would turn inside out stays (the core's rule)
+    want = np.where(believed[:, None], first[:, :4] + 0.5 * (again - first[:, :4]), first[:, :4])
+    assert np.abs(second[:, :4] - want).max() < 0.05   # px
+    assert np.abs(second[believed, :4] - first[believed, :4]).max() > 2   # it does move them
+    assert np.array_equal(second[~believed, :4], first[~believed, :4])
+    assert np.abs(second[:, 4] - first[:, 4]).max() < 1e-6   # the same probabilities
+
+
+def test_a_mirrored_verifier_averages_the_crop_and_its_mirror_image(tmp_path):
+    """`cascade.verify_mirrored`: the core judges each crop and its left-right mirror image and reports the mean
+    probability and the mean offsets, the mirror's left and right swapped and negated; the trainer's forward pass
+    on both crops gives the same figures. With `mirror_min_p` m only the crops the plain look gives >= m are
+    mirrored: the others keep their plain answer, and every score >= (m + 1) / 2 is the same as mirroring all."""
+    pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
+    from app.eval.tusimple_boxes import tusimple_config
+    from app.train.verifier import geometry_features
+
+    path = tmp_path / "box.onnx"
+    vo.save_onnx(_random_params(np.random.default_rng(2)), str(path))
+    supp = data_path("tusimple", "supp")
+    entry = json.loads((supp / "annotation.json").read_text())[0]
+    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    over = {"verifier": str(path), "nms_iou": 1.0, "rejudge_refined": False, "verify_mirrored": True}
+    cfg = tusimple_config(configuration.load(None, {"cascade": {**over, "mirror_min_p": 0.0}}))
+    off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
+    with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
+        core, horizon = pipe.stage_boxes("cascade", gray)
+        groups, _ = plain.stage_boxes("cascade", gray)
+    n = np.rint(off["cascade"]["neighbors_half"] * groups[:, 4] / (1 - groups[:, 4]))
+    params = vo.load_onnx(str(path))
+    boxes = groups[:, :4].astype(float)
+    z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(params)))
+    extra = geometry_features(boxes, n, horizon, cfg["camera"]["height_m"])
+    p, d = vo.forward(params, z, extra, box=True)
+    pm, dm = vo.forward(params, np.ascontiguousarray(z[..., ::-1]), extra, box=True)
+    mean_d = 0.5 * np.stack([d[:, 0] - dm[:, 2], d[:, 1] + dm[:, 1], d[:, 2] - dm[:, 0], d[:, 3] + dm[:, 3]], 1)
+    assert np.abs(0.5 * (p + pm) - core[:, 4]).max() < 1e-3
+    moved = vo.refine(boxes, mean_d)
+    flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
+    moved[flat] = boxes[flat]   # a box the output would turn inside out keeps the group's own (the core's rule)
+    assert np.abs(moved - core[:, :4]).max() < 0.05   # px
+    assert (~flat & (np.abs(moved - boxes).max(1) > 2)).sum() >= 5   # it does move them
+    assert np.abs(vo.refine(boxes, d) - moved)[~flat].max() > 2   # the mirror image changes the answer (px)
+
+
+def test_only_the_believed_crops_are_mirrored_and_the_high_scores_are_the_same():
+    """`cascade.mirror_min_p` m (0.5): the shipped verifier mirrors only the crops its plain look gives >= m; those
+    get what mirroring every crop gives, the others keep the plain answer, and the detections scoring >= (m + 1) / 2
+    after the suppression are the same as with every crop mirrored."""
+    from app.eval.tusimple_boxes import tusimple_config
+
+    supp = data_path("tusimple", "supp")
+    entries = json.loads((supp / "annotation.json").read_text())[:3]
+    base = {"verify_mirrored": True, "rejudge_refined": False}
+    every, lazy, unmirrored, final_every, final_lazy = (
+        tusimple_config(configuration.load(None, {"cascade": c})) for c in
+        ({**base, "mirror_min_p": 0.0, "nms_iou": 1.0}, {**base, "mirror_min_p": 0.5, "nms_iou": 1.0},
+         {**base, "verify_mirrored": False, "nms_iou": 1.0}, {"verify_mirrored": True, "mirror_min_p": 0.0},
+         {"verify_mirrored": True, "mirror_min_p": 0.5}))
+    assert lazy["cascade"]["mirror_min_p"] == 0.5 and final_lazy["cascade"]["rejudge_refined"] is True
+    pipes = [Pipeline(configuration.core_sections(c)) for c in (every, lazy, unmirrored, final_every, final_lazy)]
+    try:
+        for e in entries:
+            gray = cv2.imread(str(supp / e["file_name"]), cv2.IMREAD_GRAYSCALE)
+            a, b, u, fa, fb = (p.stage_boxes("cascade", gray)[0] for p in pipes)
+            believed = u[:, 4] >= 0.5
+            assert 1 <= believed.sum() < len(u) / 2   # most crops are not mirrored
+            assert np.abs(b[believed] - a[believed]).max() < 1e-3 and np.array_equal(b[~believed], u[~believed])
+            high_a, high_b = fa[fa[:, 4] >= 0.75], fb[fb[:, 4] >= 0.75]
+            assert len(high_a) >= 1 and high_a.shape == high_b.shape and np.abs(high_a - high_b).max() < 1e-3
+    finally:
+        for p in pipes:
+            p.close()
 
 
 def _udacity_frames(name: str, lanes: dict | None = None):

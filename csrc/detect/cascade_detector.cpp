@@ -26,7 +26,7 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
         haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
         win_ = haar_->window();
     }
-    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier);
+    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p);
     tracked_same_ = p_.tracked_verifier == "same";
     if (!tracked_same_ && !p_.tracked_verifier.empty() && p_.tracked_verifier != "off")
         tracked_ = make_vehicle_verifier(p_.tracked_verifier);
@@ -178,8 +178,20 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                     second_n.push_back(ns[k]);
                 }
             if (!which.empty()) {
-                const std::vector<float> again = verifier->probabilities(gray, second, second_n, cam.horizon_row(), hc);
-                for (size_t j = 0; j < which.size(); ++j) p[which[j]] = std::min(p[which[j]], again[j]);
+                // the second look's box output, where rejudge_move asks for it: a second, damped step (the output
+                // learned one step from a group's box; on a moved box its offsets are a second estimate of what
+                // is left)
+                std::vector<cv::Rect2f> moved = second;
+                const std::vector<float> again =
+                    p_.rejudge_move > 0.0 ? verifier->judge(gray, moved, second_n, cam.horizon_row(), hc)
+                                          : verifier->probabilities(gray, second, second_n, cam.horizon_row(), hc);
+                const float s = float(p_.rejudge_move);
+                for (size_t j = 0; j < which.size(); ++j) {
+                    p[which[j]] = std::min(p[which[j]], again[j]);
+                    const cv::Rect2f &a = second[j], &b = moved[j];
+                    boxes[which[j]] = cv::Rect2f(a.x + s * (b.x - a.x), a.y + s * (b.y - a.y),
+                                                 a.width + s * (b.width - a.width), a.height + s * (b.height - a.height));
+                }
             }
         }
         const bool report_placed = single_image || p_.refine_tracked;

@@ -59,6 +59,9 @@ struct CascadeParams {
     bool refine_tracked = false;        // a tracker gets the moved boxes too (else each group's own mean box)
     bool rejudge_refined = true;        // a moved box is judged again where it now stands (min of the two)
     double rejudge_min_p = 0.5;         // only boxes the first look gives at least this are judged again
+    double rejudge_move = 0.0;          // the second look moves the box again by this share of its offsets
+    bool verify_mirrored = false;       // the verifier also judges each crop's mirror image (mean of the two)
+    double mirror_min_p = 0.5;          // ... of the crops it gives at least this
     double nms_iou = 0.3;               // a detection overlapping a more confident one this much is dropped (1 = none)
 
     void bind(ParamMap &m) {
@@ -142,6 +145,18 @@ struct CascadeParams {
               "again: the second look can only lower a probability, and the score curve's useful points lie at 0.9 "
               "and above (TuSimple validation: best recall at precision 0.8 at score 0.9); 0 = every moved box, at "
               "twice the verifier's cost (~23 ms more CPU on a 1280x720 image of ~200 groups)");
+        m.add("rejudge_move", rejudge_move, 0.0, 1.0,
+              "share; with rejudge_refined the second look's box output moves each box again by this share of its "
+              "offsets (0 = the box stays where the first look put it, 1 = the whole second step)");
+        m.add("verify_mirrored", verify_mirrored,
+              "true = the CNN verifier also judges the mirror image of each crop and averages the two answers "
+              "(probability and box offsets), at twice its cost; a HOG verifier judges the crop as it is. Applies to "
+              "`verifier`, and to a tracked pipeline only with tracked_verifier: same");
+        m.add("mirror_min_p", mirror_min_p, 0.0, 1.0,
+              "probability; with verify_mirrored only the crops the plain look gives at least this are judged "
+              "mirrored too: a box below it keeps its plain answer, whose mean with its mirror's could not reach "
+              "(mirror_min_p + 1) / 2, so every score from there up is what mirroring every box gives (0.5: the "
+              "scores from 0.75, where every operating point lies), at the cost of the believed boxes only");
         m.add("nms_iou", nms_iou, 0.05, 1.0,
               "IoU; after scoring, a detection overlapping a more confident one at least this much is dropped (a "
               "second group on the same vehicle); 0.3 measured best at high precision on the TuSimple validation "

@@ -46,7 +46,10 @@ public:
 };
 
 // The verifier the file holds (.onnx: CnnVerifier, else HogVerifier); throws std::invalid_argument naming it.
-std::unique_ptr<VehicleVerifier> make_vehicle_verifier(const std::string &path);
+// `mirrored`: a CnnVerifier also judges the mirror image of each crop it gives at least `mirror_min_p` and averages
+// the two (CnnVerifier); a HogVerifier judges the crop as it is.
+std::unique_ptr<VehicleVerifier> make_vehicle_verifier(const std::string &path, bool mirrored = false,
+                                                       double mirror_min_p = 0.0);
 
 class HogVerifier : public VehicleVerifier {
 public:

@@ -8,7 +8,7 @@
 
 namespace hw {
 
-CnnVerifier::CnnVerifier(const std::string &path) {
+CnnVerifier::CnnVerifier(const std::string &path, bool mirrored, double mirror_min_p) {
     try {
         net_ = cv::dnn::readNetFromONNX(path);
     } catch (const cv::Exception &e) {
@@ -51,6 +51,8 @@ CnnVerifier::CnnVerifier(const std::string &path) {
         throw std::invalid_argument("cascade.verifier: '" + path + "' is not a verifier network (" + form + "): " +
                                     e.what() + "; train one with `headway train verifier --out X.onnx`");
     }
+    mirrored_ = mirrored;  // after the probe, which checks the file's own answer
+    mirror_min_p_ = mirror_min_p;
 }
 
 cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double margin) {
@@ -73,17 +75,21 @@ cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double mar
     return out;
 }
 
-std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
-                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
-                                     cv::Mat *offsets) const {
-    const int n = int(boxes.size());
-    if (n == 0) return {};
+void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
+                        const std::vector<int> &which, bool mirror, double horizon_row, double cam_height_m, float *p,
+                        cv::Mat *offsets) const {
+    const int n = int(which.size());
     const int sz[4] = {n, 1, kCropH, kCropW};
     cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F);
-    for (int i = 0; i < n; ++i) {
-        crop(gray, boxes[size_t(i)], margin_).copyTo(cv::Mat(kCropH, kCropW, CV_32F, crops.ptr<float>(i)));
-        extra.at<float>(i, 0) = float(std::log1p(double(neighbors[size_t(i)])));
-        extra.at<float>(i, 1) = implied_vehicle_height(boxes[size_t(i)], horizon_row, cam_height_m);
+    for (int k = 0; k < n; ++k) {
+        const size_t i = size_t(which[size_t(k)]);
+        cv::Mat c(kCropH, kCropW, CV_32F, crops.ptr<float>(k));
+        if (mirror)  // the crop is centred on the box, so its mirror image is the mirrored image's crop
+            cv::flip(crop(gray, boxes[i], margin_), c, 1);
+        else
+            crop(gray, boxes[i], margin_).copyTo(c);
+        extra.at<float>(k, 0) = float(std::log1p(double(neighbors[i])));
+        extra.at<float>(k, 1) = implied_vehicle_height(boxes[i], horizon_row, cam_height_m);
     }
     net_.setInput(crops, "crop");
     net_.setInput(extra, "extra");
@@ -92,13 +98,48 @@ std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::R
     if (out[0].total() != size_t(n))
         throw std::runtime_error("output p holds " + std::to_string(out[0].total()) + " values for " + std::to_string(n) +
                                  " boxes");
+    std::copy(out[0].ptr<float>(), out[0].ptr<float>() + n, p);
     if (has_box_) {
         if (out[1].total() != size_t(4 * n))
             throw std::runtime_error("output box holds " + std::to_string(out[1].total()) + " values for " +
                                      std::to_string(n) + " boxes, not 4 each");
-        if (offsets) *offsets = out[1].reshape(1, n);
+        if (offsets) *offsets = out[1].reshape(1, n).clone();
     }
-    return std::vector<float>(out[0].ptr<float>(), out[0].ptr<float>() + n);
+}
+
+std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
+                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
+                                     cv::Mat *offsets) const {
+    const int n = int(boxes.size());
+    if (n == 0) return {};
+    std::vector<int> all(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) all[size_t(i)] = i;
+    std::vector<float> p(static_cast<size_t>(n));
+    cv::Mat d;
+    batch(gray, boxes, neighbors, all, false, horizon_row, cam_height_m, p.data(), &d);
+    if (mirrored_) {  // the mirror images of the boxes the plain look gives at least mirror_min_p
+        std::vector<int> which;
+        for (int i = 0; i < n; ++i)
+            if (p[size_t(i)] >= mirror_min_p_) which.push_back(i);
+        if (!which.empty()) {
+            std::vector<float> pm(which.size());
+            cv::Mat dm;
+            batch(gray, boxes, neighbors, which, true, horizon_row, cam_height_m, pm.data(), &dm);
+            for (size_t k = 0; k < which.size(); ++k) {
+                const int i = which[k];
+                p[size_t(i)] = 0.5f * (p[size_t(i)] + pm[k]);
+                if (!has_box_) continue;
+                // the mirror's left edge is the box's right one, and its offsets point the other way
+                float *o = d.ptr<float>(i);
+                const float *m = dm.ptr<float>(int(k));
+                const float l = 0.5f * (o[0] - m[2]), t = 0.5f * (o[1] + m[1]);
+                const float r = 0.5f * (o[2] - m[0]), b = 0.5f * (o[3] + m[3]);
+                o[0] = l; o[1] = t; o[2] = r; o[3] = b;
+            }
+        }
+    }
+    if (has_box_ && offsets) *offsets = d;
+    return p;
 }
 
 std::vector<float> CnnVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,

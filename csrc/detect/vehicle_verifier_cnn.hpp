@@ -12,6 +12,14 @@
 //     l' = l + d0 w,   t' = t + d1 h,   r' = r + d2 w,   b' = b + d3 h    (w, h: the box's width and height)
 // (verifier_onnx.refine), with margin (N, 1): the crop margin it was trained with, a constant read once by the
 // probe (it replaces kMargin for that file). All the boxes of a frame go through the network in one batch.
+//
+// Mirrored (cascade.verify_mirrored): the left-right mirror image of each crop the plain look gives at least
+// mirror_min_p also goes through the network, and the two answers are averaged, p = (p + p_m) / 2, the offsets with
+// the mirror's left and right swapped and negated, d = (d0 - dm2, d1 + dm1, d2 - dm0, d3 + dm3) / 2. A vehicle seen
+// from behind is nearly symmetric and the network was trained on crops mirrored at random, so the two are two
+// estimates of the same answer; their mean ranks the boxes better (docs/cascade.md, session 10). A box below
+// mirror_min_p keeps its plain answer: its mean could not reach (mirror_min_p + 1) / 2, so every score from there up
+// is the one mirroring every box gives, for the cost of mirroring the few believed boxes.
 #pragma once
 
 #include "detect/vehicle_verifier.hpp"
@@ -26,7 +34,8 @@ public:
     static constexpr double kMargin = 0.1;  // of the box's width (height) added each side: context (networks
                                             // with the box output carry their own: output "margin")
 
-    explicit CnnVerifier(const std::string &path);  // throws std::invalid_argument naming the file
+    // throws std::invalid_argument naming the file
+    explicit CnnVerifier(const std::string &path, bool mirrored = false, double mirror_min_p = 0.0);
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                      const std::vector<int> &neighbors, double horizon_row,
                                      double cam_height_m) const override;
@@ -40,9 +49,15 @@ private:
     // p (n) and, with the box output, offsets (n x 4 float) for the boxes; `offsets` left empty without one
     std::vector<float> run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
                            double horizon_row, double cam_height_m, cv::Mat *offsets) const;
+    // one batch through the network: the crops of boxes[which[k]] (mirrored), p[k] and offsets (row k)
+    void batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
+               const std::vector<int> &which, bool mirror, double horizon_row, double cam_height_m, float *p,
+               cv::Mat *offsets) const;
 
     mutable cv::dnn::Net net_;  // forward() is not const; one verifier serves one pipeline thread
     bool has_box_ = false;      // the file has the box output ("box", N x 4)
+    bool mirrored_ = false;     // crops the plain look believes judged with their mirror image, answers averaged
+    double mirror_min_p_ = 0.0; // the plain look's probability from which a crop's mirror image is judged too
     double margin_ = kMargin;   // of the box's size added each side of the crop: the file's "margin" output, if any
     std::vector<cv::String> outs_;  // output names asked of forward(): {"p"} or {"p", "box"}
 };
