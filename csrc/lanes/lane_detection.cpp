@@ -120,6 +120,9 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
     const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
     drop_unsupported_outer(out, m.points, {}, y_h, float(band.y_bottom), cam, p.evidence);
+    // An adjacent line darker than the road (a concrete joint with dots on it) where the model puts one; after the
+    // paint check above (it has dark bars, no paint) and before the solid-edge rule (nothing beyond a solid line).
+    add_dark_adjacent(gray, band, cam, hp, p.filter, p.dark, out);
     drop_beyond_solid_edges(out, m.points, {}, y_h, band, cam, p.evidence);
     out.certain = out.valid;
     return out;
