@@ -1,5 +1,7 @@
 #include "lanes/dark_markings.hpp"
 
+#include "lanes/road_gray.hpp"
+
 #include <algorithm>
 #include <cmath>
 
@@ -42,25 +44,15 @@ void add_dark_adjacent(const cv::Mat &gray, const ScanBand &band, const CameraPa
     // On the road: both sides of the bar as bright as the ego lane's road on its row (within road_frac either
     // way; its median sampled every 2 px between the ego boundaries): a vehicle's tyres, trim or gaps between
     // its parts are dark bars too, between a body brighter or darker than the road.
-    std::vector<int> row_median(size_t(gray.rows), -1);
-    std::vector<uint8_t> samples;
+    EgoRoadGray road(gray, L, R);
     auto on_road = [&](const MarkingPoint &q) {
+        if (p.road_frac <= 0.0) return true;
         const int y = int(std::lround(q.y)), half = int(std::ceil(0.5f * q.width)) + 2;
         const int xa = int(std::lround(q.x)) - half, xb = int(std::lround(q.x)) + half;
-        if (p.road_frac <= 0.0) return true;
-        if (y < 0 || y >= gray.rows || xa < 0 || xb >= gray.cols) return false;
-        const uint8_t *row = gray.ptr<uint8_t>(y);
-        int &median = row_median[size_t(y)];
-        if (median < 0) {
-            samples.clear();
-            const int x0 = std::max(0, int(L.curve_x(float(y)))), x1 = std::min(gray.cols - 1, int(R.curve_x(float(y))));
-            for (int i = x0; i <= x1; i += 2) samples.push_back(row[i]);
-            if (samples.empty()) return false;
-            std::nth_element(samples.begin(), samples.begin() + long(samples.size() / 2), samples.end());
-            median = samples[samples.size() / 2];
-        }
+        const int median = road.at(y);
+        if (median < 0 || xa < 0 || xb >= gray.cols) return false;
         const float lo = float(p.road_frac) * float(median), hi = float(median) / float(p.road_frac);
-        const float a = row[xa], b = row[xb];
+        const float a = gray.at<uint8_t>(y, xa), b = gray.at<uint8_t>(y, xb);
         return std::min(a, b) >= lo && std::max(a, b) <= hi;
     };
     for (int side = -1; side <= 1; side += 2) {
