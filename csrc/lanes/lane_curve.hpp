@@ -45,6 +45,7 @@ struct LaneCurveParams {
     double contrast_power = 3.0;       // 1; points weigh by min(1, contrast / median)^power (0: alike)
     bool single_shared_a = true;       // one image alone: every boundary crosses the horizon row at one column
     double far_range_m = 80.0;         // m; the reported boundaries reach this range (extrapolated beyond road_range_m)
+    double single_above_road = 0.25;   // 1; one image alone: fitted points this share brighter than the ego lane's road
 
     void bind(ParamMap &m) {
         m.add("curve_enabled", enabled,
@@ -100,6 +101,18 @@ struct LaneCurveParams {
               "0.831 / 0.158 / 0.242 with one a each. Not in lane tracking: the clips read 0.906 / 0.118 / 0.118 with it "
               "there against 0.930 / 0.097 / 0.090 (0531/...793's tightening curve: one shared a with the constant-curvature "
               "c / d cannot follow it, and a wrong boundary pulls every other one with it)");
+        m.add("curve_single_above_road", single_above_road, 0.0, 10.0,
+              "1; one image alone (the \"lanes\" stage, single-image detection): the curve fit takes only the marking "
+              "points at least this share brighter than the ego lane's road on their row (its median between the "
+              "straight ego boundaries): paint and dots are retroreflective, well above the pavement (0313-1/14900's "
+              "dots 190-230 against 134), while the road between a concrete seam and a shadow passes the marking "
+              "filter, brighter than its dark sides, at the road's own gray (115-125 against 123) and pulled 14900's "
+              "right ego line 15.9 px off its dots (3.2 px with this). TuSimple's 10-image sample 0.938 / 0 / 0.050 "
+              "(accuracy / FP / FN) against 0.920 / 0.025 / 0.075 with 0 (every point); 0.05-0.15 read 0.936 / 0.025 / "
+              "0.075, 0.2-0.35 0.938 / 0 / 0.050, 0.4 and 0.5 0.916 / 0.033 / 0.083 (0313-2/37400 loses a line); the "
+              "clips' 240 frames each alone 0.853 / 0.261 / 0.272 against 0.849 / 0.261 / 0.275 at 512x288, 0.830 / "
+              "0.267 / 0.315 against 0.825 / 0.289 / 0.337 at 1280x720. Not in lane tracking (not measured there: the "
+              "clips keep 0.930 / 0.097 / 0.090); 0 disables (docs/RESULTS.md, lanes, the lanes10 round)");
         m.add("curve_far_range_m", far_range_m, 10.0, 10000.0,
               "m; the boundaries reported (ABI points, tracks file, TuSimple predictions) reach this range, "
               "the fitted curve extrapolated beyond the lane model's end (lanes.road_range_m, 80 m) when farther; 80 "

@@ -1,7 +1,10 @@
 // lane_detection.cpp - the lane markings of one frame: filter, Hough, consensus, assignment.
 #include "lanes/lane_tracker.hpp"
 
+#include "lanes/road_gray.hpp"
+
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -108,7 +111,21 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     build_lane_model(m.lines, a, m.vp, gray.size(), cam, hp, p.assembly, out);
     out.frames_since_observed = out.valid ? 0 : 1;
     LaneCurveState curve;  // one image: no curvature history
-    fit_lane_curves(m.points, std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row, cam,
+    // The curve fit takes paint, brighter than the road (curve_single_above_road): the road between a concrete seam
+    // and a shadow is a bright bar to the marking filter at the road's own gray.
+    std::vector<MarkingPoint> paint;
+    const std::vector<MarkingPoint> *fit_points = &m.points;
+    if (out.valid && p.curve.single_above_road > 0.0) {
+        EgoRoadGray road(gray, out.ego_left, out.ego_right);
+        for (const auto &q : m.points) {
+            const int x = int(std::lround(q.x)), y = int(std::lround(q.y)), median = road.at(y);
+            if (median < 0 || x < 0 || x >= gray.cols ||
+                gray.at<uint8_t>(y, x) >= float(median) * (1.0 + p.curve.single_above_road))
+                paint.push_back(q);
+        }
+        fit_points = &paint;
+    }
+    fit_lane_curves(*fit_points, std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row, cam,
                     float(p.assembly.road.lane_width_m), p.curve, curve, out, p.curve.single_shared_a);
     ego_lane_metrics(cam, out);
     // One image: outer boundaries need paint along the road in this frame, and nothing is reported beyond a
@@ -120,6 +137,9 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;
     const ScanBand band = scan_band(gray.size(), cam, hp, p.filter);
     drop_unsupported_outer(out, m.points, {}, y_h, float(band.y_bottom), cam, p.evidence);
+    // An adjacent line darker than the road (a concrete joint with dots on it) where the model puts one; after the
+    // paint check above (it has dark bars, no paint) and before the solid-edge rule (nothing beyond a solid line).
+    add_dark_adjacent(gray, band, cam, hp, p.filter, p.dark, out);
     drop_beyond_solid_edges(out, m.points, {}, y_h, band, cam, p.evidence);
     out.certain = out.valid;
     return out;

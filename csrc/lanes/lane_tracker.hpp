@@ -16,6 +16,7 @@
 #include "base/params.hpp"
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
+#include "lanes/dark_markings.hpp"
 #include "lanes/dot_markings.hpp"
 #include "lanes/hough_lines.hpp"
 #include "lanes/lane_assembly.hpp"
@@ -34,6 +35,7 @@ struct LaneParams {
     LaneCurveParams curve;
     LaneEvidenceParams evidence;
     DotMarkingParams dots;
+    DarkLineParams dark;
     int max_missing_frames = 15;         // frames a boundary is carried after it was last measured
     double marking_sigma_px = 1.0;       // px; noise of one marking point (measurement model)
     double process_accel_frac = 0.0015;  // fraction of width per frame^2; how fast a boundary may move
@@ -50,6 +52,7 @@ struct LaneParams {
         curve.bind(m);
         evidence.bind(m);
         dots.bind(m);
+        dark.bind(m);
         m.add("max_missing_frames", max_missing_frames, 0, 1000,
               "frames; how long a boundary that is no longer measured is kept by lane tracking; 15 "
               "(0.5 s at 30 fps) bridges dash gaps, worn paint and a vehicle passing over the marking");
