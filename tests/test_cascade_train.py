@@ -48,10 +48,10 @@ def _dataset(folder, n, seed):
     return folder
 
 
-def _tiny(tmp_path_factory, booster: str):
+def _tiny(tmp_path_factory, booster: str, width: int = W, height: int = H):
     folder = _dataset(tmp_path_factory.mktemp("tiny") / "data", 40, 1)
-    out = tmp_path_factory.mktemp("model") / f"tiny-{booster}.xml"
-    p = TrainParams(width=W, height=H, stages=3, num_pos=200, num_neg=200, features=400, min_box_height=10,
+    out = tmp_path_factory.mktemp("model") / f"tiny-{booster}-{width}x{height}.xml"
+    p = TrainParams(width=width, height=height, stages=3, num_pos=200, num_neg=200, features=400, min_box_height=10,
                     max_weak=20, seed=0, booster=booster)
     lines = []
     cascade = train([str(folder)], str(out), p, log=lines.append)
@@ -66,6 +66,11 @@ def tiny_cascade(tmp_path_factory):
 @pytest.fixture(scope="module")
 def tiny_discrete(tmp_path_factory):
     return _tiny(tmp_path_factory, "discrete")
+
+
+@pytest.fixture(scope="module")
+def tiny_square(tmp_path_factory):
+    return _tiny(tmp_path_factory, "gentle", 10, 10)
 
 
 def test_tiny_cascade_trains_with_a_log_line_per_stage(tiny_cascade):
@@ -213,3 +218,32 @@ def test_positives_of_one_view_only(tmp_path):
                         "--out", str(tmp_path / "m.xml"), "--min-aspect", "2", "--max-aspect", "1"],
                        capture_output=True, text=True)
     assert r.returncode == 1 and "--min-aspect 2 --max-aspect 1" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
+    """Any window the trainer takes (`--window 24x24`, docs/cascade.md "Window size and aspect"): the core's cascade
+    stage reads the window from the XML, so a square model gives square boxes whose smallest height is the model's
+    own, and the core's scanner finds exactly the windows OpenCV's finds (every raw group kept, on rendered road
+    frames where the tiny model fires often)."""
+    from app import config as configuration
+    from app.core import Pipeline
+    from app.sim import load_scenario, render
+    from app.sim.frames import scenario_camera
+
+    _, out, _ = tiny_square
+    assert tuple(cv2.CascadeClassifier(str(out)).getOriginalWindowSize()) == (10, 10)
+    sc = load_scenario("dense_traffic")
+    frames = [f.image for f in list(render(sc, frames=range(3)))]
+    found = {}
+    for opencv in (True, False):
+        cfg = configuration.load(None, {"cascade": {"model": str(out), "verifier": "off", "nms_iou": 1.0,
+                                                    "min_neighbors": 1, "opencv_scan": opencv}})
+        cfg["camera"].update(scenario_camera(sc).to_dict())
+        with Pipeline(configuration.core_sections(cfg)) as pipe:
+            found[opencv] = [[(*t.box, t.confidence) for t in pipe.run_stage("cascade", g).tracks] for g in frames]
+    assert found[False] == found[True]
+    boxes = np.array([b[:4] for f in found[False] for b in f])
+    assert len(boxes) > 20
+    w, h = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
+    assert np.abs(w - h).max() < 1e-3       # the model's aspect, not the shipped 30x20's 1.5
+    assert h.min() == pytest.approx(10, abs=1e-3)  # the smallest size scanned is the model's own

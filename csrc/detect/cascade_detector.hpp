@@ -1,7 +1,8 @@
 // cascade_detector.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/cascade.md).
 //
 // The shipped OpenCV cascade XML (trained by `headway train cascade`) is run by HaarCascade
-// (haar_cascade.hpp: OpenCV's evaluation and scan, window for window, faster) only where a vehicle can stand. The cascade's window W x H (30 x 20) was trained on windows of the
+// (haar_cascade.hpp: OpenCV's evaluation and scan, window for window, faster) only where a vehicle can stand. The
+// cascade's window W x H (the XML's own, any size and aspect; 30 x 20 shipped) was trained on windows of the
 // annotated box's height, so a window of height h_s is a vehicle whose box is h_s pixels high. On a
 // flat road a vehicle of height H_v (m) whose bottom is at row y_b has
 //     h_s = H_v * (y_b - y_h) / h_cam        (pinhole: h_s = fy H_v / Z, Z = fy h_cam / (y_b - y_h))
