@@ -25,6 +25,20 @@ def _dnn_probability(path, z, extra):
     return net.forward("p").ravel()
 
 
+def _first_validation_image():
+    supp = data_path("tusimple", "supp")
+    entry = json.loads((supp / "annotation.json").read_text())[0]
+    return cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+
+
+def _refined_as_core(boxes, d):
+    """vo.refine with the core's rule: a box the output would turn inside out keeps its own (CnnVerifier::judge)."""
+    moved = vo.refine(boxes, d)
+    flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
+    moved[flat] = np.asarray(boxes, float)[flat]
+    return moved, flat
+
+
 def _bars(rng, n):
     """Crops with noise; 'vehicles' carry a dark horizontal bar low in the crop (a shadow under a car)."""
     y = np.where(rng.random(n) < 0.3, 1, -1).astype(np.int8)
@@ -109,9 +123,7 @@ def test_core_and_cv2_dnn_give_the_trainers_probability():
     from app.eval.tusimple_boxes import tusimple_config
     from app.train.verifier import geometry_features
 
-    supp = data_path("tusimple", "supp")
-    entry = json.loads((supp / "annotation.json").read_text())[0]
-    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    gray = _first_validation_image()
     cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": str(SHIPPED_CNN), "nms_iou": 1.0,
                                                                 "rejudge_refined": False, "verify_mirrored": False}}))
     off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
@@ -166,9 +178,7 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     params = _random_params(np.random.default_rng(1))
     path = tmp_path / "box.onnx"
     vo.save_onnx(params, str(path))
-    supp = data_path("tusimple", "supp")
-    entry = json.loads((supp / "annotation.json").read_text())[0]
-    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    gray = _first_validation_image()
     over = {"verifier": str(path), "nms_iou": 1.0, "rejudge_refined": False, "verify_mirrored": False}
     cfg = tusimple_config(configuration.load(None, {"cascade": over}))
     kept = tusimple_config(configuration.load(None, {"cascade": {**over, "refine_boxes": False}}))
@@ -210,9 +220,7 @@ def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
 
     path = tmp_path / "box.onnx"
     vo.save_onnx(_random_params(np.random.default_rng(2)), str(path))
-    supp = data_path("tusimple", "supp")
-    entry = json.loads((supp / "annotation.json").read_text())[0]
-    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    gray = _first_validation_image()
     over = {"verifier": str(path), "nms_iou": 1.0, "rejudge_move": 0.0, "verify_mirrored": False}
     cfg = tusimple_config(configuration.load(None, {"cascade": over}))
     off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
@@ -229,9 +237,7 @@ def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
         return vo.forward(params, z, geometry_features(boxes, n, horizon, h), box=True)
 
     p, d = judge(groups[:, :4].astype(float))
-    moved = vo.refine(groups[:, :4], d)
-    flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
-    moved[flat] = groups[flat, :4]   # a box the output would turn inside out keeps the group's own (the core's rule)
+    moved, _ = _refined_as_core(groups[:, :4], d)
     again, _ = judge(moved)
     assert np.abs(moved - core[:, :4]).max() < 0.05   # px
     believed = p >= cfg["cascade"]["rejudge_min_p"]   # judged again: what the first look believes
@@ -249,9 +255,7 @@ def test_the_second_look_moves_a_believed_box_again_by_rejudge_move(tmp_path):
 
     path = tmp_path / "box.onnx"
     vo.save_onnx(_random_params(np.random.default_rng(2)), str(path))
-    supp = data_path("tusimple", "supp")
-    entry = json.loads((supp / "annotation.json").read_text())[0]
-    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    gray = _first_validation_image()
     over = {"verifier": str(path), "nms_iou": 1.0, "verify_mirrored": False}
     still = tusimple_config(configuration.load(None, {"cascade": {**over, "rejudge_move": 0.0}}))
     half = tusimple_config(configuration.load(None, {"cascade": {**over, "rejudge_move": 0.5}}))
@@ -268,9 +272,7 @@ def test_the_second_look_moves_a_believed_box_again_by_rejudge_move(tmp_path):
     p0, _ = vo.forward(params, vo.standardise(vo.crop_boxes(gray, groups[:, :4], vo.crop_margin(params))),
                        geometry_features(groups[:, :4], n, horizon, half["camera"]["height_m"]), box=True)
     believed = p0 >= half["cascade"]["rejudge_min_p"]
-    again = vo.refine(first[:, :4], d)
-    flat = (again[:, 2] - again[:, 0] < 1) | (again[:, 3] - again[:, 1] < 1)
-    again[flat] = first[flat, :4]   # a box the output would turn inside out stays (the core's rule)
+    again, _ = _refined_as_core(first[:, :4], d)
     want = np.where(believed[:, None], first[:, :4] + 0.5 * (again - first[:, :4]), first[:, :4])
     assert np.abs(second[:, :4] - want).max() < 0.05   # px
     assert np.abs(second[believed, :4] - first[believed, :4]).max() > 2   # it does move them
@@ -289,9 +291,7 @@ def test_a_mirrored_verifier_averages_the_crop_and_its_mirror_image(tmp_path):
 
     path = tmp_path / "box.onnx"
     vo.save_onnx(_random_params(np.random.default_rng(2)), str(path))
-    supp = data_path("tusimple", "supp")
-    entry = json.loads((supp / "annotation.json").read_text())[0]
-    gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
+    gray = _first_validation_image()
     over = {"verifier": str(path), "nms_iou": 1.0, "rejudge_refined": False, "verify_mirrored": True}
     cfg = tusimple_config(configuration.load(None, {"cascade": {**over, "mirror_min_p": 0.0}}))
     off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
@@ -307,9 +307,7 @@ def test_a_mirrored_verifier_averages_the_crop_and_its_mirror_image(tmp_path):
     pm, dm = vo.forward(params, np.ascontiguousarray(z[..., ::-1]), extra, box=True)
     mean_d = 0.5 * np.stack([d[:, 0] - dm[:, 2], d[:, 1] + dm[:, 1], d[:, 2] - dm[:, 0], d[:, 3] + dm[:, 3]], 1)
     assert np.abs(0.5 * (p + pm) - core[:, 4]).max() < 1e-3
-    moved = vo.refine(boxes, mean_d)
-    flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
-    moved[flat] = boxes[flat]   # a box the output would turn inside out keeps the group's own (the core's rule)
+    moved, flat = _refined_as_core(boxes, mean_d)
     assert np.abs(moved - core[:, :4]).max() < 0.05   # px
     assert (~flat & (np.abs(moved - boxes).max(1) > 2)).sum() >= 5   # it does move them
     assert np.abs(vo.refine(boxes, d) - moved)[~flat].max() > 2   # the mirror image changes the answer (px)
