@@ -246,4 +246,6 @@ def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
     assert len(boxes) > 20
     w, h = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
     assert np.abs(w - h).max() < 1e-3       # the model's aspect, not the shipped 30x20's 1.5
-    assert h.min() == pytest.approx(10, abs=1e-3)  # the smallest size scanned is the model's own
+    # The smallest size scanned is the model's own: a group's box is the mean of the windows in it, so the smallest
+    # box lies between 10 px and the next scale (1.12 x 10); CI saw 10.6, a 10 and an 11.2 window grouped.
+    assert 10 - 1e-3 <= h.min() < 10 * configuration.load(None)["cascade"]["scale_factor"]
