@@ -55,7 +55,53 @@ CnnVerifier::CnnVerifier(const std::string &path, bool mirrored, double mirror_m
     mirror_min_p_ = mirror_min_p;
 }
 
-cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double margin) {
+namespace {
+
+// The mean of every cell of a kCropW x kCropH grid laid over the source rectangle [x0, x1) x [y0, y1) (whole pixels,
+// inside the image, at least the crop's size), rounded: the pixel-area average cv::resize(INTER_AREA) computes, from
+// the image's integral ii (CV_32S, (rows + 1) x (cols + 1)). The integral of a piecewise-constant image is bilinear
+// between whole pixels, so each cell corner's integral is an exact bilinear read of ii: the cost is per cell, not per
+// source pixel (the groups of a frame overlap: their crops span ~2.4 M source pixels of a 0.9 M pixel image).
+// OpenCV's own arithmetic (float weights, partial pixels under 1e-3 dropped) differs by one grey level on ~0.1 % of
+// the pixels (docs/cascade.md, session 11).
+template <int W, int H>
+void area_cells(const cv::Mat &ii, int x0, int y0, int x1, int y1, cv::Mat &out) {
+    const double sx = double(x1 - x0) / W, sy = double(y1 - y0) / H;
+    int xi[W + 1], yi[H + 1];
+    double xf[W + 1], yf[H + 1];
+    for (int c = 0; c <= W; ++c) {
+        const double x = c == W ? double(x1) : x0 + c * sx;
+        xi[c] = std::min(int(std::floor(x)), ii.cols - 2);  // x == cols: the last cell, fraction 1
+        xf[c] = x - xi[c];
+    }
+    for (int r = 0; r <= H; ++r) {
+        const double y = r == H ? double(y1) : y0 + r * sy;
+        yi[r] = std::min(int(std::floor(y)), ii.rows - 2);
+        yf[r] = y - yi[r];
+    }
+    double prev[W + 1], cur[W + 1];
+    const double inv_area = 1.0 / (sx * sy);
+    for (int r = 0; r <= H; ++r) {
+        const int *a = ii.ptr<int>(yi[r]), *b = ii.ptr<int>(yi[r] + 1);
+        const double fy = yf[r];
+        for (int c = 0; c <= W; ++c) {
+            const int i = xi[c];
+            const double top = a[i] + xf[c] * (a[i + 1] - a[i]);
+            const double bottom = b[i] + xf[c] * (b[i + 1] - b[i]);
+            cur[c] = top + fy * (bottom - top);
+        }
+        if (r > 0) {
+            uchar *o = out.ptr<uchar>(r - 1);
+            for (int c = 0; c < W; ++c)
+                o[c] = cv::saturate_cast<uchar>((cur[c + 1] - cur[c] - prev[c + 1] + prev[c]) * inv_area);
+        }
+        std::copy(cur, cur + W + 1, prev);
+    }
+}
+
+} // namespace
+
+cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double margin, const cv::Mat *integral) {
     // the box's edges as the Python side sees them (float right = x + width), widened in double
     const double l = box.x, t = box.y, r = double(box.x + box.width), b = double(box.y + box.height);
     const double mx = margin * (r - l), my = margin * (b - t);
@@ -63,12 +109,17 @@ cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double mar
     const int x1 = int(std::floor(r + mx + 0.5)), y1 = int(std::floor(b + my + 0.5));
     cv::Mat out(kCropH, kCropW, CV_32F, cv::Scalar(0));
     if (x1 - x0 < 2 || y1 - y0 < 2) return out;
-    const int cx0 = std::clamp(x0, 0, gray.cols - 1), cy0 = std::clamp(y0, 0, gray.rows - 1);
-    const int cx1 = std::max(std::min(x1, gray.cols), cx0 + 1), cy1 = std::max(std::min(y1, gray.rows), cy0 + 1);
-    cv::Mat padded, small;
-    cv::copyMakeBorder(gray(cv::Rect(cx0, cy0, cx1 - cx0, cy1 - cy0)), padded, cy0 - y0, std::max(0, y1 - cy1),
-                       cx0 - x0, std::max(0, x1 - cx1), cv::BORDER_REPLICATE);
-    cv::resize(padded, small, cv::Size(kCropW, kCropH), 0, 0, cv::INTER_AREA);
+    cv::Mat small(kCropH, kCropW, CV_8U);
+    if (integral && x0 >= 0 && y0 >= 0 && x1 <= gray.cols && y1 <= gray.rows && x1 - x0 >= kCropW && y1 - y0 >= kCropH) {
+        area_cells<kCropW, kCropH>(*integral, x0, y0, x1, y1, small);
+    } else {  // reaching out of the image (border replicated), or smaller than the crop (INTER_AREA interpolates)
+        const int cx0 = std::clamp(x0, 0, gray.cols - 1), cy0 = std::clamp(y0, 0, gray.rows - 1);
+        const int cx1 = std::max(std::min(x1, gray.cols), cx0 + 1), cy1 = std::max(std::min(y1, gray.rows), cy0 + 1);
+        cv::Mat padded;
+        cv::copyMakeBorder(gray(cv::Rect(cx0, cy0, cx1 - cx0, cy1 - cy0)), padded, cy0 - y0, std::max(0, y1 - cy1),
+                           cx0 - x0, std::max(0, x1 - cx1), cv::BORDER_REPLICATE);
+        cv::resize(padded, small, cv::Size(kCropW, kCropH), 0, 0, cv::INTER_AREA);
+    }
     cv::Scalar mean, sd;
     cv::meanStdDev(small, mean, sd);
     small.convertTo(out, CV_32F, 1.0 / (sd[0] + 1.0), -mean[0] / (sd[0] + 1.0));
@@ -76,18 +127,19 @@ cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double mar
 }
 
 void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
-                        const std::vector<int> &which, bool mirror, double horizon_row, double cam_height_m, float *p,
-                        cv::Mat *offsets) const {
+                        const std::vector<int> &which, const cv::Mat *plain, double horizon_row, double cam_height_m,
+                        float *p, cv::Mat *offsets, cv::Mat *crops_out) const {
     const int n = int(which.size());
     const int sz[4] = {n, 1, kCropH, kCropW};
-    cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F);
+    cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F), ii;
+    if (!plain) cv::integral(gray, ii, CV_32S);  // once for all the crops of the batch (area_cells)
     for (int k = 0; k < n; ++k) {
         const size_t i = size_t(which[size_t(k)]);
         cv::Mat c(kCropH, kCropW, CV_32F, crops.ptr<float>(k));
-        if (mirror)  // the crop is centred on the box, so its mirror image is the mirrored image's crop
-            cv::flip(crop(gray, boxes[i], margin_), c, 1);
+        if (plain)  // the crop is centred on the box, so its mirror image is the mirrored image's crop
+            cv::flip(cv::Mat(kCropH, kCropW, CV_32F, const_cast<float *>(plain->ptr<float>(int(i)))), c, 1);
         else
-            crop(gray, boxes[i], margin_).copyTo(c);
+            crop(gray, boxes[i], margin_, &ii).copyTo(c);
         extra.at<float>(k, 0) = float(std::log1p(double(neighbors[i])));
         extra.at<float>(k, 1) = implied_vehicle_height(boxes[i], horizon_row, cam_height_m);
     }
@@ -105,6 +157,7 @@ void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxe
                                      std::to_string(n) + " boxes, not 4 each");
         if (offsets) *offsets = out[1].reshape(1, n).clone();
     }
+    if (crops_out) *crops_out = crops;
 }
 
 std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
@@ -115,8 +168,8 @@ std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::R
     std::vector<int> all(static_cast<size_t>(n));
     for (int i = 0; i < n; ++i) all[size_t(i)] = i;
     std::vector<float> p(static_cast<size_t>(n));
-    cv::Mat d;
-    batch(gray, boxes, neighbors, all, false, horizon_row, cam_height_m, p.data(), &d);
+    cv::Mat d, crops;
+    batch(gray, boxes, neighbors, all, nullptr, horizon_row, cam_height_m, p.data(), &d, mirrored_ ? &crops : nullptr);
     if (mirrored_) {  // the mirror images of the boxes the plain look gives at least mirror_min_p
         std::vector<int> which;
         for (int i = 0; i < n; ++i)
@@ -124,7 +177,8 @@ std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::R
         if (!which.empty()) {
             std::vector<float> pm(which.size());
             cv::Mat dm;
-            batch(gray, boxes, neighbors, which, true, horizon_row, cam_height_m, pm.data(), &dm);
+            // the plain crops flipped (not cut again: the same values, half the cropping)
+            batch(gray, boxes, neighbors, which, &crops, horizon_row, cam_height_m, pm.data(), &dm, nullptr);
             for (size_t k = 0; k < which.size(); ++k) {
                 const int i = which[k];
                 p[size_t(i)] = 0.5f * (p[size_t(i)] + pm[k]);

@@ -42,17 +42,19 @@ public:
     std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
                              double horizon_row, double cam_height_m) const override;
     bool has_box_output() const override { return has_box_; }
-    // The standardised crop of one box (kCropH x kCropW, float) widened by `margin` each side, as the network takes it.
-    static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box, double margin);
+    // The standardised crop of one box (kCropH x kCropW, float) widened by `margin` each side, as the network takes it;
+    // with the image's integral (CV_32S) a crop inside the image and larger than kCropW x kCropH is averaged from it.
+    static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box, double margin, const cv::Mat *integral = nullptr);
 
 private:
     // p (n) and, with the box output, offsets (n x 4 float) for the boxes; `offsets` left empty without one
     std::vector<float> run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
                            double horizon_row, double cam_height_m, cv::Mat *offsets) const;
-    // one batch through the network: the crops of boxes[which[k]] (mirrored), p[k] and offsets (row k)
+    // one batch through the network: the crops of boxes[which[k]], or with `plain` (the crops of every box, as a
+    // batch without it gives in `crops_out`) those crops mirrored; p[k] and offsets (row k)
     void batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
-               const std::vector<int> &which, bool mirror, double horizon_row, double cam_height_m, float *p,
-               cv::Mat *offsets) const;
+               const std::vector<int> &which, const cv::Mat *plain, double horizon_row, double cam_height_m, float *p,
+               cv::Mat *offsets, cv::Mat *crops_out) const;
 
     mutable cv::dnn::Net net_;  // forward() is not const; one verifier serves one pipeline thread
     bool has_box_ = false;      // the file has the box output ("box", N x 4)
