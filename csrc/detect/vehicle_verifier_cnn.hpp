@@ -31,6 +31,7 @@ namespace hw {
 class CnnVerifier : public VehicleVerifier {
 public:
     static constexpr int kCropW = 48, kCropH = 32;  // px: the cascade's aspect 1.5
+    static constexpr int kChunk = 16;               // boxes per pass through cv::dnn (cache-sized)
     static constexpr double kMargin = 0.1;  // of the box's width (height) added each side: context (networks
                                             // with the box output carry their own: output "margin")
 
