@@ -15,7 +15,7 @@ from app.core import Pipeline
 from app.train import verifier_onnx as vo
 from tests.conftest import data_path
 
-SHIPPED_CNN = configuration.SHIPPED_VERIFIER   # the default verifier (app/models/vehicle_verifier.onnx)
+SHIPPED_CNN = configuration.SHIPPED_VERIFIER   # the default verifier (app/models/vehicle_verifier.onnx, session 11's)
 
 
 def _dnn_probability(path, z, extra):
@@ -358,19 +358,24 @@ def test_an_empty_road_box_the_verifier_believes_is_refused_once_moved():
     lanes' defaults of session 6: 0.62 and 0.87 on frames 4 and 5; 0.95 on frame 3 before them). Judged again where
     it stands, that box is refused (measured: nothing >= 0.5 wider than 300 px on frames 2-5). The single-image lanes as
     then (lanes.row_width_single false, in the horizon fit too): with the lanes9 round's rule the fitted pitch moves by
-    0.02 deg and the verifier no longer believes that box on frame 5 without the second look either."""
+    0.02 deg and the verifier no longer believes that box on frame 5 without the second look either.
+    Session 5's network is app/models/vehicle_verifier_small.onnx since session 11; the wider network shipped then
+    does not believe that box even at its first look."""
     as_measured = {"row_width_single": False}
     frames, _, cam = _udacity_frames("project_video_cut.mp4", as_measured)
     values = {"camera": cam, "pipeline": {"preset": "cascade"}, "lanes": as_measured}
+    small = str(SHIPPED_CNN.parent / "vehicle_verifier_small.onnx")
     wide = {}
-    for rejudge in (False, True):
-        cascade = {"rejudge_refined": rejudge, "verify_mirrored": False, "rejudge_move": 0.0}   # session 6's looks
+    for verifier, rejudge in ((small, False), (small, True), ("", False)):
+        cascade = {"verifier": verifier, "rejudge_refined": rejudge, "verify_mirrored": False,
+                   "rejudge_move": 0.0}   # session 6's looks
         cfg = configuration.core_sections(configuration.load(None, {**values, "cascade": cascade}))
         with Pipeline(cfg) as pipe:
-            wide[rejudge] = [[b for b in pipe.stage_boxes("detect", f)[0]
-                              if b[4] >= 0.5 and b[2] - b[0] > 300] for f in frames[2:6]]
-    assert any(boxes for boxes in wide[False]), wide[False]
-    assert all(not boxes for boxes in wide[True]), wide[True]
+            wide[verifier, rejudge] = [[b for b in pipe.stage_boxes("detect", f)[0]
+                                        if b[4] >= 0.5 and b[2] - b[0] > 300] for f in frames[2:6]]
+    assert any(boxes for boxes in wide[small, False]), wide[small, False]
+    assert all(not boxes for boxes in wide[small, True]), wide[small, True]
+    assert all(not boxes for boxes in wide["", False]), wide["", False]
     # The defaults since session 10: the second step moves frame 5's box on to ~310 px, which the mirror image brings
     # down to ~0.55 (0.89 without it; measured): below every operating point, nothing wide is written
     from app.detect_images import OPERATING_POINT
@@ -445,3 +450,31 @@ def test_training_without_the_train_extra_names_it(monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "jax", None)
     with pytest.raises(SystemExit, match=r"pip install '\.\[train\]'"):
         verifier_cnn.require_train_extra()
+
+
+def test_integral_crops_are_the_pixel_area_mean_inter_area_computes():
+    """`verifier_onnx.area_cells` (the core's crops inside the image, session 11): each cell's mean from the image's
+    integral is what cv2.resize(INTER_AREA) gives, at most one grey level apart on a few pixels (OpenCV weighs partial
+    pixels in float and drops those under 1e-3), on every group's crop of the first validation images."""
+    from app.eval.tusimple_boxes import tusimple_config
+
+    supp = data_path("tusimple", "supp")
+    entries = json.loads((supp / "annotation.json").read_text())[:5]
+    cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
+    diffs = []
+    with Pipeline(configuration.core_sections(cfg)) as pipe:
+        for e in entries:
+            gray = cv2.imread(str(supp / e["file_name"]), cv2.IMREAD_GRAYSCALE)
+            ii = cv2.integral(gray, sdepth=cv2.CV_32S)
+            for l, t, r, b in pipe.stage_boxes("cascade", gray)[0][:, :4].astype(float):
+                mx, my = 0.25 * (r - l), 0.25 * (b - t)
+                x0, y0, x1, y1 = (int(np.floor(v + 0.5)) for v in (l - mx, t - my, r + mx, b + my))
+                if x0 < 0 or y0 < 0 or x1 > gray.shape[1] or y1 > gray.shape[0] or x1 - x0 < vo.CROP_W \
+                        or y1 - y0 < vo.CROP_H:
+                    continue
+                ref = cv2.resize(gray[y0:y1, x0:x1], (vo.CROP_W, vo.CROP_H), interpolation=cv2.INTER_AREA)
+                diffs.append(np.abs(vo.area_cells(ii, x0, y0, x1, y1).astype(int) - ref.astype(int)))
+                # and crop_boxes takes this path for such a box
+                assert np.array_equal(vo.crop_boxes(gray, [(l, t, r, b)], 0.25)[0], vo.area_cells(ii, x0, y0, x1, y1))
+    d = np.stack(diffs)
+    assert len(d) > 300 and d.max() <= 1 and (d > 0).mean() < 0.005

@@ -64,7 +64,7 @@ def samples(folders: list[str], cascade_xml: str, every: int, cfg: dict, cache: 
     boxes (n, 4), largest IoU with an annotated box (n,) and that annotated box (n, 4) of the cascade's
     detections (every group: no cap); read from / written to `cache` (.npz) when given and made from the same
     cascade, images and crop geometry."""
-    key = hashlib.sha256(json.dumps(["labels: IoU >= 0.5 vs the rest, every group, matched box",
+    key = hashlib.sha256(json.dumps(["labels: IoU >= 0.5 vs the rest, every group, matched box; crops: area_cells",
                                      hashlib.sha256(Path(cascade_xml).read_bytes()).hexdigest(),
                                      [str(Path(f).resolve()) for f in folders], every, vo.CROP_W, vo.CROP_H,
                                      margin, cfg["camera"], cfg["cascade"]], default=str).encode()).hexdigest()[:16]
