@@ -75,7 +75,7 @@ struct CascadeParams {
               "through a one-hidden-layer network; empty = the "
               "model shipped with Headway (app/models/vehicle_verifier.onnx, session 11's CNN of 16/32/64 channels; "
               "app/models/vehicle_verifier_small.onnx is session 5's of 8/16/32, ~16 ms less per 1280x720 image and "
-              "~0.015-0.03 less recall at precision 0.85 on the TuSimple validation split; the HOG one is "
+              "~0.03-0.04 less recall at precision 0.85 on the TuSimple validation split; the HOG one is "
               "app/models/vehicle_verifier.yml.gz; recipes in docs/cascade.md); off = "
               "the cascade's neighbour count alone as confidence, which measured worse on the TuSimple validation split. "
               "In a tracked pipeline tracked_verifier judges instead");
