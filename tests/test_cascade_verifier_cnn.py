@@ -406,14 +406,17 @@ def test_tracked_pipelines_judge_with_the_tracked_verifier():
 
 
 def test_trackers_get_the_groups_boxes_unless_refine_tracked():
-    """With a tracked verifier that has a box output (here the single-image one, `tracked_verifier: same`), the box
-    output places the detections (their probability and the suppression) but a tracker gets each group's own box:
+    """With a tracked verifier that has a box output (here session 5's, as the single-image one with
+    `tracked_verifier: same`), the box output places the detections (their probability and the suppression) but a
+    tracker gets each group's own box:
     the tracks on a real clip differ both from those with `cascade.refine_boxes: false` (nothing placed) and from
     those with `cascade.refine_tracked` (the placed boxes given to the tracker), and no track box of the first two
     frames is one the moved boxes' run has."""
     frames, fps, cam = _udacity_frames("test_small2.mp4")
     values = {"camera": cam, "pipeline": {"preset": "cascade"}}
-    same = {"tracked_verifier": "same", "verify_mirrored": False, "rejudge_move": 0.0}   # as measured (session 6)
+    # as measured (session 6): session 5's network, vehicle_verifier_small.onnx since session 11
+    same = {"verifier": str(SHIPPED_CNN.parent / "vehicle_verifier_small.onnx"), "tracked_verifier": "same",
+            "verify_mirrored": False, "rejudge_move": 0.0}
     default = _tracks(frames, fps, values, same)
     unmoved = _tracks(frames, fps, values, {**same, "refine_boxes": False})
     moved = _tracks(frames, fps, values, {**same, "refine_tracked": True})
