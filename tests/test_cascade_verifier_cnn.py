@@ -364,7 +364,7 @@ def test_an_empty_road_box_the_verifier_believes_is_refused_once_moved():
     as_measured = {"row_width_single": False}
     frames, _, cam = _udacity_frames("project_video_cut.mp4", as_measured)
     values = {"camera": cam, "pipeline": {"preset": "cascade"}, "lanes": as_measured}
-    small = str(SHIPPED_CNN.parent / "vehicle_verifier_small.onnx")
+    small = str(configuration.SHIPPED_SMALL_VERIFIER)
     wide = {}
     for verifier, rejudge in ((small, False), (small, True), ("", False)):
         cascade = {"verifier": verifier, "rejudge_refined": rejudge, "verify_mirrored": False,
@@ -415,7 +415,7 @@ def test_trackers_get_the_groups_boxes_unless_refine_tracked():
     frames, fps, cam = _udacity_frames("test_small2.mp4")
     values = {"camera": cam, "pipeline": {"preset": "cascade"}}
     # as measured (session 6): session 5's network, vehicle_verifier_small.onnx since session 11
-    same = {"verifier": str(SHIPPED_CNN.parent / "vehicle_verifier_small.onnx"), "tracked_verifier": "same",
+    same = {"verifier": str(configuration.SHIPPED_SMALL_VERIFIER), "tracked_verifier": "same",
             "verify_mirrored": False, "rejudge_move": 0.0}
     default = _tracks(frames, fps, values, same)
     unmoved = _tracks(frames, fps, values, {**same, "refine_boxes": False})
