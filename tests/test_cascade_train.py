@@ -245,7 +245,9 @@ def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
     boxes = np.array([b[:4] for f in found[False] for b in f])
     assert len(boxes) > 20
     w, h = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
-    assert np.abs(w - h).max() < 1e-3       # the model's aspect, not the shipped 30x20's 1.5
+    inside = (boxes[:, 0] > 0) & (boxes[:, 2] < frames[0].shape[1])   # a box the border cuts (border_frac) is narrower
+    assert inside.sum() > 20
+    assert np.abs(w - h)[inside].max() < 1e-3       # the model's aspect, not the shipped 30x20's 1.5
     # The smallest size scanned is the model's own: a group's box is the mean of the windows in it, so the smallest
     # box lies between 10 px and the next scale (1.12 x 10); CI saw 10.6, a 10 and an 11.2 window grouped.
     assert 10 - 1e-3 <= h.min() < 10 * configuration.load(None)["cascade"]["scale_factor"]

@@ -31,12 +31,21 @@ def _first_validation_image():
     return cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
 
 
-def _refined_as_core(boxes, d):
-    """vo.refine with the core's rule: a box the output would turn inside out keeps its own (CnnVerifier::judge)."""
+def _cut(boxes, shape):
+    """Boxes (left, top, right, bottom) cut to an image of `shape`, as the core cuts every moved box (session 12)."""
+    b = np.array(boxes, float)
+    b[:, [0, 2]] = b[:, [0, 2]].clip(0, shape[1])
+    b[:, [1, 3]] = b[:, [1, 3]].clip(0, shape[0])
+    return b
+
+
+def _refined_as_core(boxes, d, shape):
+    """vo.refine with the core's rules: a box the output would turn inside out keeps its own (CnnVerifier::judge),
+    and the moved box is cut to the image of `shape` (cascade_detector.cpp)."""
     moved = vo.refine(boxes, d)
     flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
     moved[flat] = np.asarray(boxes, float)[flat]
-    return moved, flat
+    return _cut(moved, shape), flat
 
 
 def _bars(rng, n):
@@ -142,7 +151,7 @@ def test_core_and_cv2_dnn_give_the_trainers_probability():
     p, d = vo.forward(params, z, extra, box=True)
     assert np.abs(p - np.array([t.confidence for t in r.tracks])).max() < 1e-3
     assert np.abs(p - _dnn_probability(SHIPPED_CNN, z, extra)).max() < 1e-3
-    assert np.abs(vo.refine(boxes, d) - np.array([t.box for t in r.tracks])).max() < 0.05   # px
+    assert np.abs(_cut(vo.refine(boxes, d), gray.shape) - np.array([t.box for t in r.tracks])).max() < 0.05   # px
     assert p.min() < 0.5 < p.max()   # it tells the boxes apart
 
 
@@ -198,7 +207,7 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     extra = geometry_features(boxes, n, horizon, cfg["camera"]["height_m"])
     p, d = vo.forward(back, z, extra, box=True)
     assert np.abs(p - core[:, 4]).max() < 1e-3
-    moved = vo.refine(boxes, d)
+    moved = _cut(vo.refine(boxes, d), gray.shape)
     assert np.abs(moved - core[:, :4]).max() < 0.05   # px
     assert np.abs(moved - boxes).max() > 5           # it does move them
     assert np.array_equal(as_is[:, :4], groups[:, :4]) and np.abs(as_is[:, 4] - core[:, 4]).max() < 1e-6
@@ -237,7 +246,7 @@ def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
         return vo.forward(params, z, geometry_features(boxes, n, horizon, h), box=True)
 
     p, d = judge(groups[:, :4].astype(float))
-    moved, _ = _refined_as_core(groups[:, :4], d)
+    moved, _ = _refined_as_core(groups[:, :4], d, gray.shape)
     again, _ = judge(moved)
     assert np.abs(moved - core[:, :4]).max() < 0.05   # px
     believed = p >= cfg["cascade"]["rejudge_min_p"]   # judged again: what the first look believes
@@ -272,8 +281,10 @@ def test_the_second_look_moves_a_believed_box_again_by_rejudge_move(tmp_path):
     p0, _ = vo.forward(params, vo.standardise(vo.crop_boxes(gray, groups[:, :4], vo.crop_margin(params))),
                        geometry_features(groups[:, :4], n, horizon, half["camera"]["height_m"]), box=True)
     believed = p0 >= half["cascade"]["rejudge_min_p"]
-    again, _ = _refined_as_core(first[:, :4], d)
-    want = np.where(believed[:, None], first[:, :4] + 0.5 * (again - first[:, :4]), first[:, :4])
+    again = vo.refine(first[:, :4], d)   # the second look's output as it is (the core cuts after the damped step)
+    flat = (again[:, 2] - again[:, 0] < 1) | (again[:, 3] - again[:, 1] < 1)
+    again[flat] = first[flat, :4]
+    want = _cut(np.where(believed[:, None], first[:, :4] + 0.5 * (again - first[:, :4]), first[:, :4]), gray.shape)
     assert np.abs(second[:, :4] - want).max() < 0.05   # px
     assert np.abs(second[believed, :4] - first[believed, :4]).max() > 2   # it does move them
     assert np.array_equal(second[~believed, :4], first[~believed, :4])
@@ -307,10 +318,10 @@ def test_a_mirrored_verifier_averages_the_crop_and_its_mirror_image(tmp_path):
     pm, dm = vo.forward(params, np.ascontiguousarray(z[..., ::-1]), extra, box=True)
     mean_d = 0.5 * np.stack([d[:, 0] - dm[:, 2], d[:, 1] + dm[:, 1], d[:, 2] - dm[:, 0], d[:, 3] + dm[:, 3]], 1)
     assert np.abs(0.5 * (p + pm) - core[:, 4]).max() < 1e-3
-    moved, flat = _refined_as_core(boxes, mean_d)
+    moved, flat = _refined_as_core(boxes, mean_d, gray.shape)
     assert np.abs(moved - core[:, :4]).max() < 0.05   # px
     assert (~flat & (np.abs(moved - boxes).max(1) > 2)).sum() >= 5   # it does move them
-    assert np.abs(vo.refine(boxes, d) - moved)[~flat].max() > 2   # the mirror image changes the answer (px)
+    assert np.abs(_cut(vo.refine(boxes, d), gray.shape) - moved)[~flat].max() > 2   # the mirror changes the answer (px)
 
 
 def test_only_the_believed_crops_are_mirrored_and_the_high_scores_are_the_same():

@@ -58,7 +58,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     std::vector<cv::Rect> rects;
     std::vector<int> levels;
     std::vector<double> weights;
-    cv::Mat band;
+    cv::Mat band, padded;
     int nscales = 0;  // window sizes that produced windows so far
     for (double f = 1.0; win_.height * f <= max_h; f *= p_.scale_factor) {
         const double hs = win_.height * f, ws = win_.width * f;
@@ -79,10 +79,15 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             if (yb1 < prior.y_bottom || prior.left(y) > prior.right(y)) continue;
             xl = prior.left(y); xr = prior.right(y);
         }
-        const int x0 = std::max(0, int(xl - ws / 2)), x1 = std::min(gray.cols, int(xr + ws / 2) + 1);
+        const int beyond = int(p_.border_frac * ws);  // px a window may reach past the left or right border
+        const int x0 = std::max(-beyond, int(xl - ws / 2)), x1 = std::min(gray.cols + beyond, int(xr + ws / 2) + 1);
         const int y0 = std::max(0, int(yb0 - hs)), y1 = std::min(gray.rows, int(std::ceil(yb1)) + 1);
         if (x1 - x0 < ws + 1 || y1 - y0 < hs + 1) continue;
-        const cv::Mat roi = gray(cv::Rect(x0, y0, x1 - x0, y1 - y0));
+        const int in0 = std::max(x0, 0), in1 = std::min(x1, gray.cols);
+        if (in1 - in0 < 2) continue;
+        cv::Mat roi = gray(cv::Rect(in0, y0, in1 - in0, y1 - y0));
+        if (in0 > x0 || in1 < x1)  // the band reaches past a border: black there
+            cv::copyMakeBorder(roi, padded, 0, 0, in0 - x0, x1 - in1, cv::BORDER_CONSTANT, cv::Scalar(0)), roi = padded;
         const cv::Size sz(int(std::lround(roi.cols / f)), int(std::lround(roi.rows / f)));
         if (sz.width <= win_.width || sz.height <= win_.height) continue;
         if (f > 1.0) cv::resize(roi, band, sz, 0, 0, cv::INTER_LINEAR);
@@ -118,6 +123,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     std::vector<char> used(raw.size(), 0);
     std::vector<int> members;
     std::vector<CascadeDetection> out;
+    const cv::Rect2f image(0.f, 0.f, float(gray.cols), float(gray.rows));
     for (size_t i = 0; i < raw.size(); ++i) {
         if (used[i]) continue;
         const cv::Rect2f &seed = raw[i].box;
@@ -141,7 +147,8 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         }
         if (n < p_.min_neighbors) continue;
         CascadeDetection d;
-        d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n));
+        // a group reaching past a border (border_frac) is the vehicle's part in the image, as annotations box it
+        d.box = cv::Rect2f(float(l / n), float(t / n), float((r - l) / n), float((b - t) / n)) & image;
         d.neighbors = n;
         d.stage_sum = raw[i].weight;
         d.confidence = float(n / (n + p_.neighbors_half));
@@ -166,6 +173,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         const bool refine = p_.refine_boxes && verifier->has_box_output();
         std::vector<float> p = refine ? verifier->judge(gray, boxes, ns, cam.horizon_row(), hc)
                                       : verifier->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
+        for (auto &b : boxes) b &= image;  // moved past a border: the part in the image, judged again below
         if (refine && p_.rejudge_refined) {
             // only what the first look believes: the second can only lower a probability (min of the two)
             std::vector<cv::Rect2f> second;
@@ -194,6 +202,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                 }
             }
         }
+        for (auto &b : boxes) b &= image;
         const bool report_placed = single_image || p_.refine_tracked;
         for (size_t k = 0; k < judged.size(); ++k) {
             out[judged[k]].confidence = p[k];
