@@ -13,10 +13,10 @@ from app.detect_images import DEFAULT_DETECTOR, OPERATING_POINT
 from tests.conftest import data_path
 from tests.test_cli import headway
 
-# Measured on the 600 validation images with the shipped models (docs/cascade.md): fused at score >= 0.94 recall
-# 0.679, precision 0.869 (cascade at 0.93: 0.676, 0.874). Floors that catch a regression of the models or of the
-# operating point.
-FUSED_AT_OPERATING_POINT = {"recall": 0.70, "precision": 0.85}
+# Measured on the 600 validation images with the shipped models (docs/cascade.md); floors that catch a regression
+# of the models or of the operating point. Session 12 (windows reaching past the image's border, the verifier trained on their groups): fused at 0.89
+# recall 0.761, precision 0.894 (cascade at 0.87: 0.766, 0.897).
+FUSED_AT_OPERATING_POINT = {"recall": 0.74, "precision": 0.85}
 
 
 def test_detect_writes_only_detections_at_the_operating_point(tmp_path):
@@ -64,8 +64,9 @@ def test_fused_at_its_operating_point_keeps_what_the_docs_say(fused_scores):
 
 
 @pytest.mark.xfail(strict=True, reason="issue 12's fused bar (recall >= 0.80 at precision >= 0.85) is not reached: "
-                                       "0.727 at 0.873 at the operating point (session 11), 0.735 at 0.850 at best; "
-                                       "every detection kept holds 0.84 of the vehicles (docs/RESULTS.md)")
+                                       "0.761 at 0.894 at the operating point (session 12), 0.789 at 0.854 at best "
+                                       "on the evaluation's curve (0.792 on a finer one); every detection kept holds "
+                                       "0.87 of the vehicles (docs/RESULTS.md)")
 def test_fused_meets_the_issue_bar(fused_scores):
     best = fused_scores["best_at_precision_0.85"]
     assert best is not None and best["recall"] >= 0.80
