@@ -243,7 +243,7 @@ SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.
 SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.onnx"
 SHIPPED_HOG_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml.gz"
 # Session 5's CNN (8/16/32 channels), the single-image verifier until session 11: ~16 ms less per 1280x720 image; not
-# trained on the groups past the image's border, 0.06 less recall at precision 0.85 on held-out training images
+# trained on the groups past the image's border, 0.095 less recall at precision 0.85 on held-out training images
 # since the border scan (cascade.verifier: its path; docs/cascade.md, sessions 11-12).
 SHIPPED_SMALL_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier_small.onnx"
 # The verifier of a tracked pipeline: session 3's CNN, on which the trackers were tuned (cascade.tracked_verifier;

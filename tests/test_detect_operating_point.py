@@ -14,9 +14,9 @@ from tests.conftest import data_path
 from tests.test_cli import headway
 
 # Measured on the 600 validation images with the shipped models (docs/cascade.md); floors that catch a regression
-# of the models or of the operating point. Session 12 (windows reaching past the image's border, the verifier trained on their groups): fused at 0.89
-# recall 0.761, precision 0.894 (cascade at 0.87: 0.766, 0.897).
-FUSED_AT_OPERATING_POINT = {"recall": 0.74, "precision": 0.85}
+# of the models or of the operating point. Session 12 (windows reaching past the image's border, the verifier trained
+# on their groups for 8 epochs): fused at 0.79 recall 0.806, precision 0.881 (cascade at 0.77: 0.808, 0.890).
+FUSED_AT_OPERATING_POINT = {"recall": 0.78, "precision": 0.85}
 
 
 def test_detect_writes_only_detections_at_the_operating_point(tmp_path):
@@ -63,10 +63,11 @@ def test_fused_at_its_operating_point_keeps_what_the_docs_say(fused_scores):
     assert op["recall"] >= FUSED_AT_OPERATING_POINT["recall"] and op["precision"] >= FUSED_AT_OPERATING_POINT["precision"]
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12's fused bar (recall >= 0.80 at precision >= 0.85) is not reached: "
-                                       "0.761 at 0.894 at the operating point (session 12), 0.789 at 0.854 at best "
-                                       "on the evaluation's curve (0.792 on a finer one); every detection kept holds "
-                                       "0.87 of the vehicles (docs/RESULTS.md)")
 def test_fused_meets_the_issue_bar(fused_scores):
+    """Issue 12's bar for `headway detect`: recall >= 0.80 at precision >= 0.85 (boxes >= 40 px), on the curve and at
+    the operating point it writes by (chosen on held-out training images). Session 12, the 8-epoch verifier: 0.812 at
+    0.867 on the evaluation's curve, 0.806 at 0.881 at the operating point 0.79."""
+    op = fused_scores["operating_point"]
+    assert op["recall"] >= 0.80 and op["precision"] >= 0.85, op
     best = fused_scores["best_at_precision_0.85"]
     assert best is not None and best["recall"] >= 0.80
