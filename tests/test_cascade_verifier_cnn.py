@@ -39,13 +39,13 @@ def _cut(boxes, shape):
     return b
 
 
-def _refined_as_core(boxes, d, shape):
+def _refined_as_core(boxes, d, shape=None):
     """vo.refine with the core's rules: a box the output would turn inside out keeps its own (CnnVerifier::judge),
-    and the moved box is cut to the image of `shape` (cascade_detector.cpp)."""
+    and the moved box is cut to the image of `shape` (cascade_detector.cpp; None: not cut)."""
     moved = vo.refine(boxes, d)
     flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
     moved[flat] = np.asarray(boxes, float)[flat]
-    return _cut(moved, shape), flat
+    return (moved if shape is None else _cut(moved, shape)), flat
 
 
 def _bars(rng, n):
@@ -281,9 +281,7 @@ def test_the_second_look_moves_a_believed_box_again_by_rejudge_move(tmp_path):
     p0, _ = vo.forward(params, vo.standardise(vo.crop_boxes(gray, groups[:, :4], vo.crop_margin(params))),
                        geometry_features(groups[:, :4], n, horizon, half["camera"]["height_m"]), box=True)
     believed = p0 >= half["cascade"]["rejudge_min_p"]
-    again = vo.refine(first[:, :4], d)   # the second look's output as it is (the core cuts after the damped step)
-    flat = (again[:, 2] - again[:, 0] < 1) | (again[:, 3] - again[:, 1] < 1)
-    again[flat] = first[flat, :4]
+    again, _ = _refined_as_core(first[:, :4], d)   # not cut: the core cuts after the damped step
     want = _cut(np.where(believed[:, None], first[:, :4] + 0.5 * (again - first[:, :4]), first[:, :4]), gray.shape)
     assert np.abs(second[:, :4] - want).max() < 0.05   # px
     assert np.abs(second[believed, :4] - first[believed, :4]).max() > 2   # it does move them

@@ -173,7 +173,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         const bool refine = p_.refine_boxes && verifier->has_box_output();
         std::vector<float> p = refine ? verifier->judge(gray, boxes, ns, cam.horizon_row(), hc)
                                       : verifier->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
-        for (auto &b : boxes) b &= image;  // moved past a border: the part in the image, judged again below
+        for (auto &b : boxes) b &= image;  // moved past a border: the part in the image (judged, if again, there)
         if (refine && p_.rejudge_refined) {
             // only what the first look believes: the second can only lower a probability (min of the two)
             std::vector<cv::Rect2f> second;
@@ -198,11 +198,11 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                     p[which[j]] = std::min(p[which[j]], again[j]);
                     const cv::Rect2f &a = second[j], &b = moved[j];
                     boxes[which[j]] = cv::Rect2f(a.x + s * (b.x - a.x), a.y + s * (b.y - a.y),
-                                                 a.width + s * (b.width - a.width), a.height + s * (b.height - a.height));
+                                                 a.width + s * (b.width - a.width), a.height + s * (b.height - a.height)) &
+                                      image;
                 }
             }
         }
-        for (auto &b : boxes) b &= image;
         const bool report_placed = single_image || p_.refine_tracked;
         for (size_t k = 0; k < judged.size(); ++k) {
             out[judged[k]].confidence = p[k];
