@@ -105,7 +105,7 @@ def _cmd_train(args) -> int:
                 verifier_cnn.train(args.data, args.cascade, args.out, cfg, every=args.every or 1, channels=channels,
                                    hidden=args.hidden, epochs=args.epochs or 6, decay=args.decay, seed=args.seed,
                                    cache=args.cache, compare_hog=args.compare_hog, log=log, box=not args.no_box,
-                                   near=args.near, margin=args.margin)
+                                   near=args.near, margin=args.margin, neg_share=args.neg_share)
             finally:
                 log.close()
             return 0
@@ -293,6 +293,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--margin", type=float, default=0.1,
                    help="CNN: of the box's size added each side of its crop (default 0.1; the core crops a network "
                         "with a box output with BOX_MARGIN, verifier_onnx.py)")
+    t.add_argument("--neg-share", type=float, default=1.0,
+                   help="CNN: share of the plain others (IoU < 0.3, ~90 %% of the samples) each epoch sees, drawn "
+                        "afresh and weighted up so the loss is the same; 1 = all (default); 0.3 makes an epoch "
+                        "~2.6x faster (docs/cascade.md, 'Session 13')")
     t.add_argument("--decay", type=float, default=1e-4, help="L2 weight decay (default 1e-4)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")

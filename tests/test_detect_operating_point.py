@@ -14,8 +14,9 @@ from tests.conftest import data_path
 from tests.test_cli import headway
 
 # Measured on the 600 validation images with the shipped models (docs/cascade.md); floors that catch a regression
-# of the models or of the operating point. Session 12 (windows reaching past the image's border, the verifier trained
-# on their groups for 8 epochs): fused at 0.79 recall 0.806, precision 0.881 (cascade at 0.77: 0.808, 0.890).
+# of the models or of the operating point. Session 13 (windows reaching past the image's border, the verifier trained
+# on their groups, 8 epochs each seeing 0.3 of the plain others): fused at 0.79 recall 0.806, precision 0.880
+# (cascade at 0.77: 0.810, 0.888).
 FUSED_AT_OPERATING_POINT = {"recall": 0.78, "precision": 0.85}
 
 
@@ -65,8 +66,8 @@ def test_fused_at_its_operating_point_keeps_what_the_docs_say(fused_scores):
 
 def test_fused_meets_the_issue_bar(fused_scores):
     """Issue 12's bar for `headway detect`: recall >= 0.80 at precision >= 0.85 (boxes >= 40 px), on the curve and at
-    the operating point it writes by (chosen on held-out training images). Session 12, the 8-epoch verifier: 0.812 at
-    0.867 on the evaluation's curve, 0.806 at 0.881 at the operating point 0.79."""
+    the operating point it writes by (chosen on held-out training images). Session 13's verifier: 0.819 at 0.855 on
+    the evaluation's curve, 0.806 at 0.880 at the operating point 0.79 (session 12's: 0.812 at 0.867, 0.806 at 0.881)."""
     op = fused_scores["operating_point"]
     assert op["recall"] >= 0.80 and op["precision"] >= 0.85, op
     best = fused_scores["best_at_precision_0.85"]

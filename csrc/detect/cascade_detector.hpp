@@ -75,7 +75,7 @@ struct CascadeParams {
               "cv::dnn (`headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
               "through a one-hidden-layer network; empty = the "
               "model shipped with Headway (app/models/vehicle_verifier.onnx, a CNN of 16/32/64 channels trained in "
-              "session 12 on the groups of the scan past the image's border; app/models/vehicle_verifier_small.onnx is "
+              "session 13 on the groups of the scan past the image's border; app/models/vehicle_verifier_small.onnx is "
               "session 5's of 8/16/32, ~16 ms less per 1280x720 image and 0.095 less recall at precision 0.85 on "
               "held-out training images (0.03-0.04 on the validation split before the border scan); the HOG one is "
               "app/models/vehicle_verifier.yml.gz; recipes in docs/cascade.md); off = "
