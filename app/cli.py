@@ -296,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--neg-share", type=float, default=1.0,
                    help="CNN: share of the plain others (IoU < 0.3, ~90 %% of the samples) each epoch sees, drawn "
                         "afresh and weighted up so the loss is the same; 1 = all (default); 0.3 makes an epoch "
-                        "~2.6x faster (docs/cascade.md, 'Session 13')")
+                        "~2.4x faster (docs/cascade.md, 'Session 13')")
     t.add_argument("--decay", type=float, default=1e-4, help="L2 weight decay (default 1e-4)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")
