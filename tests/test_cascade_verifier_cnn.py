@@ -281,6 +281,67 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     assert np.allclose(margin, 0.2)
 
 
+@pytest.mark.parametrize("model", ["vehicle_verifier", "vehicle_verifier_tracked", "vehicle_verifier_small"])
+def test_the_own_forward_pass_gives_cv_dnns_answers(model):
+    """The core runs a verifier network by its own forward pass (csrc/detect/verifier_net.cpp), unless
+    `cascade.verifier_dnn`: on every cascade group of a validation image, with the mirror images and the second look
+    as shipped, the probabilities are cv::dnn's within 1e-5 and the moved boxes within 1e-3 px. Not bit for bit:
+    its own order of summation, so this is not cv::dnn run twice."""
+    from app.eval.tusimple_boxes import tusimple_config
+
+    gray = _first_validation_image()
+    over = {"verifier": str(configuration.SHIPPED_VERIFIER.with_name(model + ".onnx")), "nms_iou": 1.0}
+    runs = []
+    for dnn in (False, True):
+        cfg = tusimple_config(configuration.load(None, {"cascade": {**over, "verifier_dnn": dnn}}))
+        with Pipeline(configuration.core_sections(cfg)) as pipe:
+            runs.append(pipe.stage_boxes("cascade", gray)[0])
+    own, dnn = runs
+    assert len(own) == len(dnn) > 40
+    assert np.abs(own[:, 4] - dnn[:, 4]).max() < 1e-5
+    assert np.abs(own[:, :4] - dnn[:, :4]).max() < 1e-3   # px
+    assert not np.array_equal(own, dnn)
+    assert dnn[:, 4].min() < 0.5 < dnn[:, 4].max()
+
+
+def test_a_network_the_own_forward_pass_cannot_take_runs_by_cv_dnn(tmp_path):
+    """The own forward pass takes channel counts in multiples of 8; a network trained with others (here 6/12/20
+    channels, 12 hidden units) is run by cv::dnn, with or without `cascade.verifier_dnn` the same answers, and they are
+    the trainer's."""
+    pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
+    from app.eval.tusimple_boxes import tusimple_config
+    from app.train.verifier import geometry_features
+
+    rng = np.random.default_rng(3)
+    c = (1, 6, 12, 20)
+    params = {}
+    for k in range(3):
+        params[f"conv{k}_w"] = rng.normal(0, np.sqrt(2 / (9 * c[k])), (c[k + 1], c[k], 3, 3)).astype(np.float32)
+        params[f"conv{k}_b"] = rng.normal(0, 0.1, c[k + 1]).astype(np.float32)
+    nflat = c[3] * (vo.CROP_H // 8) * (vo.CROP_W // 8)
+    params.update(dense_w=rng.normal(0, np.sqrt(2 / (nflat + 2)), (nflat + 2, 12)).astype(np.float32),
+                  dense_b=rng.normal(0, 0.1, 12).astype(np.float32), out_w=rng.normal(0, 1, 12).astype(np.float32),
+                  out_b=np.zeros(1, np.float32), extra_mean=np.float32([1.5, 2.0]), extra_scale=np.float32([1.0, 0.5]))
+    path = tmp_path / "odd.onnx"
+    vo.save_onnx(params, str(path))
+    gray = _first_validation_image()
+    over = {"verifier": str(path), "nms_iou": 1.0, "verify_mirrored": False}
+    out = []
+    for cascade in ({**over, "verifier_dnn": False}, {**over, "verifier_dnn": True}, {"verifier": "off", "nms_iou": 1.0}):
+        cfg = tusimple_config(configuration.load(None, {"cascade": cascade}))
+        with Pipeline(configuration.core_sections(cfg)) as pipe:
+            out.append(pipe.stage_boxes("cascade", gray))
+    (core, horizon), (dnn, _), (groups, _) = out
+    assert np.array_equal(core, dnn)
+    half = configuration.load(None)["cascade"]["neighbors_half"]
+    n = np.rint(half * groups[:, 4] / (1 - groups[:, 4]))
+    boxes = groups[:, :4].astype(float)
+    z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(params)))
+    extra = geometry_features(boxes, n, horizon, cfg["camera"]["height_m"])
+    assert len(core) == len(groups) > 40
+    assert np.abs(vo.forward(params, z, extra) - core[:, 4]).max() < 1e-3
+
+
 def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
     """`cascade.rejudge_refined` (default): each box the box output moved and the first look believes (p >=
     `rejudge_min_p`) is judged again on its new crop and keeps the lower of the two probabilities; the core's

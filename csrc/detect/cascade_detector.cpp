@@ -26,10 +26,10 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
         haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
         win_ = haar_->window();
     }
-    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p);
+    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
     tracked_same_ = p_.tracked_verifier == "same";
     if (!tracked_same_ && !p_.tracked_verifier.empty() && p_.tracked_verifier != "off")
-        tracked_ = make_vehicle_verifier(p_.tracked_verifier);
+        tracked_ = make_vehicle_verifier(p_.tracked_verifier, false, 0.0, p_.verifier_dnn);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }

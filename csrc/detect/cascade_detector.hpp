@@ -50,6 +50,7 @@ struct CascadeParams {
     double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
     bool opencv_scan = false;           // scan with cv::CascadeClassifier (the reference) instead of HaarCascade
+    bool verifier_dnn = false;          // the CNN verifiers run by cv::dnn (the reference) instead of their own forward pass
     int scan_lanes = 0;                 // windows HaarCascade evaluates at once: 0 = the widest the CPU has, 4, 8
     double group_iou = 0.45;            // raw windows overlapping the group's strongest this much join it
     int min_neighbors = 2;              // groups of fewer raw windows are dropped
@@ -71,8 +72,8 @@ struct CascadeParams {
               "path of the OpenCV cascade XML; empty = the model shipped with Headway "
               "(app/models/vehicle_cascade.xml, recipe in docs/cascade.md)");
         m.add("verifier", verifier, nullptr,
-              "path of the verifier judging every cascade detection: *.onnx = a small CNN on the box's crop run by "
-              "cv::dnn (`headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
+              "path of the verifier judging every cascade detection: *.onnx = a small CNN on the box's crop, read by "
+              "cv::dnn and run by its own forward pass (verifier_dnn; `headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
               "through a one-hidden-layer network; empty = the "
               "model shipped with Headway (app/models/vehicle_verifier.onnx, a CNN of 16/32/64 channels trained in "
               "session 13 on the groups of the scan past the image's border; app/models/vehicle_verifier_small.onnx is "
@@ -108,6 +109,13 @@ struct CascadeParams {
         m.add("opencv_scan", opencv_scan,
               "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
               "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
+        m.add("verifier_dnn", verifier_dnn,
+              "true = the CNN verifiers (verifier, tracked_verifier) are run by cv::dnn, the reference, instead of their "
+              "own forward pass (detect/verifier_net.hpp: the trainer's architecture in plain and AVX2 loops, compared "
+              "with cv::dnn when the file is loaded; answers within 1e-5 on real crops). The own pass measured side by "
+              "side with cv::dnn (docs/PERFORMANCE.md, session 14): the fused bench's cascade stage at 640x480 26.5 -> "
+              "15.8 ms median, `headway detect` 75 -> 46 ms CPU per 1280x720 JPEG. For tests and comparison; a network "
+              "of another form (channel counts not multiples of 8) is run by cv::dnn either way");
         m.add("group_iou", group_iou, 0.05, 0.95,
               "IoU; raw windows overlapping a group's strongest window at least this much belong to it; with the CNN "
               "verifier 0.65 (more, tighter groups judged) measured better at high precision (docs/cascade.md), but the "

@@ -16,10 +16,11 @@ float implied_vehicle_height(const cv::Rect2f &box, double horizon_row, double c
     return float(std::clamp(hv, 0.0, 10.0));
 }
 
-std::unique_ptr<VehicleVerifier> make_vehicle_verifier(const std::string &path, bool mirrored, double mirror_min_p) {
+std::unique_ptr<VehicleVerifier> make_vehicle_verifier(const std::string &path, bool mirrored, double mirror_min_p,
+                                                       bool dnn) {
     const std::string ext = ".onnx";
     if (path.size() > ext.size() && path.compare(path.size() - ext.size(), ext.size(), ext) == 0)
-        return std::make_unique<CnnVerifier>(path, mirrored, mirror_min_p);
+        return std::make_unique<CnnVerifier>(path, mirrored, mirror_min_p, dnn);
     return std::make_unique<HogVerifier>(path);
 }
 

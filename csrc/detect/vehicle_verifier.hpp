@@ -1,7 +1,7 @@
 // vehicle_verifier.hpp - the second learned stage: is a detected box a vehicle?
 //
 // Two kinds, chosen by the model file's name (make_vehicle_verifier):
-// - *.onnx: a small convolutional network on the box's crop, run by cv::dnn (vehicle_verifier_cnn.hpp);
+// - *.onnx: a small convolutional network on the box's crop (vehicle_verifier_cnn.hpp), by its own forward pass;
 // - otherwise (*.yml, *.yml.gz): HogVerifier below.
 // Both take, besides the image, log(1 + n) of the n raw cascade windows grouped and the vehicle height the
 // box implies on a flat road (implied_vehicle_height).
@@ -47,9 +47,10 @@ public:
 
 // The verifier the file holds (.onnx: CnnVerifier, else HogVerifier); throws std::invalid_argument naming it.
 // `mirrored`: a CnnVerifier also judges the mirror image of each crop it gives at least `mirror_min_p` and averages
-// the two (CnnVerifier); a HogVerifier judges the crop as it is.
+// the two (CnnVerifier); a HogVerifier judges the crop as it is. `dnn`: a CnnVerifier's network is run by cv::dnn
+// rather than its own forward pass (verifier_net.hpp).
 std::unique_ptr<VehicleVerifier> make_vehicle_verifier(const std::string &path, bool mirrored = false,
-                                                       double mirror_min_p = 0.0);
+                                                       double mirror_min_p = 0.0, bool dnn = false);
 
 class HogVerifier : public VehicleVerifier {
 public:

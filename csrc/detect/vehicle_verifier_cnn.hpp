@@ -1,4 +1,9 @@
-// vehicle_verifier_cnn.hpp - the convolutional verifier: a small CNN on each detection's crop, run by cv::dnn.
+// vehicle_verifier_cnn.hpp - the convolutional verifier: a small CNN on each detection's crop.
+//
+// cv::dnn reads the file; the network then runs by its own forward pass (verifier_net.hpp: the trainer's one
+// architecture, 2-3x faster on these small layers) once that agrees with cv::dnn on probe crops when the file is
+// loaded (a disagreement is an error, never a silent answer), and by cv::dnn for a graph of another form or with
+// cascade.verifier_dnn.
 //
 // Trained by `headway train verifier --out X.onnx` (app/train/verifier_cnn.py, JAX) and written as ONNX
 // (app/train/verifier_onnx.py, which also holds the network's equations). Its inputs, computed here exactly
@@ -23,6 +28,7 @@
 #pragma once
 
 #include "detect/vehicle_verifier.hpp"
+#include "detect/verifier_net.hpp"
 
 #include <opencv2/dnn.hpp>
 
@@ -36,7 +42,8 @@ public:
                                             // with the box output carry their own: output "margin")
 
     // throws std::invalid_argument naming the file
-    explicit CnnVerifier(const std::string &path, bool mirrored = false, double mirror_min_p = 0.0);
+    // `dnn`: cv::dnn runs the network (the reference) even where the own forward pass (verifier_net.hpp) could
+    explicit CnnVerifier(const std::string &path, bool mirrored = false, double mirror_min_p = 0.0, bool dnn = false);
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                      const std::vector<int> &neighbors, double horizon_row,
                                      double cam_height_m) const override;
@@ -46,6 +53,8 @@ public:
     // The standardised crop of one box (kCropH x kCropW, float) widened by `margin` each side, as the network takes it;
     // with the image's integral (CV_32S) a crop inside the image and larger than kCropW x kCropH is averaged from it.
     static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box, double margin, const cv::Mat *integral = nullptr);
+    // true when the network runs by its own forward pass (verifier_net.hpp) rather than cv::dnn
+    bool own_forward() const { return own_ != nullptr; }
 
 private:
     // p (n) and, with the box output, offsets (n x 4 float) for the boxes; `offsets` left empty without one
@@ -57,6 +66,14 @@ private:
                const std::vector<int> &which, const cv::Mat *plain, double horizon_row, double cam_height_m, float *p,
                cv::Mat *offsets, cv::Mat *crops_out) const;
 
+    // the crops (n, 1, kCropH, kCropW) and extra features (n x 2) through the network: p[n], offsets (n x 4, allocated)
+    // with the box output; by the own forward pass unless `dnn` or there is none
+    void forward(const cv::Mat &crops, const cv::Mat &extra, float *p, cv::Mat *offsets, bool dnn = false) const;
+    // the largest difference between the own forward pass (plain and, where the CPU has it, AVX2) and cv::dnn on a few
+    // random crops, over the probabilities and the box offsets
+    double own_disagreement() const;
+
+    std::unique_ptr<VerifierNet> own_;  // null: cv::dnn runs the network
     mutable cv::dnn::Net net_;  // forward() is not const; one verifier serves one pipeline thread
     bool has_box_ = false;      // the file has the box output ("box", N x 4)
     bool mirrored_ = false;     // crops the plain look believes judged with their mirror image, answers averaged
