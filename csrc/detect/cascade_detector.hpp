@@ -111,11 +111,12 @@ struct CascadeParams {
               "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
         m.add("verifier_dnn", verifier_dnn,
               "true = the CNN verifiers (verifier, tracked_verifier) are run by cv::dnn, the reference, instead of their "
-              "own forward pass (detect/verifier_net.hpp: the trainer's architecture in plain and AVX2 loops, compared "
-              "with cv::dnn when the file is loaded; answers within 1e-5 on real crops). The own pass measured side by "
-              "side with cv::dnn (docs/PERFORMANCE.md, session 14): the fused bench's cascade stage at 640x480 26.5 -> "
-              "15.8 ms median, `headway detect` 75 -> 46 ms CPU per 1280x720 JPEG. For tests and comparison; a network "
-              "of another form (channel counts not multiples of 8) is run by cv::dnn either way");
+              "own forward pass (detect/verifier_net.hpp: the trainer's architecture in AVX2 loops with Winograd "
+              "convolutions, plain loops without AVX2, compared with cv::dnn when the file is loaded; answers within 1e-5 "
+              "on real crops). Measured side by side with cv::dnn (docs/PERFORMANCE.md, session 14): the fused bench's "
+              "cascade stage at 640x480 35.0 -> 18.6 ms median, `headway detect` 88 -> 43 ms CPU per 1280x720 JPEG. For "
+              "tests and comparison; a network of another form (channel counts not multiples of 8) is run by cv::dnn "
+              "either way");
         m.add("group_iou", group_iou, 0.05, 0.95,
               "IoU; raw windows overlapping a group's strongest window at least this much belong to it; with the CNN "
               "verifier 0.65 (more, tighter groups judged) measured better at high precision (docs/cascade.md), but the "

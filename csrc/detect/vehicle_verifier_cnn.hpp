@@ -1,7 +1,7 @@
 // vehicle_verifier_cnn.hpp - the convolutional verifier: a small CNN on each detection's crop.
 //
 // cv::dnn reads the file; the network then runs by its own forward pass (verifier_net.hpp: the trainer's one
-// architecture, 2-3x faster on these small layers) once that agrees with cv::dnn on probe crops when the file is
+// architecture, 3.5-5x faster on these small layers) once that agrees with cv::dnn on probe crops when the file is
 // loaded (a disagreement is an error, never a silent answer), and by cv::dnn for a graph of another form or with
 // cascade.verifier_dnn.
 //

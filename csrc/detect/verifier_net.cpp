@@ -48,40 +48,40 @@ void conv_row_plain(const float *in, int inw, int W, int cin, const float *w, in
     }
 }
 
-// 16 output channels from channel co for six output pixels x .. x + 5: twelve accumulators (enough in flight for two FMA
-// ports of 4-5 cycles' latency), each weight vector loaded once for the six pixels. Named variables, not an array:
-// GCC 12 keeps an array of __m256 on the stack and stores it every step.
-__attribute__((target("avx2,fma"))) inline void conv_block6x16(const float *in, int inw, int x, int cin, const float *w,
-                                                                int cout, int co, float *row) {
+// C (6 rows x 16 columns, row stride ldc) = sum over `segments` of A_s (6 rows, `astride` apart, k values each) x B_s
+// (k rows, ldb apart), A_s and B_s each segment `aseg` and `bseg` floats further on: twelve accumulators (enough in
+// flight for two FMA ports of 4-5 cycles' latency), each B vector loaded once for the six rows. A convolution row is
+// this with the kernel's 3 rows as segments (rows of A: output pixels, cin apart; k: 3 columns x cin channels), a
+// Winograd position one segment. Named variables, not an array: GCC 12 keeps an array of __m256 on the stack and
+// stores it every step.
+__attribute__((target("avx2,fma"))) inline void mac6x16(const float *a, int astride, int k, int segments, size_t aseg,
+                                                         const float *b, int ldb, size_t bseg, float *c, int ldc) {
     __m256 a0 = _mm256_setzero_ps(), a1 = a0, a2 = a0, a3 = a0, a4 = a0, a5 = a0;
     __m256 b0 = a0, b1 = a0, b2 = a0, b3 = a0, b4 = a0, b5 = a0;
-    const int taps = 3 * cin;
-    for (int ky = 0; ky < 3; ++ky) {
-        const float *ip = in + (size_t(ky) * inw + x) * cin;
-        const float *wp = w + size_t(ky) * taps * cout + co;
-        for (int j = 0; j < taps; ++j, wp += cout) {  // pixel p's tap j lies p * cin floats after pixel 0's
+    for (int sg = 0; sg < segments; ++sg) {
+        const float *ip = a + sg * aseg, *wp = b + sg * bseg;
+        for (int j = 0; j < k; ++j, wp += ldb) {
             const __m256 w0 = _mm256_loadu_ps(wp), w1 = _mm256_loadu_ps(wp + 8);
             __m256 v = _mm256_broadcast_ss(ip + j);
             a0 = _mm256_fmadd_ps(v, w0, a0); b0 = _mm256_fmadd_ps(v, w1, b0);
-            v = _mm256_broadcast_ss(ip + j + cin);
+            v = _mm256_broadcast_ss(ip + j + astride);
             a1 = _mm256_fmadd_ps(v, w0, a1); b1 = _mm256_fmadd_ps(v, w1, b1);
-            v = _mm256_broadcast_ss(ip + j + 2 * cin);
+            v = _mm256_broadcast_ss(ip + j + 2 * astride);
             a2 = _mm256_fmadd_ps(v, w0, a2); b2 = _mm256_fmadd_ps(v, w1, b2);
-            v = _mm256_broadcast_ss(ip + j + 3 * cin);
+            v = _mm256_broadcast_ss(ip + j + 3 * astride);
             a3 = _mm256_fmadd_ps(v, w0, a3); b3 = _mm256_fmadd_ps(v, w1, b3);
-            v = _mm256_broadcast_ss(ip + j + 4 * cin);
+            v = _mm256_broadcast_ss(ip + j + 4 * astride);
             a4 = _mm256_fmadd_ps(v, w0, a4); b4 = _mm256_fmadd_ps(v, w1, b4);
-            v = _mm256_broadcast_ss(ip + j + 5 * cin);
+            v = _mm256_broadcast_ss(ip + j + 5 * astride);
             a5 = _mm256_fmadd_ps(v, w0, a5); b5 = _mm256_fmadd_ps(v, w1, b5);
         }
     }
-    float *o = row + size_t(x) * cout + co;
-    _mm256_storeu_ps(o, a0); _mm256_storeu_ps(o + 8, b0); o += cout;
-    _mm256_storeu_ps(o, a1); _mm256_storeu_ps(o + 8, b1); o += cout;
-    _mm256_storeu_ps(o, a2); _mm256_storeu_ps(o + 8, b2); o += cout;
-    _mm256_storeu_ps(o, a3); _mm256_storeu_ps(o + 8, b3); o += cout;
-    _mm256_storeu_ps(o, a4); _mm256_storeu_ps(o + 8, b4); o += cout;
-    _mm256_storeu_ps(o, a5); _mm256_storeu_ps(o + 8, b5);
+    _mm256_storeu_ps(c, a0); _mm256_storeu_ps(c + 8, b0); c += ldc;
+    _mm256_storeu_ps(c, a1); _mm256_storeu_ps(c + 8, b1); c += ldc;
+    _mm256_storeu_ps(c, a2); _mm256_storeu_ps(c + 8, b2); c += ldc;
+    _mm256_storeu_ps(c, a3); _mm256_storeu_ps(c + 8, b3); c += ldc;
+    _mm256_storeu_ps(c, a4); _mm256_storeu_ps(c + 8, b4); c += ldc;
+    _mm256_storeu_ps(c, a5); _mm256_storeu_ps(c + 8, b5);
 }
 
 // 8 output channels from channel co for six output pixels (a channel count that is an odd multiple of 8)
@@ -115,9 +115,77 @@ __attribute__((target("avx2,fma"))) void conv_row_avx2(const float *in, int inw,
                                                         int cout, float *row) {
     // W is a multiple of 6 (the crop's width a multiple of 24, from_dnn)
     for (int co = 0; co + 16 <= cout; co += 16)
-        for (int x = 0; x < W; x += 6) conv_block6x16(in, inw, x, cin, w, cout, co, row);
+        for (int x = 0; x < W; x += 6)
+            mac6x16(in + size_t(x) * cin, cin, 3 * cin, 3, size_t(inw) * cin, w + co, cout, size_t(3) * cin * cout,
+                    row + size_t(x) * cout + co, cout);
     if (cout % 16)
         for (int x = 0; x < W; x += 6) conv_block6x8(in, inw, x, cin, w, cout, cout - 8, row);
+}
+
+// ---- Winograd F(2x2, 3x3) for the layers with 8 or more input channels (AVX2 path) ----
+// A 2x2 output tile from its 4x4 input tile d: Y = A^T [(G g G^T) .* (B^T d B)] A, summed over the input channels, with
+//     B^T = [1 0 -1 0; 0 1 1 0; 0 -1 1 0; 0 1 0 -1],  G = [1 0 0; .5 .5 .5; .5 -.5 .5; 0 0 1],  A^T = [1 1 1 0; 0 1 -1 -1]
+// (Lavin and Gray 2016): 16 multiplies per tile and channel pair instead of 36, 2.25x fewer; the transforms are adds.
+// The 2x2 output tile is one 2x2 pool window, so the pool is taken from the tile directly.
+
+// V (16 positions x tiles x cin) of one row of tiles: `in` at the tiles' top padded row, tiles x 2 columns apart
+__attribute__((target("avx2,fma"))) void winograd_input(const float *in, int inw, int tiles, int cin, float *V) {
+    const size_t pos_stride = size_t(tiles) * cin;
+    for (int t = 0; t < tiles; ++t)
+        for (int c = 0; c < cin; c += 8) {
+            __m256 d[4][4];
+            for (int r = 0; r < 4; ++r)
+                for (int q = 0; q < 4; ++q) d[r][q] = _mm256_loadu_ps(in + (size_t(r) * inw + 2 * t + q) * cin + c);
+            __m256 u[4][4];  // B^T d: along the rows
+            for (int q = 0; q < 4; ++q) {
+                u[0][q] = _mm256_sub_ps(d[0][q], d[2][q]);
+                u[1][q] = _mm256_add_ps(d[1][q], d[2][q]);
+                u[2][q] = _mm256_sub_ps(d[2][q], d[1][q]);
+                u[3][q] = _mm256_sub_ps(d[1][q], d[3][q]);
+            }
+            float *v = V + size_t(t) * cin + c;
+            for (int r = 0; r < 4; ++r) {  // (B^T d) B: along the columns
+                _mm256_storeu_ps(v + (4 * r + 0) * pos_stride, _mm256_sub_ps(u[r][0], u[r][2]));
+                _mm256_storeu_ps(v + (4 * r + 1) * pos_stride, _mm256_add_ps(u[r][1], u[r][2]));
+                _mm256_storeu_ps(v + (4 * r + 2) * pos_stride, _mm256_sub_ps(u[r][2], u[r][1]));
+                _mm256_storeu_ps(v + (4 * r + 3) * pos_stride, _mm256_sub_ps(u[r][1], u[r][3]));
+            }
+        }
+}
+
+// One row of pooled outputs (tiles x cout, written at `out`) from the padded input rows at `in`: U (16 x cin x cout,
+// cout a multiple of 16), tiles a multiple of 6; V and M scratch of 16 x tiles x cin and 16 x tiles x cout floats
+__attribute__((target("avx2,fma"))) void winograd_row_pool(const float *in, int inw, int tiles, int cin, const float *U,
+                                                            const float *bias, int cout, float *V, float *M, float *out) {
+    winograd_input(in, inw, tiles, cin, V);
+    for (int pos = 0; pos < 16; ++pos) {
+        const float *v = V + size_t(pos) * tiles * cin, *u = U + size_t(pos) * cin * cout;
+        float *m = M + size_t(pos) * tiles * cout;
+        for (int co = 0; co < cout; co += 16)
+            for (int t = 0; t < tiles; t += 6)
+                mac6x16(v + size_t(t) * cin, cin, cin, 1, 0, u + co, cout, 0, m + size_t(t) * cout + co, cout);
+    }
+    const size_t ps = size_t(tiles) * cout;
+    const __m256 zero = _mm256_setzero_ps();
+    for (int t = 0; t < tiles; ++t)
+        for (int co = 0; co < cout; co += 8) {
+            const float *m = M + size_t(t) * cout + co;
+            __m256 s[4][4];
+            for (int r = 0; r < 4; ++r)
+                for (int q = 0; q < 4; ++q) s[r][q] = _mm256_loadu_ps(m + (4 * r + q) * ps);
+            __m256 w[2][4];  // A^T M: along the rows
+            for (int q = 0; q < 4; ++q) {
+                w[0][q] = _mm256_add_ps(_mm256_add_ps(s[0][q], s[1][q]), s[2][q]);
+                w[1][q] = _mm256_sub_ps(_mm256_sub_ps(s[1][q], s[2][q]), s[3][q]);
+            }
+            __m256 mx = zero;
+            for (int r = 0; r < 2; ++r) {  // (A^T M) A: along the columns, and the pool's max of the four
+                const __m256 y0 = _mm256_add_ps(_mm256_add_ps(w[r][0], w[r][1]), w[r][2]);
+                const __m256 y1 = _mm256_sub_ps(_mm256_sub_ps(w[r][1], w[r][2]), w[r][3]);
+                mx = r == 0 ? _mm256_max_ps(y0, y1) : _mm256_max_ps(mx, _mm256_max_ps(y0, y1));
+            }
+            _mm256_storeu_ps(out + size_t(t) * cout + co, _mm256_max_ps(_mm256_add_ps(mx, _mm256_loadu_ps(bias + co)), zero));
+        }
 }
 
 // ---- h = relu(W x + b): hidden a multiple of 8 ----
@@ -171,6 +239,21 @@ std::unique_ptr<VerifierNet> VerifierNet::from_dnn(cv::dnn::Net &net, int crop_h
         for (int o = 0; o < cout; ++o)  // ONNX (cout, cin, ky, kx) -> (ky, kx, cin, cout)
             for (int i = 0; i < cin; ++i)
                 for (int t = 0; t < 9; ++t) c.w[(size_t(t) * cin + i) * cout + o] = w[(size_t(o) * cin + i) * 9 + t];
+        if (cin % 8 == 0 && cout % 16 == 0) {  // U = G g G^T of every channel pair, for winograd_row_pool
+            c.wino.assign(size_t(16) * cin * cout, 0.f);
+            static const double G[4][3] = {{1, 0, 0}, {0.5, 0.5, 0.5}, {0.5, -0.5, 0.5}, {0, 0, 1}};
+            for (int o = 0; o < cout; ++o)
+                for (int i = 0; i < cin; ++i) {
+                    const float *g = &w[(size_t(o) * cin + i) * 9];
+                    for (int r = 0; r < 4; ++r)
+                        for (int q = 0; q < 4; ++q) {
+                            double u = 0.0;
+                            for (int ky = 0; ky < 3; ++ky)
+                                for (int kx = 0; kx < 3; ++kx) u += G[r][ky] * g[ky * 3 + kx] * G[q][kx];
+                            c.wino[(size_t(4 * r + q) * cin + i) * cout + o] = float(u);
+                        }
+                }
+        }
         cin = cout;
     }
     const int h3 = crop_h / 8, w3 = crop_w / 8, c3 = cin, nflat = h3 * w3 * c3;
@@ -224,6 +307,12 @@ void VerifierNet::run(const float *crops, const float *extra, int n, float *p, f
         rowbuf = std::max(rowbuf, size_t(ws[k]) * conv_[k].cout);
     }
     std::vector<float> rows(2 * rowbuf);
+    size_t vlen = 0, mlen = 0;  // Winograd scratch: one row of tiles
+    for (int k = 0; k < 3; ++k) {
+        vlen = std::max(vlen, size_t(16) * ws[k + 1] * conv_[k].cin);
+        mlen = std::max(mlen, size_t(16) * ws[k + 1] * conv_[k].cout);
+    }
+    std::vector<float> V(vlen), M(mlen);
     const int nflat = hs[3] * ws[3] * conv_[2].cout;
     std::vector<float> flat(static_cast<size_t>(nflat + 2)), h(static_cast<size_t>(hidden_));
     for (int i = 0; i < n; ++i) {
@@ -233,6 +322,13 @@ void VerifierNet::run(const float *crops, const float *extra, int n, float *p, f
             const Conv &c = conv_[k];
             const int W = ws[k], inw = W + 2, ow = ws[k + 1] + 2;
             float *ra = rows.data(), *rb = rows.data() + rowbuf;
+            if (avx2 && !c.wino.empty() && ws[k + 1] % 6 == 0) {  // a tile row of 2 output rows = one pooled row
+                for (int py = 0; py < hs[k + 1]; ++py)
+                    winograd_row_pool(maps[k].data() + size_t(2 * py) * inw * c.cin, inw, ws[k + 1], c.cin, c.wino.data(),
+                                      c.b.data(), c.cout, V.data(), M.data(),
+                                      maps[k + 1].data() + (size_t(py + 1) * ow + 1) * c.cout);
+                continue;
+            }
             for (int py = 0; py < hs[k + 1]; ++py) {
                 const float *in = maps[k].data() + size_t(2 * py) * inw * c.cin;
                 if (avx2) {

@@ -7,9 +7,11 @@
 // 8-64 output channels, 48 x 32 maps) at a few GMAC/s: session 3's 8/16/32 network, ~1 M multiply-adds a crop, took
 // ~0.2 ms a crop, half of a tracked frame's cascade stage (docs/PERFORMANCE.md, session 13). Here each crop's maps
 // stay in the cache (a conv computes two rows, pools them and writes the next layer's padded input), and the output
-// channels are the SIMD lanes: four output pixels at a time, every input value broadcast once against 8 or 16 output
+// channels are the SIMD lanes: six output pixels at a time, every input value broadcast once against 8 or 16 output
 // channels' weights, with AVX2 + FMA where the CPU has them (runtime dispatch, as haar_cascade.cpp; the objects carry
-// no -march), plain loops elsewhere.
+// no -march), plain loops elsewhere. With AVX2 the layers of 8 or more input channels (the second and third, ~90 % of
+// the multiply-adds) are Winograd F(2x2, 3x3) convolutions: 2.25x fewer multiplies, and each 2x2 output tile is one
+// pool window (verifier_net.cpp).
 //
 // The arithmetic is float, as cv::dnn's, in another order of summation: answers agree to ~1e-6 (a test compares both
 // on real crops; the verifier compares both paths with cv::dnn when it loads the file and refuses the file, naming
@@ -43,6 +45,7 @@ private:
         int cin = 0, cout = 0;
         std::vector<float> w;  // [ky][kx][cin][cout]: the output channels contiguous (the SIMD lanes)
         std::vector<float> b;  // [cout]
+        std::vector<float> wino;  // [16][cin][cout]: G g G^T (Winograd F(2x2, 3x3)); empty unless cin % 8 and cout % 16 are 0
     };
     void run(const float *crops, const float *extra, int n, float *p, float *box, bool avx2) const;
 
