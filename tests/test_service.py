@@ -116,10 +116,18 @@ def test_ready_after_first_frames_and_watchdog_stops_when_core_stalls(service, t
     pings = [t for t, m in msgs if "WATCHDOG=1" in m]
     # pings every WATCHDOG_USEC/2 = 0.2 s while the core runs ...
     assert len(pings) >= 4
-    # ... and none once the core has stalled (3 s after start + stall_timeout 2 s, so from ~5 s on)
-    later = notifications(notify, 3.0)
-    assert not any("WATCHDOG=1" in m for _, m in later[-5:]), "watchdog kept pinging a stalled core"
-    assert any("core_stalled" in m for _, m in later if m.startswith("STATUS="))
+    # ... and none once the core has stalled (3 s after its start, seen after stall_timeout 2 s). The service's own
+    # start-up takes 1-3 s with the machine's load, so the stall is waited for (at most 12 s), not assumed by a clock
+    # (a fixed window failed once in a full suite on a slow machine)
+    def stalled(ms):
+        return any("core_stalled" in m for _, m in ms if m.startswith("STATUS="))
+
+    later, end = [], time.monotonic() + 12.0
+    while not stalled(later) and time.monotonic() < end:
+        later += notifications(notify, 0.25)
+    assert stalled(later), f"no core_stalled status: {later[-5:]}"
+    after = notifications(notify, 1.5)
+    assert after and not any("WATCHDOG=1" in m for _, m in after), "watchdog kept pinging a stalled core"
     writer.stop.set()
 
 
