@@ -178,13 +178,14 @@ __attribute__((target("avx2,fma"))) void winograd_row_pool(const float *in, int 
                 w[0][q] = _mm256_add_ps(_mm256_add_ps(s[0][q], s[1][q]), s[2][q]);
                 w[1][q] = _mm256_sub_ps(_mm256_sub_ps(s[1][q], s[2][q]), s[3][q]);
             }
-            __m256 mx = zero;
+            __m256 mx[2];
             for (int r = 0; r < 2; ++r) {  // (A^T M) A: along the columns, and the pool's max of the four
                 const __m256 y0 = _mm256_add_ps(_mm256_add_ps(w[r][0], w[r][1]), w[r][2]);
                 const __m256 y1 = _mm256_sub_ps(_mm256_sub_ps(w[r][1], w[r][2]), w[r][3]);
-                mx = r == 0 ? _mm256_max_ps(y0, y1) : _mm256_max_ps(mx, _mm256_max_ps(y0, y1));
+                mx[r] = _mm256_max_ps(y0, y1);
             }
-            _mm256_storeu_ps(out + size_t(t) * cout + co, _mm256_max_ps(_mm256_add_ps(mx, _mm256_loadu_ps(bias + co)), zero));
+            const __m256 pooled = _mm256_max_ps(mx[0], mx[1]);
+            _mm256_storeu_ps(out + size_t(t) * cout + co, _mm256_max_ps(_mm256_add_ps(pooled, _mm256_loadu_ps(bias + co)), zero));
         }
 }
 

@@ -37,7 +37,8 @@ public:
     // n standardised crops (n x crop_h x crop_w floats, one after the other) and their extra features (n x 2): the
     // probabilities p[n] and, when `box` is given and the network has the box output, its offsets (n x 4).
     void forward(const float *crops, const float *extra, int n, float *p, float *box) const;
-    // the same without AVX2 (the path of CPUs that lack it; tests compare the two)
+    // the same in plain loops, direct convolutions (the path of CPUs without AVX2; CnnVerifier's load check compares
+    // it with cv::dnn on every CPU)
     void forward_plain(const float *crops, const float *extra, int n, float *p, float *box) const;
 
 private:
