@@ -268,6 +268,7 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
     struct Cand { float r; int x, y; };
     std::vector<Cand> cand;
     float r_max = 0.f;
+    __m128 r_max4 = _mm_setzero_ps();  // four lanes of r_max, folded in after the rows
     const float k = float(p.harris_k);
     for (int y = y0 - 2; y <= y1 + 1; ++y) {
         // Ix^2, Iy^2, IxIy of row y where the mask of rows y-2 .. y+2 reaches, then their 3-sums along the row
@@ -301,31 +302,24 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
             const float *ya = hyy.ptr<float>(ra), *yb = hyy.ptr<float>(rb), *yc = hyy.ptr<float>(rc);
             const float *ca = hxy.ptr<float>(ra), *cb = hxy.ptr<float>(rb), *cc = hxy.ptr<float>(rc);
             float *o = resp.ptr<float>(rb);
-            const uint8_t *m = mask.ptr<uint8_t>(yr);
             for (const auto &run : rruns)
                 for (int x = run[0]; x < run[1]; ++x) {
                     const float sx = xa[x] + xb[x] + xc[x], sy = ya[x] + yb[x] + yc[x], sc = ca[x] + cb[x] + cc[x];
                     const float tr = sx + sy;
                     o[x] = sx * sy - sc * sc - k * tr * tr;
                 }
-            // the largest response on region pixels (the runs are region pixels), four at a time
-            __m128 mx = _mm_set1_ps(r_max);
+            // the largest response on region pixels (a row's runs are its region pixels), four at a time
             for (const auto &run : runs_of(yr)) {
                 const int x1 = std::min(run[1], W - 2);
                 int x = std::max(run[0], 2);
-                for (; x + 4 <= x1; x += 4) mx = _mm_max_ps(mx, _mm_loadu_ps(o + x));
-                for (; x < x1; ++x)
-                    if (m[x]) r_max = std::max(r_max, o[x]);
+                for (; x + 4 <= x1; x += 4) r_max4 = _mm_max_ps(r_max4, _mm_loadu_ps(o + x));
+                for (; x < x1; ++x) r_max = std::max(r_max, o[x]);
             }
-            alignas(16) float lanes[4];
-            _mm_store_ps(lanes, mx);
-            r_max = std::max({r_max, lanes[0], lanes[1], lanes[2], lanes[3]});
         }
         // 3x3 local maxima of row yn = y - 2 (ties broken toward the first), on region pixels
         const int yn = y - 2;
         if (yn < y0 || yn >= y1) continue;
         const float *a = resp.ptr<float>((yn + 2) % 3), *b = resp.ptr<float>((yn + 3) % 3), *c = resp.ptr<float>((yn + 4) % 3);
-        const uint8_t *m = mask.ptr<uint8_t>(yn);
         const __m128 zero = _mm_setzero_ps();
         for (const auto &run : runs_of(yn)) {
             const int x1 = std::min(run[1], W - 3);
@@ -346,11 +340,11 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
                 const int bits = _mm_movemask_ps(ok);
                 if (!bits) continue;
                 for (int i = 0; i < 4; ++i)
-                    if ((bits >> i & 1) && m[x + i]) cand.push_back({b[x + i], x + i, yn});
+                    if (bits >> i & 1) cand.push_back({b[x + i], x + i, yn});
             }
             for (; x < x1; ++x) {
                 const float v = b[x];
-                if (v <= 0.f || !m[x]) continue;
+                if (v <= 0.f) continue;
                 if (v < a[x - 1] || v < a[x] || v < a[x + 1] || v < b[x - 1] || v <= b[x + 1] || v <= c[x - 1] ||
                     v <= c[x] || v <= c[x + 1])
                     continue;
@@ -358,6 +352,9 @@ std::vector<cv::Point2f> harris_corners(const cv::Mat &gray, const cv::Mat &mask
             }
         }
     }
+    alignas(16) float lane_max[4];
+    _mm_store_ps(lane_max, r_max4);
+    r_max = std::max({r_max, lane_max[0], lane_max[1], lane_max[2], lane_max[3]});
     // Keep those above harris_quality of the strongest.
     const float thr = float(p.harris_quality) * r_max;
     cand.erase(std::remove_if(cand.begin(), cand.end(), [&](const Cand &c) { return c.r <= thr; }), cand.end());
