@@ -82,6 +82,24 @@ cv::Range lane_feature_rows(int height, float horizon_row, const CameraParams &c
     return cv::Range(y0, height);
 }
 
+namespace {
+
+// Runs [begin, end) of the 255 bytes of a 0/255 row (memchr scans the empty stretches fast).
+void row_runs(const uint8_t *m, int W, std::vector<cv::Vec2i> &runs) {
+    runs.clear();
+    int x = 0;
+    while (x < W) {
+        const void *b = std::memchr(m + x, 255, size_t(W - x));
+        if (!b) break;
+        const int start = int(static_cast<const uint8_t *>(b) - m);
+        const void *e = std::memchr(m + start, 0, size_t(W - start));
+        x = e ? int(static_cast<const uint8_t *>(e) - m) : W;
+        runs.push_back({start, x});
+    }
+}
+
+} // namespace
+
 // An AVX2 clone beside the baseline one (integer arithmetic: the same response).
 __attribute__((target_clones("avx2", "default")))
 void marking_response(const cv::Mat &gray, cv::Range rows, float horizon_row, const CameraParams &cam,
@@ -92,7 +110,8 @@ void marking_response(const cv::Mat &gray, cv::Range rows, float horizon_row, co
     binary.setTo(0);
     const int W = gray.cols;
     const int thr = int(std::ceil(p.response_min));
-    std::vector<uint8_t> on(size_t(W) + 1, 0);
+    std::vector<uint8_t> on(size_t(W), 0);
+    std::vector<cv::Vec2i> runs;
     for (int j = rows.start; j < rows.end; ++j) {
         // Marking width in px at this row: fx / Z * w_m with Z = fy h / (j - y_h).
         const double width = p.marking_width_m * std::max(0.0, cam.fx * (j - horizon_row) / (cam.fy * cam.height_m));
@@ -101,19 +120,15 @@ void marking_response(const cv::Mat &gray, cv::Range rows, float horizon_row, co
         const int min_run = std::max(1, int(std::lround(p.min_run_frac * width)));
         const uint8_t *x = gray.ptr<uint8_t>(j);
         uint8_t *y = binary.ptr<uint8_t>(j);
-        // eq. 1: y_i = 2 x_i - (x_{i-t} + x_{i+t}) - |x_{i-t} - x_{i+t}|, thresholded (a plain loop the
-        // compiler vectorises), then each run reduced to its centre.
+        // eq. 1: y_i = 2 x_i - (x_{i-t} + x_{i+t}) - |x_{i-t} - x_{i+t}|, thresholded to 0/255 (a plain loop
+        // the compiler vectorises), then each run reduced to its centre (row_runs skips the empty stretches).
         for (int i = t; i < W - t; ++i) {
             const int l = x[i - t], r = x[i + t];
-            on[i] = uint8_t(2 * x[i] - (l + r) - std::abs(l - r) >= thr);
+            on[i] = uint8_t(-int(2 * x[i] - (l + r) - std::abs(l - r) >= thr));
         }
-        on[W - t] = 0;
-        for (int i = t; i <= W - t;) {
-            if (!on[i]) { ++i; continue; }
-            const int start = i;
-            while (on[i]) ++i;
-            if (i - start >= min_run) y[(start + i - 1) / 2] = 255;
-        }
+        row_runs(on.data() + t, W - 2 * t, runs);
+        for (const auto &run : runs)
+            if (run[1] - run[0] >= min_run) y[t + (run[0] + run[1] - 1) / 2] = 255;
     }
 }
 
@@ -212,20 +227,6 @@ std::vector<MarkingSegment> marking_segments(const cv::Mat &binary, cv::Range ro
 }
 
 namespace {
-
-// Runs [begin, end) of the 255 bytes of a 0/255 row (memchr scans the empty stretches fast).
-void row_runs(const uint8_t *m, int W, std::vector<cv::Vec2i> &runs) {
-    runs.clear();
-    int x = 0;
-    while (x < W) {
-        const void *b = std::memchr(m + x, 255, size_t(W - x));
-        if (!b) break;
-        const int start = int(static_cast<const uint8_t *>(b) - m);
-        const void *e = std::memchr(m + start, 0, size_t(W - start));
-        x = e ? int(static_cast<const uint8_t *>(e) - m) : W;
-        runs.push_back({start, x});
-    }
-}
 
 // Union of the runs of rows [r0, r1) of `rows`, each widened by `pad` and clipped to [lo, hi).
 void union_runs(const std::vector<std::vector<cv::Vec2i>> &rows, int r0, int r1, int pad, int lo, int hi,
