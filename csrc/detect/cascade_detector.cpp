@@ -47,7 +47,9 @@ struct Raw {
 } // namespace
 
 std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const LaneModel &lanes,
-                                                      const CameraParams &cam, bool single_image) const {
+                                                      const CameraParams &cam, bool single_image, int slice,
+                                                      int slices) const {
+    CV_Assert(slices >= 1 && slice >= 0 && slice < slices);
     CV_Assert(gray.type() == CV_8UC1);
     const RoadPrior prior = make_road_prior(gray.size(), lanes, cam, p_.road);
     std::vector<Raw> raw;
@@ -58,8 +60,14 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     std::vector<cv::Rect> rects;
     std::vector<int> levels;
     std::vector<double> weights;
-    cv::Mat band, padded;
-    int nscales = 0;  // window sizes that produced windows so far
+    // Plan every window size's band first (rows where its bottom may lie, columns of the road area), then scan
+    // the sizes of this call's slice: all of them, or one block of `slices` (tracked_slices).
+    struct Band {
+        double f, ws, hs;
+        int x0, y0, x1, y1, in0, in1;
+        double windows;  // windows the band holds at step_px: what its scan costs
+    };
+    std::vector<Band> bands;
     for (double f = 1.0; win_.height * f <= max_h; f *= p_.scale_factor) {
         const double hs = win_.height * f, ws = win_.width * f;
         if (hs < p_.min_window_px) continue;
@@ -85,6 +93,40 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         if (x1 - x0 < ws + 1 || y1 - y0 < hs + 1) continue;
         const int in0 = std::max(x0, 0), in1 = std::min(x1, gray.cols);
         if (in1 - in0 < 2) continue;
+        const double step = p_.step_px * f;
+        bands.push_back({f, ws, hs, x0, y0, x1, y1, in0, in1,
+                         std::max(0.0, (x1 - x0 - ws) / step + 1) * std::max(0.0, (y1 - y0 - hs) / step + 1)});
+    }
+    size_t first = 0, last = bands.size();
+    if (slices > 1) {
+        // Contiguous blocks of sizes (a vehicle's sizes stay together: it is grouped and verified once) of about
+        // equal cost: a block closes where taking the next size would pass the remaining windows' fair share by
+        // more than stopping leaves it short; every block gets a size while there are sizes enough.
+        double left = 0.0;
+        for (const Band &b : bands) left += b.windows;
+        size_t i = 0;
+        for (int k = 0; k < slices; ++k) {
+            const size_t begin = i;
+            const double share = left / double(slices - k);
+            double acc = 0.0;
+            while (i < bands.size()) {
+                const bool last_block = k == slices - 1;  // takes the rest
+                if (!last_block && i > begin &&
+                    (acc + bands[i].windows - share > share - acc || bands.size() - i <= size_t(slices - 1 - k)))
+                    break;
+                acc += bands[i].windows;
+                ++i;
+            }
+            left -= acc;
+            if (k == slice) { first = begin; last = i; break; }
+        }
+    }
+    cv::Mat band, padded;
+    int nscales = 0;  // window sizes that produced windows so far
+    for (size_t bi = first; bi < last; ++bi) {
+        const Band &bd = bands[bi];
+        const double f = bd.f, ws = bd.ws, hs = bd.hs;
+        const int x0 = bd.x0, y0 = bd.y0, x1 = bd.x1, y1 = bd.y1, in0 = bd.in0, in1 = bd.in1;
         cv::Mat roi = gray(cv::Rect(in0, y0, in1 - in0, y1 - y0));
         if (in0 > x0 || in1 < x1)  // the band reaches past a border: black there
             cv::copyMakeBorder(roi, padded, 0, 0, in0 - x0, x1 - in1, cv::BORDER_CONSTANT, cv::Scalar(0)), roi = padded;

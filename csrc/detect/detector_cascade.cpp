@@ -6,7 +6,10 @@ namespace hw {
 
 bool CascadeDetectorPart::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
     Stopwatch sw;
-    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera, ctx.single_image)) {
+    const int slices = ctx.single_image ? 1 : slices_;
+    const int slice = slices > 1 ? next_slice_ : 0;
+    if (slices > 1) next_slice_ = (next_slice_ + 1) % slices;
+    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera, ctx.single_image, slice, slices)) {
         Hypothesis h = hypothesis_of(d.box, d.confidence, d.stage_sum, "cascade");
         h.appearance = d.confidence;
         out.push_back(h);

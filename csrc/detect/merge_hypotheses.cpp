@@ -82,7 +82,8 @@ std::vector<Hypothesis> HypothesisMerge::merge_and_verify(const RoadContext &ctx
     for (const Group &g : groups) {
         const bool shadow_edge = std::isfinite(g.anchor.road_gray);
         const bool appearance_only = !shadow_edge && g.sources.size() < 2;
-        if (appearance_only && g.appearance < float(p_.min_appearance)) continue;
+        // min_appearance 1: never (a network's probability can round to 1.0f)
+        if (appearance_only && (p_.min_appearance >= 1.0 || g.appearance < float(p_.min_appearance))) continue;
         const cv::Rect2f &b = g.anchor.box;
         const float bottom = bottom_of(b);
         if (appearance_only && !near_ego_lane(ctx.lanes, b.x + 0.5f * b.width, bottom, p_.appearance_lanes)) continue;
