@@ -108,9 +108,9 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         for (int k = 0; k < slices; ++k) {
             const size_t begin = i;
             const double share = left / double(slices - k);
+            const bool last_block = k == slices - 1;  // takes the rest
             double acc = 0.0;
             while (i < bands.size()) {
-                const bool last_block = k == slices - 1;  // takes the rest
                 if (!last_block && i > begin &&
                     (acc + bands[i].windows - share > share - acc || bands.size() - i <= size_t(slices - 1 - k)))
                     break;

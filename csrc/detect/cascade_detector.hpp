@@ -187,7 +187,7 @@ struct CascadeParams {
               "(contiguous sizes holding about equal numbers of windows, smallest first) and each full detection "
               "scans and verifies the next block: no frame pays the whole scan, and each size is scanned once every "
               "tracked_slices full detections. Measured (docs/PERFORMANCE.md, session 19): with 16 the fused bench's "
-              "p99 falls from 21-23 to 5.8-6.5 ms at 640x480 and the synthetic suite, FCW cases and the seven real "
+              "p99 falls from 18-25 to 5.8-7.7 ms at 640x480 and the synthetic suite, FCW cases and the seven real "
               "vehicles score as with 1, but the far car ahead on solidWhiteRight.mp4 (45-54 m) is lost from 2 slices "
               "up (tracked 181 frames with 1, 98 with 2, 32 with 3, none with 4 or more), and with the cascade alone "
               "(preset cascade) so is steady_following's lead. 1 = every size on every full detection (the "
