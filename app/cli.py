@@ -124,7 +124,7 @@ def _cmd_train(args) -> int:
     p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
                     features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
                     seed=args.seed, max_minutes=args.max_minutes, resume=args.resume or "", booster=args.boost,
-                    min_aspect=args.min_aspect, max_aspect=args.max_aspect)
+                    min_aspect=args.min_aspect, max_aspect=args.max_aspect, scan_band=_scan_band(args.scan_band))
     if not 0 <= p.min_aspect < p.max_aspect:
         raise ValueError(f"--min-aspect {p.min_aspect:g} --max-aspect {p.max_aspect:g}: give 0 <= min < max (box "
                          f"width / height)")
@@ -134,6 +134,20 @@ def _cmd_train(args) -> int:
     finally:
         log.close()
     return 0
+
+
+def _scan_band(text: str | None) -> tuple:
+    """`--scan-band ROW,HEIGHT_M[,MIN_M,MAX_M]` as the trainer's tuple; () when not given."""
+    if not text:
+        return ()
+    try:
+        v = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        v = ()
+    if len(v) not in (2, 4) or v[1] <= 0 or (len(v) == 4 and not 0 < v[2] < v[3]):
+        raise ValueError(f"--scan-band {text!r}: give ROW,HEIGHT_M or ROW,HEIGHT_M,MIN_M,MAX_M (horizon row in px, "
+                         f"camera height in m, the lowest and tallest vehicle in m, lowest first), e.g. 344,1.8")
+    return v
 
 
 class _line_logger:
@@ -271,6 +285,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--boost", choices=["gentle", "discrete"], default="gentle",
                    help="gentle: Gentle AdaBoost, real-valued stump leaves (default, the shipped model); discrete: "
                         "Discrete AdaBoost as in paper 004, leaves +-alpha (docs/cascade.md compares them)")
+    t.add_argument("--scan-band", metavar="ROW,HEIGHT_M[,MIN_M,MAX_M]",
+                   help="negatives only from the rows the cascade stage scans for each window size: the camera's "
+                        "horizon row (px) and height (m), and the lowest and tallest vehicle (default 1.0,4.5 m); "
+                        "TuSimple's camera: 344,1.8 (default: negatives from anywhere in the image)")
     t.add_argument("--log", help="also write the per-stage log here")
     t = ts.add_parser("verifier", help="a network judging the cascade's detections: a small CNN on the box's crop "
                       "(--out X.onnx, needs pip install '.[train]') or HOG + one hidden layer (--out X.yml[.gz])")

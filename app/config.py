@@ -307,7 +307,7 @@ def _choices(spec: dict) -> str:
 
 def frame_size_problem(width: int, height: int) -> Optional[str]:
     """Why frames of this size cannot be processed (outside the camera's width/height range), or None."""
-    cam = schema()["camera"]
+    cam = _registry()["camera"]  # built once: detect and replay ask for every image
     lo_w, hi_w, lo_h, hi_h = cam["width"]["min"], cam["width"]["max"], cam["height"]["min"], cam["height"]["max"]
     if lo_w <= width <= hi_w and lo_h <= height <= hi_h:
         return None

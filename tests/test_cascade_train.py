@@ -251,3 +251,69 @@ def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
     # The smallest size scanned is the model's own: a group's box is the mean of the windows in it, so the smallest
     # box lies between 10 px and the next scale (1.12 x 10); CI saw 10.6, a 10 and an 11.2 window grouped.
     assert 10 - 1e-3 <= h.min() < 10 * configuration.load(None)["cascade"]["scale_factor"]
+
+
+def test_scan_band_negatives_come_only_from_the_rows_the_detector_scans(tmp_path):
+    """`--scan-band`: random and mined negatives lie inside the flat-road band of each window size (bottom
+    between horizon + h * cam_h / 4.5 and horizon + h * cam_h / 1.0, widened by a quarter window), never in
+    the rows above or below it. The scene is dark noise outside the widest band and bright noise inside."""
+    from app.train.cascade.samples import Miner, ScanBand, load_folders, random_negatives
+
+    band = ScanBand(horizon_row=60, camera_height_m=1.5)
+    top, bottom = band.rows(H)
+    assert (top, bottom) == pytest.approx((60 + H * 1.5 / 4.5 - H - 0.25 * H, 60 + H * 1.5 + 0.25 * H))
+    rng = np.random.default_rng(3)
+    # the union of the bands of every window size scanned (H .. 2H here): rows 45 .. 88
+    lo, hi = int(band.rows(2 * H)[0]), int(np.ceil(band.rows(2 * H)[1]))
+    (tmp_path / "images").mkdir()
+    img = rng.integers(0, 60, (140, 200)).astype(np.uint8)
+    img[lo:hi] = rng.integers(190, 256, (hi - lo, 200))
+    cv2.imwrite(str(tmp_path / "images" / "0.png"), img)
+    (tmp_path / "annotation.json").write_text(json.dumps([{"file_name": "images/0.png", "bbox": []}]))
+    items = load_folders([str(tmp_path)])
+    inside = random_negatives(items, 200, W, H, rng, max_scale=2.0, band=band)
+    assert len(inside) == 200 and inside.min() >= 150  # bilinear sampling may blend the band's edge row
+    anywhere = random_negatives(items, 200, W, H, rng, max_scale=2.0)
+    assert (anywhere.reshape(200, -1).max(1) < 100).sum() > 50  # without the band, most rows are dark
+    # a one-stump cascade that accepts every window: the miner's crops stay inside the band too
+    from app.train.cascade.model import Cascade, Stage
+
+    fs = FeatureSet(W, H)
+    accept_all = Cascade(W, H, stages=[Stage(features=[0], thresholds=[0.0], left=[1.0], right=[1.0],
+                                             threshold=-1.0)])
+    xml = tmp_path / "all.xml"
+    accept_all.save(fs, str(xml))
+    mined, scanned, seen = Miner(items, W, H, rng, max_scale=2.0, band=band).mine(str(xml), 100, 1.0, 200)
+    assert len(mined) == 100 and scanned > 0 and mined.min() >= 150
+
+
+def test_mined_negatives_do_not_depend_on_the_order_opencv_returns_windows(tiny_cascade, tmp_path, monkeypatch):
+    """OpenCV's detector threads append windows in the order they finish, so the same scan returns them in another
+    order from run to run on a multi-core machine. The miner must pick the same negatives whatever that order:
+    training is deterministic by seed."""
+    from app.train.cascade import samples
+
+    _, xml, _ = tiny_cascade
+    items = samples.load_folders([str(_dataset(tmp_path / "data", 12, 5))])
+
+    def mine():
+        return samples.Miner(items, W, H, np.random.default_rng(4)).mine(str(xml), 150, 0.05, 60)
+
+    plain = mine()
+    real = cv2.CascadeClassifier
+
+    class Shuffled:
+        def __init__(self, path):
+            self.cc, self.rng = real(path), np.random.default_rng(9)
+
+        def empty(self):
+            return self.cc.empty()
+
+        def detectMultiScale(self, *a, **k):
+            r = np.asarray(self.cc.detectMultiScale(*a, **k))
+            return r[self.rng.permutation(len(r))] if len(r) else r
+
+    monkeypatch.setattr(samples.cv2, "CascadeClassifier", Shuffled)
+    shuffled = mine()
+    assert len(plain[0]) > 50 and plain[1:] == shuffled[1:]
+    assert np.array_equal(plain[0], shuffled[0])

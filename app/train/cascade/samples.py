@@ -26,6 +26,26 @@ class Annotated:
     boxes: np.ndarray  # (n, 4) float left, top, right, bottom
 
 
+@dataclass(frozen=True)
+class ScanBand:
+    """The rows a detector scans for each window size on a flat road, as Headway's `cascade` stage does:
+    a window of height h (px) has its bottom between `horizon_row + h * camera_height_m / max_vehicle_m`
+    and `horizon_row + h * camera_height_m / min_vehicle_m`. Negatives taken only there are the windows the
+    detector will meet (road, vehicles' surroundings, barriers) rather than sky and trees, which it never
+    scans. `margin` widens the band by that fraction of h each way (the horizon moves with the lanes)."""
+    horizon_row: float
+    camera_height_m: float
+    min_vehicle_m: float = 1.0
+    max_vehicle_m: float = 4.5
+    margin: float = 0.25
+
+    def rows(self, h: float) -> tuple[float, float]:
+        """Top and bottom image rows (original pixels) of the windows of height `h`."""
+        top = self.horizon_row + h * self.camera_height_m / self.max_vehicle_m - h
+        bottom = self.horizon_row + h * self.camera_height_m / self.min_vehicle_m
+        return top - self.margin * h, bottom + self.margin * h
+
+
 def load_folders(folders: list[str]) -> list[Annotated]:
     out = []
     for d in folders:
@@ -101,9 +121,9 @@ def positives(items: list[Annotated], width: int, height: int, min_height: float
 
 
 def random_negatives(items: list[Annotated], n: int, width: int, height: int, rng: np.random.Generator,
-                     max_scale: float = 12.0) -> np.ndarray:
+                     max_scale: float = 12.0, band: ScanBand | None = None) -> np.ndarray:
     """`n` windows at random places and scales (window height H to H * max_scale) overlapping no box,
-    among those OpenCV scans (contrast above its threshold)."""
+    among those OpenCV scans (contrast above its threshold); inside `band`'s rows when given."""
     out = []
     while len(out) < n:
         if len(out) >= 64:
@@ -117,7 +137,13 @@ def random_negatives(items: list[Annotated], n: int, width: int, height: int, rn
             w, h = width * s, height * s
             if w >= g.shape[1] or h >= g.shape[0]:
                 continue
-            x, y = rng.uniform(0, g.shape[1] - w), rng.uniform(0, g.shape[0] - h)
+            y_lo, y_hi = 0.0, g.shape[0] - h
+            if band is not None:
+                top, bottom = band.rows(h)
+                y_lo, y_hi = max(y_lo, top), min(y_hi, bottom - h)
+                if y_hi <= y_lo:
+                    continue
+            x, y = rng.uniform(0, g.shape[1] - w), rng.uniform(y_lo, y_hi)
             box = np.array([[x, y, x + w, y + h]])
             if len(it.boxes) and iou(box, it.boxes).max() >= NEG_IOU:
                 continue
@@ -131,11 +157,12 @@ class Miner:
     previous stage stopped (cycling), at most `per_image` windows per visit. Each visit scans one random
     scale (window height H to H * `max_scale`, log-uniform): the image is resized to it and a random part
     of it, big enough for about 2 * per_image false alarms at the cascade's current false-alarm rate, is
-    scanned at that scale, so that the windows taken are exactly the pixels OpenCV classified."""
+    scanned at that scale, so that the windows taken are exactly the pixels OpenCV classified. With a
+    `band`, the part scanned lies inside the band's rows for that scale."""
 
     def __init__(self, items: list[Annotated], width: int, height: int, rng: np.random.Generator,
-                 per_image: int = 8, max_scale: float = 12.0):
-        self.items, self.width, self.height = items, width, height
+                 per_image: int = 8, max_scale: float = 12.0, band: ScanBand | None = None):
+        self.items, self.width, self.height, self.band = items, width, height, band
         self.order = rng.permutation(len(items))
         self.rng, self.per_image, self.max_scale = rng, per_image, max_scale
         self.next = 0
@@ -158,17 +185,26 @@ class Miner:
             sw, sh = round(g.shape[1] / f), round(g.shape[0] / f)
             if sw <= W + 2 or sh <= H + 2:
                 continue
+            # the rows that may be scanned at this scale (all, or the band's), in the resized image
+            r0, r1 = 0, sh
+            if self.band is not None:
+                top, bottom = self.band.rows(H * f)
+                r0, r1 = max(0, int(np.floor(top / f))), min(sh, int(np.ceil(bottom / f)))
+                if r1 - r0 <= H + 2:
+                    continue
             small = cv2.resize(g, (sw, sh), interpolation=cv2.INTER_LINEAR)
             # a crop of about `want` windows (step 2) with the image's aspect, at least one window
             cw = int(min(sw, max(W + 2, np.sqrt(4 * want * sw / sh) + W)))
-            ch = int(min(sh, max(H + 2, np.sqrt(4 * want * sh / sw) + H)))
-            x0, y0 = int(self.rng.integers(0, sw - cw + 1)), int(self.rng.integers(0, sh - ch + 1))
+            ch = int(min(r1 - r0, max(H + 2, np.sqrt(4 * want * sh / sw) + H)))
+            x0, y0 = int(self.rng.integers(0, sw - cw + 1)), int(self.rng.integers(r0, r1 - ch + 1))
             crop = np.ascontiguousarray(small[y0:y0 + ch, x0:x0 + cw])
             scanned += ((cw - W) // 2 + 1) * ((ch - H) // 2 + 1)
             rects = cc.detectMultiScale(crop, scaleFactor=1.5, minNeighbors=0, minSize=(W, H), maxSize=(W, H))
             if not len(rects):
                 continue
+            # OpenCV's threads append windows in the order they finish: sorted, the seed alone picks the negatives
             r = np.asarray(rects, int)
+            r = r[np.lexsort((r[:, 0], r[:, 1]))]
             boxes = np.c_[r[:, 0] + x0, r[:, 1] + y0, r[:, 0] + x0 + W, r[:, 1] + y0 + H].astype(float) * f
             keep = np.ones(len(r), bool) if not len(it.boxes) else iou(boxes, it.boxes).max(1) < NEG_IOU
             r = r[keep]

@@ -18,7 +18,7 @@ from tqdm import tqdm
 from .boost import train_stage
 from .haar import FeatureSet, responses, integrals, variance_norm
 from .model import Cascade
-from .samples import Miner, load_folders, positives, random_negatives
+from .samples import Miner, ScanBand, load_folders, positives, random_negatives
 
 
 @dataclass
@@ -39,6 +39,9 @@ class TrainParams:
     max_minutes: float = 55.0       # no new stage starts after this (the whole run fits in an hour)
     resume: str = ""                # cascade XML written by this trainer: its stages are kept, more are added
     booster: str = "gentle"         # gentle (OpenCV's default, shipped) or discrete (paper 004); docs/cascade.md
+    # negatives only from the rows a flat-road detector scans for each window size: (horizon row px,
+    # camera height m[, lowest, tallest vehicle m]); () = anywhere in the image (samples.ScanBand)
+    scan_band: tuple = ()
 
 
 def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str], None] = print) -> Cascade:
@@ -62,7 +65,8 @@ def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str],
         cascade.stages = Cascade.from_xml(fs, p.resume).stages
         fa_rate = p.max_false_alarm ** len(cascade.stages)
         log(f"resumed: {len(cascade.stages)} stages from {p.resume}")
-    miner = Miner(items, p.width, p.height, rng)
+    band = ScanBand(*p.scan_band) if p.scan_band else None
+    miner = Miner(items, p.width, p.height, rng, band=band)
     tmp = tempfile.NamedTemporaryFile(suffix=".xml", delete=False)
     tmp.close()
     try:
@@ -75,7 +79,7 @@ def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str],
             pos = pool[accepted]
             pos = pos[rng.permutation(len(pos))[: p.num_pos]]
             if s == 0:
-                neg = random_negatives(items, p.num_neg, p.width, p.height, rng)
+                neg = random_negatives(items, p.num_neg, p.width, p.height, rng, band=band)
                 ratio_txt = "random windows"
             else:
                 cascade.save(fs, tmp.name)
