@@ -68,6 +68,14 @@ void KalmanBoxParams::bind(ParamMap &m) {
           "IoU of a detection with a predicted box above which it measures that vehicle");
     m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
           "IoU above which two tracks are the same vehicle; the one with fewer measurements goes");
+    m.add("beside_overlap", beside_overlap, 0.0, 1.0,
+          "share of the narrower width; a new detection standing on a tracked vehicle's bottom row (beside_bottom_tol) "
+          "whose columns overlap that vehicle's by at least this much starts no track: two vehicles at one range stand "
+          "side by side and cannot overlap in the image, so it is a window beside the vehicle (synthetic, fused: a "
+          "cascade group half on the car and a parallax region agreeing on it, 30 frames of a ghost on "
+          "overpass_shadow); 1 = off");
+    m.add("beside_bottom_tol", beside_bottom_tol, 0.0, 1.0,
+          "vehicle widths (the narrower); bottom rows at most this far apart are one range for beside_overlap");
     m.add("min_width_ratio", min_width_ratio, 0.0, 1.0,
           "expected vehicle widths at its bottom row; a track narrower than this has lost its vehicle "
           "(squeezed between a neighbour's edges) and is deleted");
@@ -250,6 +258,12 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
             // A detection on a tracked vehicle's body (window, bumper) is not a new vehicle either.
             explained = explained || box_iou(tb, b) >= 0.2f ||
                         (foot.x >= tb.x && foot.x <= tb.x + tb.width && foot.y >= tb.y && foot.y <= tb.y + tb.height);
+            // On the vehicle's own bottom row and overlapping its columns: beside it, not another vehicle.
+            const float narrower = std::min(tb.width, b.width);
+            const float overlap = std::min(tb.x + tb.width, b.x + b.width) - std::max(tb.x, b.x);
+            explained = explained || (kalman_.beside_overlap < 1.0 &&
+                                      std::abs(tb.y + tb.height - foot.y) <= kalman_.beside_bottom_tol * narrower &&
+                                      overlap >= kalman_.beside_overlap * narrower);
         }
         if (explained) continue;
         const KalmanBox::Vec3 z(b.x, b.y + b.height, b.x + b.width);

@@ -53,6 +53,9 @@ struct KalmanBoxParams {
     int max_coast_frames = 15;        // frames a vehicle may live on NCC alone before misses count
     double match_iou = 0.3;           // detection <-> predicted box overlap that is the same vehicle
     double duplicate_iou = 0.5;       // two tracks overlapping this much: the younger is deleted
+    double beside_overlap = 0.25;     // a new detection on a tracked vehicle's bottom row whose columns overlap it
+    double beside_bottom_tol = 0.2;   // ... by this share of the narrower width is that vehicle (bottoms this many
+                                      // widths apart at most): two vehicles at one range cannot overlap in the image
     double min_width_ratio = 0.35;    // track width / expected width at its row, at least
     double max_width_ratio = 2.5;     // ... at most
     double max_dt_s = 1.0;            // s; a longer gap between frames restarts tracking
