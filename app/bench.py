@@ -51,7 +51,8 @@ def run_bench(scenario: str = "dense_traffic", preset: Optional[str] = None, wid
     }
 
 
-def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, config_path: Optional[str] = None) -> dict:
+def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, config_path: Optional[str] = None,
+                      preset: Optional[str] = None) -> dict:
     """Capture-to-CAN latency through the real-time loop: frames pushed at their frame rate (stamped with
     the monotonic clock at capture, as a camera's are), results popped and handed to the supervisor's
     stack, which encodes and sends the CAN frames on a python-can `virtual` bus. Measured per frame:
@@ -67,7 +68,7 @@ def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, co
 
     sc = load_scenario(scenario)
     images = [f.image for f in render(sc)]
-    cfg = configuration.load(config_path)
+    cfg = configuration.load(config_path, {"pipeline": {"preset": preset}} if preset else None)
     cfg["can"].update(interface="virtual", channel="headway-bench")
     latencies, cpu_ms = [], []
     with Pipeline(configuration.core_sections(cfg)) as pipe, CanSession.for_live(cfg) as can_session:
@@ -105,14 +106,14 @@ def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, co
         stop.set()
         cam.join()
         dropped = pipe.health()["results_dropped"]
-    return {"scenario": scenario, "frames": len(latencies), "dropped": dropped,
+    return {"scenario": scenario, "preset": cfg["pipeline"]["preset"], "frames": len(latencies), "dropped": dropped,
             "capture_to_can": _stats(latencies), "supervisor_cpu_per_frame": _stats(cpu_ms)}
 
 
 def format_latency(report: dict) -> str:
     c, s = report["capture_to_can"], report["supervisor_cpu_per_frame"]
-    return (f"capture-to-CAN latency over {report['frames']} frames ({report['scenario']}, 30 fps pushed through "
-            f"the real-time loop, CAN on a virtual bus, {report['dropped']} dropped):\n"
+    return (f"capture-to-CAN latency, preset {report['preset']}, over {report['frames']} frames ({report['scenario']}, "
+            f"30 fps pushed through the real-time loop, CAN on a virtual bus, {report['dropped']} dropped):\n"
             f"| measure | median ms | p99 ms |\n| --- | ---: | ---: |\n"
             f"| capture to CAN frames handed to the bus | {c['median_ms']:.2f} | {c['p99_ms']:.2f} |\n"
             f"| supervisor CPU per frame (inputs, FCW, CAN encoding) | {s['median_ms']:.2f} | {s['p99_ms']:.2f} |")
@@ -147,7 +148,7 @@ def pinned_to_one_core():
 
 def main(args) -> int:
     if args.latency:
-        report = run_latency_bench(args.scenario, args.seconds, args.config)
+        report = run_latency_bench(args.scenario, args.seconds, args.config, args.preset)
         print(json.dumps(report, indent=2) if args.json else format_latency(report))
         return 0
     with pinned_to_one_core() as core:

@@ -317,3 +317,12 @@ def test_mined_negatives_do_not_depend_on_the_order_opencv_returns_windows(tiny_
     shuffled = mine()
     assert len(plain[0]) > 50 and plain[1:] == shuffled[1:]
     assert np.array_equal(plain[0], shuffled[0])
+
+
+@pytest.mark.parametrize("band", ["344", "344,abc", "344,-1.8", "344,1.8,4.5,1.0"])
+def test_cli_names_a_bad_scan_band(tmp_path, band):
+    folder = _dataset(tmp_path / "data", 2, 1)
+    r = subprocess.run([sys.executable, "-m", "app.cli", "train", "cascade", "--data", str(folder),
+                        "--out", str(tmp_path / "m.xml"), "--scan-band", band], capture_output=True, text=True)
+    assert r.returncode == 1 and f"--scan-band {band!r}" in r.stderr and "ROW,HEIGHT_M" in r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "m.xml").exists()

@@ -104,6 +104,17 @@ def test_bench_reports_median_and_p99_per_stage():
     assert all(s["p99_ms"] >= s["median_ms"] > 0 for s in stages.values())
 
 
+def test_latency_bench_runs_the_preset_asked_for():
+    """`bench --latency --preset P` measures P's real-time loop (it used to run the configuration's default
+    whatever --preset said) and says which preset it measured."""
+    r = headway("bench", "--latency", "--seconds", "1", "--preset", "thesis", "--json")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert rep["preset"] == "thesis" and rep["frames"] >= 20 and rep["dropped"] == 0
+    c = rep["capture_to_can"]
+    assert c["p99_ms"] >= c["median_ms"] > 0
+
+
 @pytest.mark.parametrize("args, message", [
     (["replay", "/nonexistent/drive.mp4"], "no such file or folder"),
     (["replay", "FOLDER"], "needs its frame rate"),

@@ -1,4 +1,5 @@
 #include "detect/cascade_detector.hpp"
+#include "base/threads.hpp"
 #include "detect/haar_cascade.hpp"
 #include "detect/vehicle_verifier.hpp"
 
@@ -25,11 +26,14 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
     } else {
         haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
         win_ = haar_->window();
+        for (int k = 1; k < p_.threads; ++k) helpers_.push_back(std::make_unique<HaarCascade>(p_.model, p_.scan_lanes));
     }
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
+    if (verifier_) verifier_->set_threads(p_.threads);
     tracked_same_ = p_.tracked_verifier == "same";
     if (!tracked_same_ && !p_.tracked_verifier.empty() && p_.tracked_verifier != "off")
         tracked_ = make_vehicle_verifier(p_.tracked_verifier, false, 0.0, p_.verifier_dnn);
+    if (tracked_) tracked_->set_threads(p_.threads);
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }
@@ -53,7 +57,6 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     CV_Assert(gray.type() == CV_8UC1);
     const RoadPrior prior = make_road_prior(gray.size(), lanes, cam, p_.road);
     std::vector<Raw> raw;
-    std::vector<HaarWindow> wins;
     if (prior.empty()) return {};
     const double yh = prior.horizon_row, hc = cam.height_m;
     const double max_h = p_.max_window_frac * gray.rows;
@@ -121,30 +124,48 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             if (k == slice) { first = begin; last = i; break; }
         }
     }
-    cv::Mat band, padded;
-    int nscales = 0;  // window sizes that produced windows so far
-    for (size_t bi = first; bi < last; ++bi) {
-        const Band &bd = bands[bi];
-        const double f = bd.f, ws = bd.ws, hs = bd.hs;
-        const int x0 = bd.x0, y0 = bd.y0, x1 = bd.x1, y1 = bd.y1, in0 = bd.in0, in1 = bd.in1;
-        cv::Mat roi = gray(cv::Rect(in0, y0, in1 - in0, y1 - y0));
-        if (in0 > x0 || in1 < x1)  // the band reaches past a border: black there
-            cv::copyMakeBorder(roi, padded, 0, 0, in0 - x0, x1 - in1, cv::BORDER_CONSTANT, cv::Scalar(0)), roi = padded;
+    // Each size's windows, scanned on `threads` threads (sizes dealt round-robin: neighbours cost about the same),
+    // each with its own HaarCascade (scratch buffers); gathered in size order, so the windows are those of one thread.
+    const size_t nb = last - first;
+    std::vector<std::vector<HaarWindow>> found(nb);
+    std::vector<char> scanned(nb, 0);
+    auto scan_band = [&](size_t k, const HaarCascade *haar) {
+        const Band &bd = bands[first + k];
+        const double f = bd.f;
+        cv::Mat roi = gray(cv::Rect(bd.in0, bd.y0, bd.in1 - bd.in0, bd.y1 - bd.y0)), padded, band;
+        if (bd.in0 > bd.x0 || bd.in1 < bd.x1)  // the band reaches past a border: black there
+            cv::copyMakeBorder(roi, padded, 0, 0, bd.in0 - bd.x0, bd.x1 - bd.in1, cv::BORDER_CONSTANT, cv::Scalar(0)),
+                roi = padded;
         const cv::Size sz(int(std::lround(roi.cols / f)), int(std::lround(roi.rows / f)));
-        if (sz.width <= win_.width || sz.height <= win_.height) continue;
+        if (sz.width <= win_.width || sz.height <= win_.height) return;
         if (f > 1.0) cv::resize(roi, band, sz, 0, 0, cv::INTER_LINEAR);
         else band = roi;
-        wins.clear();
+        scanned[k] = 1;
         if (cc_) {  // the reference: OpenCV's own scan at scale 1 (step 2)
             rects.clear(); levels.clear(); weights.clear();
             cc_->detectMultiScale(band, rects, levels, weights, 1.5, 0, 0, win_, win_, true);
-            for (size_t i = 0; i < rects.size(); ++i) wins.push_back({rects[i].x, rects[i].y, weights[i]});
+            for (size_t i = 0; i < rects.size(); ++i) found[k].push_back({rects[i].x, rects[i].y, weights[i]});
         } else {
-            haar_->scan(band, p_.step_px, wins);  // the same windows, faster (haar_cascade.hpp)
+            haar->scan(band, p_.step_px, found[k]);  // the same windows, faster (haar_cascade.hpp)
         }
-        for (const HaarWindow &w : wins)
-            raw.push_back({cv::Rect2f(float(x0 + w.x * f), float(y0 + w.y * f), float(ws), float(hs)), float(w.stage_sum),
-                           nscales});
+    };
+    const int threads = cc_ ? 1 : int(std::min<size_t>(size_t(usable_threads(1 + int(helpers_.size()))), std::max<size_t>(nb, 1)));
+    if (threads <= 1) {
+        for (size_t k = 0; k < nb; ++k) scan_band(k, haar_.get());
+    } else {
+        cv::parallel_for_(cv::Range(0, threads), [&](const cv::Range &r) {
+            for (int t = r.start; t < r.end; ++t)
+                for (size_t k = size_t(t); k < nb; k += size_t(threads))
+                    scan_band(k, t == 0 ? haar_.get() : helpers_[size_t(t - 1)].get());
+        }, threads);
+    }
+    int nscales = 0;  // window sizes that produced windows so far
+    for (size_t k = 0; k < nb; ++k) {
+        if (!scanned[k]) continue;
+        const Band &bd = bands[first + k];
+        for (const HaarWindow &w : found[k])
+            raw.push_back({cv::Rect2f(float(bd.x0 + w.x * bd.f), float(bd.y0 + w.y * bd.f), float(bd.ws), float(bd.hs)),
+                           float(w.stage_sum), nscales});
         ++nscales;
     }
     // group: strongest first, every window overlapping a group's seed joins it. OpenCV's detectMultiScale scans in

@@ -49,6 +49,7 @@ struct CascadeParams {
     double max_window_frac = 0.6;       // largest window height as a fraction of the image height
     double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
+    int threads = 2;                    // threads the scan's sizes and the verifier's crops are shared among; 1 = caller
     bool opencv_scan = false;           // scan with cv::CascadeClassifier (the reference) instead of HaarCascade
     bool verifier_dnn = false;          // the CNN verifiers run by cv::dnn (the reference) instead of their own forward pass
     int scan_lanes = 0;                 // windows HaarCascade evaluates at once: 0 = the widest the CPU has, 4, 8
@@ -104,6 +105,10 @@ struct CascadeParams {
               "px of the image; window sizes below this height are not scanned (0 = all, from the model's own "
               "20 px): smaller vehicles are not wanted, and the smallest sizes are the costliest to scan");
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
+        m.add("threads", threads, 1, 16,
+              "threads the stage runs on, at most the cores the process may use: the window sizes and the verifier "
+              "network's crops shared among them, with the same windows, groups and probabilities as one thread "
+              "(docs/PERFORMANCE.md, session 20); 1 = the calling thread only, as when pinned to one core");
         m.add("scan_lanes", scan_lanes, 0, 8,
               "windows the own scanner evaluates at once: 0 = the widest this CPU has (8 with AVX2, else 4), 4 = "
               "SSE2, 8 = AVX2; the same detections either way (for tests and CPUs without AVX2)");
@@ -229,6 +234,7 @@ public:
 private:
     CascadeParams p_;
     std::unique_ptr<HaarCascade> haar_;          // the scan, unless opencv_scan
+    std::vector<std::unique_ptr<HaarCascade>> helpers_;  // one more per thread (their scratch is their own)
     std::unique_ptr<cv::CascadeClassifier> cc_;  // only with opencv_scan
     std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
     std::unique_ptr<VehicleVerifier> tracked_;   // null: tracked_verifier "off", or "same" (then verifier_)

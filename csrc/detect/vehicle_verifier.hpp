@@ -43,6 +43,8 @@ public:
     }
     // true when judge() moves boxes (a box output)
     virtual bool has_box_output() const { return false; }
+    // threads its network may share the crops among (base/threads.hpp); verifiers without one ignore it
+    virtual void set_threads(int) {}
 };
 
 // The verifier the file holds (.onnx: CnnVerifier, else HogVerifier); throws std::invalid_argument naming it.

@@ -187,6 +187,10 @@ void CnnVerifier::forward(const cv::Mat &crops, const cv::Mat &extra, float *p, 
     }
 }
 
+void CnnVerifier::set_threads(int threads) {
+    if (own_) own_->set_threads(threads);  // cv::dnn keeps its own threading
+}
+
 double CnnVerifier::own_disagreement() const {
     // crops of standard normal values (what standardised crops look like) and plausible extra features
     const int n = 2 * kChunk + 3, sz[4] = {n, 1, kCropH, kCropW};

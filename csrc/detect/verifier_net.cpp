@@ -1,6 +1,8 @@
 #include "detect/verifier_net.hpp"
+#include "base/threads.hpp"
 
 #include <immintrin.h>
+#include <opencv2/core/utility.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -290,7 +292,18 @@ std::unique_ptr<VerifierNet> VerifierNet::from_dnn(cv::dnn::Net &net, int crop_h
 }
 
 void VerifierNet::forward(const float *crops, const float *extra, int n, float *p, float *box) const {
-    run(crops, extra, n, p, box, avx2_);
+    const int t = std::min(usable_threads(threads_), n / 4);  // a part of fewer than 4 crops is not worth a thread
+    if (t <= 1) {
+        run(crops, extra, n, p, box, avx2_);
+        return;
+    }
+    cv::parallel_for_(cv::Range(0, t), [&](const cv::Range &r) {
+        for (int k = r.start; k < r.end; ++k) {
+            const int a = int(int64_t(n) * k / t), b = int(int64_t(n) * (k + 1) / t);
+            run(crops + size_t(a) * h_ * w_, extra + 2 * size_t(a), b - a, p + a, box ? box + 4 * size_t(a) : nullptr,
+                avx2_);
+        }
+    }, t);
 }
 
 void VerifierNet::forward_plain(const float *crops, const float *extra, int n, float *p, float *box) const {
