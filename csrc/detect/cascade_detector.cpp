@@ -124,8 +124,8 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             if (k == slice) { first = begin; last = i; break; }
         }
     }
-    // Each size's windows, scanned on `threads` threads (sizes dealt round-robin: neighbours cost about the same),
-    // each with its own HaarCascade (scratch buffers); gathered in size order, so the windows are those of one thread.
+    // Each size's windows, scanned on up to `threads` threads, a size at a time (base/threads.hpp: SlotPool), each
+    // thread with its own HaarCascade (scratch buffers); gathered in size order: the windows of one thread.
     const size_t nb = last - first;
     std::vector<std::vector<HaarWindow>> found(nb);
     std::vector<char> scanned(nb, 0);
@@ -153,11 +153,12 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     if (threads <= 1) {
         for (size_t k = 0; k < nb; ++k) scan_band(k, haar_.get());
     } else {
-        cv::parallel_for_(cv::Range(0, threads), [&](const cv::Range &r) {
-            for (int t = r.start; t < r.end; ++t)
-                for (size_t k = size_t(t); k < nb; k += size_t(threads))
-                    scan_band(k, t == 0 ? haar_.get() : helpers_[size_t(t - 1)].get());
-        }, threads);
+        SlotPool evaluators(threads);  // slot 0: haar_, slot k: helpers_[k - 1]
+        cv::parallel_for_(cv::Range(0, int(nb)), [&](const cv::Range &r) {
+            const int slot = evaluators.take();
+            for (int k = r.start; k < r.end; ++k) scan_band(size_t(k), slot == 0 ? haar_.get() : helpers_[size_t(slot - 1)].get());
+            evaluators.give(slot);
+        }, double(nb));
     }
     int nscales = 0;  // window sizes that produced windows so far
     for (size_t k = 0; k < nb; ++k) {

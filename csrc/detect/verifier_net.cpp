@@ -292,18 +292,19 @@ std::unique_ptr<VerifierNet> VerifierNet::from_dnn(cv::dnn::Net &net, int crop_h
 }
 
 void VerifierNet::forward(const float *crops, const float *extra, int n, float *p, float *box) const {
-    const int t = std::min(usable_threads(threads_), n / 4);  // a part of fewer than 4 crops is not worth a thread
-    if (t <= 1) {
+    constexpr int kPiece = 4;  // crops a piece of the work: fewer is not worth a thread
+    const int t = usable_threads(threads_), pieces = (n + kPiece - 1) / kPiece;
+    if (t <= 1 || pieces <= 1) {
         run(crops, extra, n, p, box, avx2_);
         return;
     }
-    cv::parallel_for_(cv::Range(0, t), [&](const cv::Range &r) {
-        for (int k = r.start; k < r.end; ++k) {
-            const int a = int(int64_t(n) * k / t), b = int(int64_t(n) * (k + 1) / t);
-            run(crops + size_t(a) * h_ * w_, extra + 2 * size_t(a), b - a, p + a, box ? box + 4 * size_t(a) : nullptr,
-                avx2_);
-        }
-    }, t);
+    SlotPool running(t);  // at most t pieces at once (base/threads.hpp)
+    cv::parallel_for_(cv::Range(0, pieces), [&](const cv::Range &r) {
+        const int slot = running.take();
+        const int a = r.start * kPiece, b = std::min(n, r.end * kPiece);
+        run(crops + size_t(a) * h_ * w_, extra + 2 * size_t(a), b - a, p + a, box ? box + 4 * size_t(a) : nullptr, avx2_);
+        running.give(slot);
+    }, double(pieces));
 }
 
 void VerifierNet::forward_plain(const float *crops, const float *extra, int n, float *p, float *box) const {
