@@ -26,7 +26,7 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
     } else {
         haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
         win_ = haar_->window();
-        for (int k = 1; k < p_.threads; ++k) helpers_.push_back(std::make_unique<HaarCascade>(p_.model, p_.scan_lanes));
+        for (int k = 1; k < p_.threads; ++k) helpers_.push_back(std::make_unique<HaarCascade>(*haar_));
     }
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
     if (verifier_) verifier_->set_threads(p_.threads);
@@ -128,7 +128,6 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     // thread with its own HaarCascade (scratch buffers); gathered in size order: the windows of one thread.
     const size_t nb = last - first;
     std::vector<std::vector<HaarWindow>> found(nb);
-    std::vector<char> scanned(nb, 0);
     auto scan_band = [&](size_t k, const HaarCascade *haar) {
         const Band &bd = bands[first + k];
         const double f = bd.f;
@@ -140,7 +139,6 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         if (sz.width <= win_.width || sz.height <= win_.height) return;
         if (f > 1.0) cv::resize(roi, band, sz, 0, 0, cv::INTER_LINEAR);
         else band = roi;
-        scanned[k] = 1;
         if (cc_) {  // the reference: OpenCV's own scan at scale 1 (step 2)
             rects.clear(); levels.clear(); weights.clear();
             cc_->detectMultiScale(band, rects, levels, weights, 1.5, 0, 0, win_, win_, true);
@@ -160,14 +158,11 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             evaluators.give(slot);
         }, double(nb));
     }
-    int nscales = 0;  // window sizes that produced windows so far
-    for (size_t k = 0; k < nb; ++k) {
-        if (!scanned[k]) continue;
+    for (size_t k = 0; k < nb; ++k) {  // the window size's index in this call: one bucket of by_x below
         const Band &bd = bands[first + k];
         for (const HaarWindow &w : found[k])
             raw.push_back({cv::Rect2f(float(bd.x0 + w.x * bd.f), float(bd.y0 + w.y * bd.f), float(bd.ws), float(bd.hs)),
-                           float(w.stage_sum), nscales});
-        ++nscales;
+                           float(w.stage_sum), int(k)});
     }
     // group: strongest first, every window overlapping a group's seed joins it. OpenCV's detectMultiScale scans in
     // parallel and returns the windows in a thread-dependent order, and stage sums tie (they are sums of a few
@@ -181,7 +176,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     // The windows of each scale sorted by x: a window can reach IoU >= group_iou > 0 with the seed only if it
     // overlaps it, x in (x_seed - w, x_seed + w_seed), and its area is within a factor group_iou of the seed's;
     // only those are tested (the same windows the test of every pair finds, summed in the same order).
-    std::vector<std::vector<std::pair<float, int>>> by_x(nscales);
+    std::vector<std::vector<std::pair<float, int>>> by_x(nb);
     for (size_t i = 0; i < raw.size(); ++i) by_x[size_t(raw[i].scale)].push_back({raw[i].box.x, int(i)});
     for (auto &v : by_x) std::sort(v.begin(), v.end());
     std::vector<char> used(raw.size(), 0);
