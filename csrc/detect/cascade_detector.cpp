@@ -1,5 +1,5 @@
 #include "detect/cascade_detector.hpp"
-#include "base/threads.hpp"
+#include "base/worker_pool.hpp"
 #include "detect/haar_cascade.hpp"
 #include "detect/vehicle_verifier.hpp"
 
@@ -28,12 +28,13 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
         win_ = haar_->window();
         for (int k = 1; k < p_.threads; ++k) helpers_.push_back(std::make_unique<HaarCascade>(*haar_));
     }
+    pool_ = std::make_unique<WorkerPool>(p_.threads);
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
-    if (verifier_) verifier_->set_threads(p_.threads);
+    if (verifier_) verifier_->set_pool(pool_.get());
     tracked_same_ = p_.tracked_verifier == "same";
     if (!tracked_same_ && !p_.tracked_verifier.empty() && p_.tracked_verifier != "off")
         tracked_ = make_vehicle_verifier(p_.tracked_verifier, false, 0.0, p_.verifier_dnn);
-    if (tracked_) tracked_->set_threads(p_.threads);
+    if (tracked_) tracked_->set_pool(pool_.get());
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }
@@ -124,8 +125,8 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             if (k == slice) { first = begin; last = i; break; }
         }
     }
-    // Each size's windows, scanned on up to `threads` threads, a size at a time (base/threads.hpp: SlotPool), each
-    // thread with its own HaarCascade (scratch buffers); gathered in size order: the windows of one thread.
+    // Each size's windows, scanned on up to `threads` threads, a size at a time (base/worker_pool.hpp), each thread
+    // with its own HaarCascade (scratch buffers); gathered in size order: the windows of one thread.
     const size_t nb = last - first;
     std::vector<std::vector<HaarWindow>> found(nb);
     auto scan_band = [&](size_t k, const HaarCascade *haar) {
@@ -147,16 +148,12 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             haar->scan(band, p_.step_px, found[k]);  // the same windows, faster (haar_cascade.hpp)
         }
     };
-    const int threads = cc_ ? 1 : int(std::min<size_t>(size_t(usable_threads(1 + int(helpers_.size()))), std::max<size_t>(nb, 1)));
-    if (threads <= 1) {
-        for (size_t k = 0; k < nb; ++k) scan_band(k, haar_.get());
+    if (cc_) {  // OpenCV's scan keeps its own threads
+        for (size_t k = 0; k < nb; ++k) scan_band(k, nullptr);
     } else {
-        SlotPool evaluators(threads);  // slot 0: haar_, slot k: helpers_[k - 1]
-        cv::parallel_for_(cv::Range(0, int(nb)), [&](const cv::Range &r) {
-            const int slot = evaluators.take();
-            for (int k = r.start; k < r.end; ++k) scan_band(size_t(k), slot == 0 ? haar_.get() : helpers_[size_t(slot - 1)].get());
-            evaluators.give(slot);
-        }, double(nb));
+        pool_->run(int(nb), [&](int k, int slot) {  // slot 0: haar_, slot k: helpers_[k - 1]
+            scan_band(size_t(k), slot == 0 ? haar_.get() : helpers_[size_t(slot - 1)].get());
+        });
     }
     for (size_t k = 0; k < nb; ++k) {  // the window size's index in this call: one bucket of by_x below
         const Band &bd = bands[first + k];

@@ -218,6 +218,7 @@ struct CascadeDetection {
 
 class VehicleVerifier;
 class HaarCascade;
+class WorkerPool;
 
 class CascadeDetector {
 public:
@@ -236,6 +237,7 @@ private:
     std::unique_ptr<HaarCascade> haar_;          // the scan, unless opencv_scan
     std::vector<std::unique_ptr<HaarCascade>> helpers_;  // one more per thread (their scratch is their own)
     std::unique_ptr<cv::CascadeClassifier> cc_;  // only with opencv_scan
+    std::unique_ptr<WorkerPool> pool_;           // the scan's sizes and the verifier's crops (threads)
     std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
     std::unique_ptr<VehicleVerifier> tracked_;   // null: tracked_verifier "off", or "same" (then verifier_)
     bool tracked_same_ = false;

@@ -23,6 +23,8 @@
 
 namespace hw {
 
+class WorkerPool;
+
 // The vehicle height (m) a box implies on a flat road, H = h_cam h / (y_b - y_h); 10 when its bottom is not
 // below the horizon; clipped to 0..10.
 float implied_vehicle_height(const cv::Rect2f &box, double horizon_row, double cam_height_m);
@@ -43,8 +45,9 @@ public:
     }
     // true when judge() moves boxes (a box output)
     virtual bool has_box_output() const { return false; }
-    // threads its network may share the crops among (base/threads.hpp); verifiers without one ignore it
-    virtual void set_threads(int) {}
+    // the threads its network may share the crops among (base/worker_pool.hpp; not owned, null: the calling thread
+    // alone); verifiers without one ignore it
+    virtual void set_pool(WorkerPool *) {}
 };
 
 // The verifier the file holds (.onnx: CnnVerifier, else HogVerifier); throws std::invalid_argument naming it.

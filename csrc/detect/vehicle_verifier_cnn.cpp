@@ -187,8 +187,8 @@ void CnnVerifier::forward(const cv::Mat &crops, const cv::Mat &extra, float *p, 
     }
 }
 
-void CnnVerifier::set_threads(int threads) {
-    if (own_) own_->set_threads(threads);  // cv::dnn keeps its own threading
+void CnnVerifier::set_pool(WorkerPool *pool) {
+    if (own_) own_->set_pool(pool);  // cv::dnn keeps its own threading
 }
 
 double CnnVerifier::own_disagreement() const {

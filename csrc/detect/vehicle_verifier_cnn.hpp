@@ -47,7 +47,7 @@ public:
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                      const std::vector<int> &neighbors, double horizon_row,
                                      double cam_height_m) const override;
-    void set_threads(int threads) override;
+    void set_pool(WorkerPool *pool) override;
     std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
                              double horizon_row, double cam_height_m) const override;
     bool has_box_output() const override { return has_box_; }

@@ -1,5 +1,5 @@
 #include "detect/verifier_net.hpp"
-#include "base/threads.hpp"
+#include "base/worker_pool.hpp"
 
 #include <immintrin.h>
 #include <opencv2/core/utility.hpp>
@@ -293,18 +293,15 @@ std::unique_ptr<VerifierNet> VerifierNet::from_dnn(cv::dnn::Net &net, int crop_h
 
 void VerifierNet::forward(const float *crops, const float *extra, int n, float *p, float *box) const {
     constexpr int kPiece = 4;  // crops a piece of the work: fewer is not worth a thread
-    const int t = usable_threads(threads_), pieces = (n + kPiece - 1) / kPiece;
-    if (t <= 1 || pieces <= 1) {
+    const int pieces = (n + kPiece - 1) / kPiece;
+    if (!pool_ || pool_->threads() <= 1 || pieces <= 1) {
         run(crops, extra, n, p, box, avx2_);
         return;
     }
-    SlotPool running(t);  // at most t pieces at once (base/threads.hpp)
-    cv::parallel_for_(cv::Range(0, pieces), [&](const cv::Range &r) {
-        const int slot = running.take();
-        const int a = r.start * kPiece, b = std::min(n, r.end * kPiece);
+    pool_->run(pieces, [&](int k, int) {  // base/worker_pool.hpp
+        const int a = k * kPiece, b = std::min(n, a + kPiece);
         run(crops + size_t(a) * h_ * w_, extra + 2 * size_t(a), b - a, p + a, box ? box + 4 * size_t(a) : nullptr, avx2_);
-        running.give(slot);
-    }, double(pieces));
+    });
 }
 
 void VerifierNet::forward_plain(const float *crops, const float *extra, int n, float *p, float *box) const {

@@ -26,6 +26,8 @@
 
 namespace hw {
 
+class WorkerPool;
+
 class VerifierNet {
 public:
     // The network `net` (cv::dnn, read from a verifier ONNX) holds, for crops of crop_h x crop_w; null when it is
@@ -36,16 +38,16 @@ public:
     bool has_box() const { return !box_w_.empty(); }
     // n standardised crops (n x crop_h x crop_w floats, one after the other) and their extra features (n x 2): the
     // probabilities p[n] and, when `box` is given and the network has the box output, its offsets (n x 4).
-    // Shared among set_threads() threads (at most the cores the process may use), each a contiguous part of the
-    // crops: every crop's outputs are what one thread gives.
+    // Shared among the threads of set_pool()'s pool (base/worker_pool.hpp), four crops a piece: every crop's
+    // outputs are what one thread gives.
     void forward(const float *crops, const float *extra, int n, float *p, float *box) const;
-    void set_threads(int threads) { threads_ = threads; }
+    void set_pool(WorkerPool *pool) { pool_ = pool; }  // null: the calling thread alone
     // the same in plain loops, direct convolutions (the path of CPUs without AVX2; CnnVerifier's load check compares
     // it with cv::dnn on every CPU)
     void forward_plain(const float *crops, const float *extra, int n, float *p, float *box) const;
 
 private:
-    int threads_ = 1;
+    WorkerPool *pool_ = nullptr;  // not owned
     struct Conv {
         int cin = 0, cout = 0;
         std::vector<float> w;  // [ky][kx][cin][cout]: the output channels contiguous (the SIMD lanes)
