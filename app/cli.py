@@ -236,9 +236,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seconds", type=float, default=10.0, help="length of the --latency run")
 
     s = sub.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
-    s.add_argument("--pipeline", default="thesis",
+    s.add_argument("--pipeline", default="fused",
                    help="preset (named composition of detector and tracker parts) to evaluate: thesis, parallax, "
-                        "parallax_kalman, shadow_particles, phd, cascade, fused, cascade_shadow_phd (default thesis)")
+                        "parallax_kalman, shadow_particles, phd, cascade, fused, cascade_shadow_phd (default fused, "
+                        "the configuration's default)")
     s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range,fcw,road_motion,real_fcw "
                                          "(default all)")
     s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")

@@ -93,9 +93,16 @@ def _source_path(cfg: dict) -> Optional[str]:
 CROSS_FIELD_RULES = (_fcw_order, _mcu_timing, _source_path)
 
 
+# Headway's default composition (docs/RESULTS.md, "Which is the default": fused since session 21). The core's own
+# default, for a pipeline made through the C ABI without a preset, is thesis: it needs no model file, and the shipped
+# models' paths are filled in here (core_sections).
+DEFAULT_PRESET = "fused"
+
+
 def schema() -> dict[str, dict[str, dict]]:
     """Every key of the configuration: {section: {key: {default, type, min, max, choices, doc}}}."""
     s = core_schema()
+    s["pipeline"]["preset"]["default"] = DEFAULT_PRESET
     s.update(copy.deepcopy(SUPERVISOR_SCHEMA))
     return s
 

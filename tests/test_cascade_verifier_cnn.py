@@ -564,19 +564,24 @@ def test_a_box_output_of_the_wrong_shape_is_a_clear_error(tmp_path, outputs):
     pytest.importorskip("onnx", reason="writing ONNX needs the onnx package (test or train extra)")
     path = tmp_path / "box.onnx"
     vo.save_onnx(_random_params(np.random.default_rng(0), box_outputs=outputs), str(path))
-    cfg = configuration.load(None, {"cascade": {"verifier": str(path)}})
-    with Pipeline(configuration.core_sections(cfg)) as pipe:
-        with pytest.raises(ValueError, match=r"cascade.verifier.*box.*not 4 each.*headway train verifier"):
+    _bad_verifier_is_named(str(path), r"cascade.verifier.*box.*not 4 each.*headway train verifier")
+
+
+def _bad_verifier_is_named(path: str, message: str) -> None:
+    """A preset without the cascade loads it on the first single-image stage; the default (fused) when the pipeline
+    is made. Either way the error names the key and how to make a good file."""
+    cfg = configuration.load(None, {"cascade": {"verifier": path}, "pipeline": {"preset": "thesis"}})
+    with Pipeline(configuration.core_sections(cfg)) as pipe:   # the cascade stage loads on first use
+        with pytest.raises(ValueError, match=message):
             pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))
+    with pytest.raises(ValueError, match=message):
+        Pipeline(configuration.core_sections(configuration.load(None, {"cascade": {"verifier": path}})))
 
 
 def test_a_file_that_is_not_a_verifier_network_is_a_clear_error(tmp_path):
     bad = tmp_path / "v.onnx"
     bad.write_bytes(b"not a network")
-    cfg = configuration.load(None, {"cascade": {"verifier": str(bad)}})
-    with Pipeline(configuration.core_sections(cfg)) as pipe:   # the cascade stage loads on first use
-        with pytest.raises(ValueError, match="cascade.verifier.*headway train verifier"):
-            pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))
+    _bad_verifier_is_named(str(bad), "cascade.verifier.*headway train verifier")
 
 
 def test_training_without_the_train_extra_names_it(monkeypatch):
