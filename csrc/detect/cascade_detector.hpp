@@ -50,6 +50,7 @@ struct CascadeParams {
     double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
     int threads = 2;                    // threads the scan's sizes and the verifier's crops are shared among; 1 = caller
+                                        // (base/worker_pool.hpp)
     bool opencv_scan = false;           // scan with cv::CascadeClassifier (the reference) instead of HaarCascade
     bool verifier_dnn = false;          // the CNN verifiers run by cv::dnn (the reference) instead of their own forward pass
     int scan_lanes = 0;                 // windows HaarCascade evaluates at once: 0 = the widest the CPU has, 4, 8
@@ -107,8 +108,10 @@ struct CascadeParams {
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
         m.add("threads", threads, 1, 16,
               "threads the stage runs on, at most the cores the process may use: the window sizes and the verifier "
-              "network's crops shared among them, with the same windows, groups and probabilities as one thread "
-              "(docs/PERFORMANCE.md, session 20); 1 = the calling thread only, as when pinned to one core");
+              "network's crops shared among the caller and the stage's own workers, kept off the caller's core, with "
+              "the same windows, groups and probabilities as one thread; fused's capture-to-CAN p99 in the live loop "
+              "14-16 ms with 2 against 20 with 1 (docs/PERFORMANCE.md, sessions 20-21); 1 = the calling thread only, "
+              "as when pinned to one core");
         m.add("scan_lanes", scan_lanes, 0, 8,
               "windows the own scanner evaluates at once: 0 = the widest this CPU has (8 with AVX2, else 4), 4 = "
               "SSE2, 8 = AVX2; the same detections either way (for tests and CPUs without AVX2)");
