@@ -302,3 +302,47 @@ def test_fused_tracks_the_same_on_two_threads_with_the_cores_idle_between_frames
                 time.sleep(idle_s)
         runs.append(out)
     assert sum(len(r) for r in runs[0]) > 30 and runs[0] == runs[1]
+
+
+def test_a_process_forked_after_the_workers_started_detects_alone_and_exits():
+    """The stage's worker threads (csrc/base/worker_pool.hpp) do not exist in a process forked after they started:
+    there the stage must run everything on the calling thread, with the parent's answer, and closing the pipeline must
+    not wait for the missing workers (a join would hang the child forever)."""
+    import os
+    import time
+
+    from app.sim import load_scenario, render
+    from app.sim.frames import scenario_camera
+
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("one core available: the stage starts no worker whatever cascade.threads says")
+    sc = load_scenario("dense_traffic")
+    frames = [f.image for f in list(render(sc))[:3]]
+    cfg = configuration.load(None, {"cascade": {"threads": 2}})
+    cfg["camera"].update(scenario_camera(sc).to_dict())
+    pipe = Pipeline(configuration.core_sections(cfg)).__enter__()
+    try:
+        expected = [[(*t.box, t.confidence) for t in pipe.run_stage("fused", g).tracks] for g in frames]
+        pid = os.fork()
+        if pid == 0:  # the child: the same answers on its one thread, then a clean close
+            code = 1
+            try:
+                got = [[(*t.box, t.confidence) for t in pipe.run_stage("fused", g).tracks] for g in frames]
+                pipe.__exit__(None, None, None)
+                code = 0 if got == expected else 2
+            finally:
+                os._exit(code)
+        deadline = time.monotonic() + 60
+        while True:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                break
+            if time.monotonic() > deadline:
+                os.kill(pid, 9)
+                os.waitpid(pid, 0)
+                pytest.fail("the forked child did not finish within 60 s (waiting for workers it does not have?)")
+            time.sleep(0.05)
+        assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, f"child exit status {status}"
+        assert sum(len(r) for r in expected) > 3
+    finally:
+        pipe.__exit__(None, None, None)

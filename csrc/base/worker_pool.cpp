@@ -2,6 +2,7 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -14,14 +15,22 @@ int usable_threads(int wanted) {
     return std::max(1, std::min(wanted, cores));
 }
 
-WorkerPool::WorkerPool(int threads) : threads_(std::max(1, threads)) {}
+WorkerPool::WorkerPool(int threads)
+    : threads_(std::max(1, threads)), sync_(std::make_unique<Sync>()), owner_pid_(int(getpid())) {}
 
 WorkerPool::~WorkerPool() {
+    if (int(getpid()) != owner_pid_) {
+        // a forked child: its copies name threads that do not run in it (joining them, or destroying the locks they
+        // waited on, would wait forever), so they are let go
+        for (auto &t : workers_) t.detach();
+        (void)sync_.release();
+        return;
+    }
     {
-        std::lock_guard<std::mutex> lock(mu_);
+        std::lock_guard<std::mutex> lock(sync_->mu);
         quit_ = true;
     }
-    wake_.notify_all();
+    sync_->wake.notify_all();
     for (auto &t : workers_) t.join();
 }
 
@@ -48,7 +57,7 @@ void WorkerPool::drain(int slot) {
         try {
             (*job_)(i, slot);
         } catch (...) {
-            std::lock_guard<std::mutex> lock(mu_);
+            std::lock_guard<std::mutex> lock(sync_->mu);
             if (!error_) error_ = std::current_exception();
         }
     }
@@ -58,8 +67,8 @@ void WorkerPool::work(int slot) {
     unsigned long seen = 0;
     for (;;) {
         {
-            std::unique_lock<std::mutex> lock(mu_);
-            wake_.wait(lock, [&] { return quit_ || generation_ != seen; });
+            std::unique_lock<std::mutex> lock(sync_->mu);
+            sync_->wake.wait(lock, [&] { return quit_ || generation_ != seen; });
             if (quit_) return;
             seen = generation_;
             // a worker that wakes after the caller has run out of items stays out: the caller waits only for the
@@ -69,14 +78,14 @@ void WorkerPool::work(int slot) {
         }
         drain(slot);
         {
-            std::lock_guard<std::mutex> lock(mu_);
-            if (active_.fetch_sub(1) == 1) done_.notify_one();
+            std::lock_guard<std::mutex> lock(sync_->mu);
+            if (active_.fetch_sub(1) == 1) sync_->done.notify_one();
         }
     }
 }
 
 void WorkerPool::run(int n, const std::function<void(int, int)> &fn) {
-    const int t = std::min(threads(), n);
+    const int t = int(getpid()) == owner_pid_ ? std::min(threads(), n) : 1;  // forked: the workers are not here
     if (t <= 1) {
         for (int i = 0; i < n; ++i) fn(i, 0);
         return;
@@ -84,7 +93,7 @@ void WorkerPool::run(int n, const std::function<void(int, int)> &fn) {
     start(t - 1);
     place();
     {
-        std::lock_guard<std::mutex> lock(mu_);
+        std::lock_guard<std::mutex> lock(sync_->mu);
         job_ = &fn;
         n_ = n;
         next_.store(0);
@@ -93,10 +102,10 @@ void WorkerPool::run(int n, const std::function<void(int, int)> &fn) {
         closed_ = false;
         ++generation_;
     }
-    wake_.notify_all();
+    sync_->wake.notify_all();
     drain(0);
     {
-        std::lock_guard<std::mutex> lock(mu_);
+        std::lock_guard<std::mutex> lock(sync_->mu);
         closed_ = true;
     }
     // A worker that joined holds at most one item when the caller runs out: wait for it spinning a little (a
@@ -104,8 +113,8 @@ void WorkerPool::run(int n, const std::function<void(int, int)> &fn) {
     const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(2);
     while (active_.load() > 0 && std::chrono::steady_clock::now() < until) {
     }
-    std::unique_lock<std::mutex> lock(mu_);
-    done_.wait(lock, [&] { return active_.load() == 0; });
+    std::unique_lock<std::mutex> lock(sync_->mu);
+    sync_->done.wait(lock, [&] { return active_.load() == 0; });
     job_ = nullptr;
     if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
 }

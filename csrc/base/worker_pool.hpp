@@ -18,6 +18,7 @@
 #include <condition_variable>
 #include <exception>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <utility>
@@ -40,7 +41,8 @@ public:
     // the threads a call would use now: at most threads, at most the cores the caller may run on
     int threads() const { return usable_threads(threads_); }
     // fn(item, slot) for every item 0 .. n-1; returns when all are done. An exception thrown by fn is rethrown
-    // here (the first one; the other items still run). Not reentrant: one caller at a time.
+    // here (the first one; the other items still run). Not reentrant: one caller at a time. In a process forked
+    // after the workers started (which has only the forking thread) everything runs on the caller.
     void run(int n, const std::function<void(int item, int slot)> &fn);
 
 private:
@@ -51,11 +53,16 @@ private:
 
     int threads_ = 1;
     std::vector<std::thread> workers_;
-    std::mutex mu_;
-    std::condition_variable wake_, done_;
+    // The locks, held apart: a forked child leaves them behind instead of destroying them (a condition variable the
+    // parent's workers waited on is never free in the child, and destroying it would wait forever).
+    struct Sync {
+        std::mutex mu;
+        std::condition_variable wake, done;
+    };
+    std::unique_ptr<Sync> sync_;
     unsigned long generation_ = 0;         // one per call; a worker runs each generation once
     int participants_ = 0;                 // workers (slots 1 .. participants_) in the current call
-    std::atomic<int> active_{0};           // workers inside the current call (changed under mu_)
+    std::atomic<int> active_{0};           // workers inside the current call (changed under sync_->mu)
     bool closed_ = true;                   // the caller has run out of items: no worker joins any more
     bool quit_ = false;
     const std::function<void(int, int)> *job_ = nullptr;
@@ -63,6 +70,7 @@ private:
     int n_ = 0;
     std::exception_ptr error_;
     int placed_cpu_ = -1;                  // the caller's core the workers were last kept off
+    int owner_pid_ = 0;                    // the process the workers run in (a forked child has none of them)
 };
 
 } // namespace hw
