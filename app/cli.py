@@ -239,12 +239,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--pipeline", default="fused",
                    help="preset (named composition of detector and tracker parts) to evaluate: thesis, parallax, "
                         "parallax_kalman, shadow_particles, phd, cascade, fused, cascade_shadow_phd (default fused, "
-                        "the configuration's default)")
+                        "the configuration's default); several separated by commas (e.g. thesis,parallax,cascade,fused) "
+                        "are evaluated one after another, each into OUT/PRESET/, and set side by side in OUT/compare.md")
     s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range,fcw,road_motion,real_fcw "
                                          "(default all)")
     s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
-    s.add_argument("--out", help="report folder (default reports/eval-PIPELINE)")
+    s.add_argument("--out", help="report folder (default reports/eval-PIPELINE; with several presets "
+                                 "reports/eval-A-B-...)")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--workers", type=int, help="run the synthetic and FCW scenarios on a local Dask cluster of N "
                                                "worker processes (docs/fleet.md)")

@@ -232,16 +232,45 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
     return report
 
 
+def presets_of(arg: str) -> list[str]:
+    """The presets --pipeline names (one, or several separated by commas), each checked against the core's list."""
+    from app import config as configuration
+
+    known = configuration.schema()["pipeline"]["preset"]["choices"].split("|")
+    presets = [p.strip() for p in arg.split(",") if p.strip()]
+    bad = [p for p in presets if p not in known]
+    if bad or not presets:
+        raise ValueError(f"--pipeline: unknown preset(s) {', '.join(bad) or repr(arg)}; choose from {', '.join(known)} "
+                         "(several separated by commas are set side by side)")
+    if len(set(presets)) != len(presets):
+        raise ValueError(f"--pipeline: {arg!r} names a preset twice")
+    return presets
+
+
 def main(args) -> int:
     parts = tuple(args.parts.split(",")) if args.parts else PARTS
     unknown = set(parts) - set(PARTS)
     if unknown:
         raise ValueError(f"--parts: unknown part(s) {', '.join(sorted(unknown))}; choose from {', '.join(PARTS)}")
-    out = args.out or f"reports/eval-{args.pipeline}"
+    presets = presets_of(args.pipeline)
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers {args.workers}: need at least one worker")
-    report = run(args.pipeline, out, parts, args.data, args.config,
-                 args.scenarios.split(",") if args.scenarios else None, workers=args.workers, scheduler=args.scheduler)
-    print(markdown(report))
-    print(f"\nreport: {Path(out).resolve()}/report.json, report.md, examples/")
+    scenarios = args.scenarios.split(",") if args.scenarios else None
+    out = Path(args.out or f"reports/eval-{'-'.join(presets)}")
+    if len(presets) == 1:
+        report = run(presets[0], str(out), parts, args.data, args.config, scenarios, workers=args.workers,
+                     scheduler=args.scheduler)
+        print(markdown(report))
+        print(f"\nreport: {out.resolve()}/report.json, report.md, examples/")
+        return 0
+    from app.eval import compare
+
+    reports = [run(p, str(out / p), parts, args.data, args.config, scenarios, workers=args.workers,
+                   scheduler=args.scheduler) for p in presets]
+    text = compare.markdown(reports, folders=presets)
+    (out / "compare.md").write_text(text)
+    (out / "compare.json").write_text(json.dumps({"presets": presets, "parts": list(parts),
+                                                  "reports": [f"{p}/report.json" for p in presets]}, indent=1))
+    print(text, end="")
+    print(f"\nreport: {out.resolve()}/compare.md, and each preset's in {out.resolve()}/PRESET/")
     return 0
