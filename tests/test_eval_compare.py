@@ -73,3 +73,19 @@ def test_a_bad_preset_list_is_named(tmp_path, arg, message):
     assert r.returncode != 0
     assert re.search(message, r.stderr), r.stderr
     assert not (tmp_path / "x").exists()  # nothing run
+
+
+def test_a_preset_without_a_single_image_detector_skips_the_tusimple_images_with_the_reason(tmp_path):
+    """The parallax detector compares a frame with the one before: `headway eval` of parallax (alone or beside other
+    presets) leaves the single-image TuSimple part out with the reason, and measures the rest."""
+    from tests.conftest import data_path
+
+    data_path("tusimple", "supp")
+    out = tmp_path / "p"
+    r = headway("eval", "--pipeline", "parallax", "--parts", "tusimple,synthetic", "--scenarios", "steady_following",
+                "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((out / "report.json").read_text())
+    assert "tusimple" not in rep and "two frames" in rep["skipped"]["tusimple"]
+    assert rep["synthetic"]["overall"]["mota"] > 0.5
+    assert "skipped tusimple" in (out / "report.md").read_text()

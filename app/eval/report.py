@@ -114,6 +114,7 @@ def markdown(report: dict) -> str:
 
         out += ["### False warnings on the real recordings (nothing dangerous happens in them)", "",
                 real_video_fcw.markdown(rv, report["preset"]), ""]
+    out += [f"(skipped {name}: {why})" for name, why in report.get("skipped", {}).items()]
     return "\n".join(out)
 
 
@@ -157,7 +158,10 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
                     shown[0] += 1
 
             say("TuSimple images")
-            report["tusimple"] = tusimple_boxes.evaluate(str(supp), config_path, preset, on_image=keep)
+            try:
+                report["tusimple"] = tusimple_boxes.evaluate(str(supp), config_path, preset, on_image=keep)
+            except tusimple_boxes.NoSingleImageDetector as e:
+                report["skipped"]["tusimple"] = str(e)
         else:
             report["skipped"]["tusimple"] = f"{supp} not found"
     if "lanes" in parts:

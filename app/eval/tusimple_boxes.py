@@ -103,6 +103,10 @@ def load_entries(supp_dir: str, limit: Optional[int] = None) -> list[dict]:
     return json.loads((Path(supp_dir) / "annotation.json").read_text())[:limit]
 
 
+class NoSingleImageDetector(ValueError):
+    """The preset's detectors all need two frames (the parallax detector): single images cannot be scored."""
+
+
 def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "thesis", limit: Optional[int] = None,
              on_image: Optional[Callable] = None) -> dict:
     root = Path(supp_dir)
@@ -111,6 +115,14 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
     # not tracking presets
     stage = preset if preset in ("cascade", "fused") else "detect"
     cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}} if stage == "detect" else None))
+    if stage == "detect":
+        named = cfg["pipeline"].get("detectors") or configuration.presets().get(preset, {}).get("detectors") or []
+        named = named.split(",") if isinstance(named, str) else named
+        if not [d for d in named if d.strip() and d.strip() != "parallax"]:
+            raise NoSingleImageDetector(
+                f"preset {preset}: its detectors ({', '.join(named) or 'none'}) need two frames (the parallax detector "
+                "compares a frame with the one before), so single images cannot be scored; its tracking is measured by "
+                "the other parts")
     scored = []
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for e in entries:
