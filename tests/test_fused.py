@@ -142,11 +142,14 @@ def _frames_on_the_white_car(preset: str, **sections) -> int:
 
 def test_fused_tracks_the_far_car_ahead_that_shadows_alone_miss():
     """solidWhiteRight's white car ahead, 45-54 m away: the tracked `fused` preset has a confirmed track on it on
-    the six labelled frames (measured 6 of 6), thesis (shadows and edges) on none; with the cascade's scan spread
-    over 4 full detections (cascade.tracked_slices 4) the car is lost too, which is why fused scans every size."""
+    the six labelled frames (measured 6 of 6), thesis (shadows and edges) on none. The preset spreads the cascade's
+    scan of the nearer sizes over 4 full detections but scans a car's sizes beyond 35 m every time
+    (cascade.tracked_far_m); with every size spread (tracked_far_m 0) the car is lost, with the whole scan on every
+    detection (tracked_slices 1) it is kept too."""
     assert _frames_on_the_white_car("fused") >= 5
+    assert _frames_on_the_white_car("fused", cascade={"tracked_slices": 1}) >= 5
     assert _frames_on_the_white_car("thesis") == 0
-    assert _frames_on_the_white_car("fused", cascade={"tracked_slices": 4}) <= 1
+    assert _frames_on_the_white_car("fused", cascade={"tracked_far_m": 0.0}) <= 1
 
 
 def test_fused_starts_no_second_track_beside_a_tracked_car(tmp_path):

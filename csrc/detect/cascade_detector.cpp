@@ -101,14 +101,19 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         bands.push_back({f, ws, hs, x0, y0, x1, y1, in0, in1,
                          std::max(0.0, (x1 - x0 - ws) / step + 1) * std::max(0.0, (y1 - y0 - hs) / step + 1)});
     }
-    size_t first = 0, last = bands.size();
+    // The far sizes (tracked_far_m: window heights of a 1.5 m car beyond that range) are scanned every time; the
+    // rest, all sizes without it, are cut into `slices` blocks.
+    size_t far = 0;
+    if (slices > 1 && p_.tracked_far_m > 0.0)
+        while (far < bands.size() && bands[far].hs <= cam.fy * 1.5 / p_.tracked_far_m) ++far;
+    size_t first = far, last = bands.size();
     if (slices > 1) {
         // Contiguous blocks of sizes (a vehicle's sizes stay together: it is grouped and verified once) of about
         // equal cost: a block closes where taking the next size would pass the remaining windows' fair share by
         // more than stopping leaves it short; every block gets a size while there are sizes enough.
         double left = 0.0;
-        for (const Band &b : bands) left += b.windows;
-        size_t i = 0;
+        for (size_t j = far; j < bands.size(); ++j) left += bands[j].windows;
+        size_t i = far;
         for (int k = 0; k < slices; ++k) {
             const size_t begin = i;
             const double share = left / double(slices - k);
@@ -127,10 +132,13 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     }
     // Each size's windows, scanned on up to `threads` threads, a size at a time (base/worker_pool.hpp), each thread
     // with its own HaarCascade (scratch buffers); gathered in size order: the windows of one thread.
-    const size_t nb = last - first;
+    std::vector<size_t> scanned;  // the bands of this call, smallest size first: the far ones, then the slice
+    for (size_t j = 0; j < far; ++j) scanned.push_back(j);
+    for (size_t j = first; j < last; ++j) scanned.push_back(j);
+    const size_t nb = scanned.size();
     std::vector<std::vector<HaarWindow>> found(nb);
     auto scan_band = [&](size_t k, const HaarCascade *haar) {
-        const Band &bd = bands[first + k];
+        const Band &bd = bands[scanned[k]];
         const double f = bd.f;
         cv::Mat roi = gray(cv::Rect(bd.in0, bd.y0, bd.in1 - bd.in0, bd.y1 - bd.y0)), padded, band;
         if (bd.in0 > bd.x0 || bd.in1 < bd.x1)  // the band reaches past a border: black there
@@ -156,7 +164,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         });
     }
     for (size_t k = 0; k < nb; ++k) {  // the window size's index in this call: one bucket of by_x below
-        const Band &bd = bands[first + k];
+        const Band &bd = bands[scanned[k]];
         for (const HaarWindow &w : found[k])
             raw.push_back({cv::Rect2f(float(bd.x0 + w.x * bd.f), float(bd.y0 + w.y * bd.f), float(bd.ws), float(bd.hs)),
                            float(w.stage_sum), int(k)});

@@ -69,6 +69,7 @@ struct CascadeParams {
     double nms_iou = 0.3;               // a detection overlapping a more confident one this much is dropped (1 = none)
     double border_frac = 0.5;           // share of a window's width that may lie beyond the left or right border
     int tracked_slices = 1;             // tracked: the scan spread over this many full detections, a block of sizes each
+    double tracked_far_m = 0.0;         // tracked slices: a car's sizes beyond this range (m) scanned every time (0: none)
 
     void bind(ParamMap &m) {
         m.add("model", model, nullptr,
@@ -199,7 +200,14 @@ struct CascadeParams {
               "vehicles score as with 1, but the far car ahead on solidWhiteRight.mp4 (45-54 m) is lost from 2 slices "
               "up (tracked 181 frames with 1, 98 with 2, 32 with 3, none with 4 or more), and with the cascade alone "
               "(preset cascade) so is steady_following's lead. 1 = every size on every full detection (the "
-              "default). Single images (`headway detect`, the evaluation's TuSimple images) always scan every size");
+              "default). Single images (`headway detect`, the evaluation's TuSimple images) always scan every size; "
+              "see tracked_far_m for the far vehicles");
+        m.add("tracked_far_m", tracked_far_m, 0.0, 1000.0,
+              "m; with tracked_slices > 1, the window sizes of a car (1.5 m high) farther than this, fy 1.5 / "
+              "tracked_far_m px and smaller, are scanned on every full detection, and only the larger sizes are cut "
+              "into tracked_slices blocks: the far vehicles the cascade alone finds keep being scanned as often as "
+              "without slices, the near ones (which the shadows and parallax find on every detection too) less often. "
+              "0 = every size in the blocks (docs/PERFORMANCE.md, session 21)");
         m.add("border_frac", border_frac, 0.0, 0.5,
               "share of a window's width that may lie beyond the image's left or right border (black there); at most "
               "half, as the scan reaches past the road area's sides: a vehicle the border cuts (passing, or being "
@@ -231,7 +239,7 @@ public:
     // `single_image`: one image alone (no tracker follows), where the moved boxes (refine_boxes) are reported; in
     // a tracked pipeline only with refine_tracked (else each detection keeps its group's mean box).
     // `slice` of `slices`: only that block of the window sizes is scanned (contiguous sizes of about equal cost,
-    // smallest first; tracked_slices); 0 of 1 = every size.
+    // smallest first; tracked_slices), with the far sizes (tracked_far_m) every time; 0 of 1 = every size.
     std::vector<CascadeDetection> detect(const cv::Mat &gray, const LaneModel &lanes, const CameraParams &cam,
                                          bool single_image = true, int slice = 0, int slices = 1) const;
 
