@@ -324,13 +324,21 @@ def frame_size_problem(width: int, height: int) -> Optional[str]:
 def default_yaml() -> str:
     """The documented default configuration, every key with its reason (for `headway config default`)."""
     lines = ["# Headway configuration. Give only the keys you change; the rest are these defaults.", ""]
+    # keys the default preset sets are shown commented out: written out, they would stay set under another preset
+    preset = schema()["pipeline"]["preset"]["default"]
+    by_preset = presets().get(preset, {}).get("keys", {})
+    as_text = lambda v: yaml.safe_dump(v, default_flow_style=True).strip().removesuffix("...").strip()  # noqa: E731
     for sec, keys in schema().items():
         lines.append(f"{sec}:")
         for key, spec in keys.items():
             rng = f" [{spec['min']}, {spec['max']}]" if "min" in spec else ""
             ch = f" one of {_choices(spec)}" if "choices" in spec else ""
             lines.append(f"  # {spec['doc']}{rng}{ch}")
-            lines.append(f"  {key}: {yaml.safe_dump(spec['default'], default_flow_style=True).strip().removesuffix('...').strip()}")
+            if key in by_preset.get(sec, {}):
+                lines.append(f"  # {key}: {as_text(by_preset[sec][key])}   (set by the preset {preset}; without it "
+                             f"{as_text(spec['default'])})")
+            else:
+                lines.append(f"  {key}: {as_text(spec['default'])}")
         lines.append("")
     return "\n".join(lines)
 

@@ -71,10 +71,17 @@ def test_device_index_or_path():
 
 
 def test_default_yaml_documents_every_key_and_loads_back(tmp_path):
+    """Every key documented with its default; the keys the default preset sets, commented out with the preset's value
+    (written out they would stay set under another preset); loaded back, the defaults."""
     text = configuration.default_yaml()
+    preset = configuration.defaults()["pipeline"]["preset"]
+    by_preset = configuration.presets()[preset]["keys"]
     for sec, keys in configuration.schema().items():
         for key in keys:
-            assert f"  {key}:" in text, f"{sec}.{key} missing from the documented default"
+            if key in by_preset.get(sec, {}):
+                assert f"  # {key}: " in text and f"(set by the preset {preset};" in text, f"{sec}.{key}"
+            else:
+                assert f"  {key}:" in text, f"{sec}.{key} missing from the documented default"
     assert configuration.load(write(tmp_path, text)) == configuration.defaults()
     assert yaml.safe_load(text)["camera"]["fx"] == configuration.defaults()["camera"]["fx"]
 

@@ -5,15 +5,17 @@ from __future__ import annotations
 
 import pytest
 
+from app import config as configuration
 from app.config import SHIPPED_CASCADE
 from app.core import ConfigError, Pipeline, core_schema
 from tests.thesis_scenes import config, frames
 
 
-def _run(name: str, pipeline: dict, n: int) -> list:
+def _run(name: str, pipeline: dict, n: int, cascade: dict | None = None) -> list:
     cfg = config(name)
     cfg["pipeline"] = pipeline
-    cfg["cascade"] = {"model": str(SHIPPED_CASCADE)}  # the core alone has no default model (app/config.py fills it)
+    # the core alone has no default model (app/config.py fills it)
+    cfg["cascade"] = {"model": str(SHIPPED_CASCADE), **(cascade or {})}
     with Pipeline(cfg) as p:
         return [p.process(f.image, f.t_s) for f in frames(name)[:n]]
 
@@ -36,8 +38,12 @@ def test_the_registries_are_in_the_configuration_schema():
                                                        ("cascade", ["cascade"], "phd"),
                                                        ("fused", ["cascade", "shadow", "parallax"], "kalman")])
 def test_a_preset_is_its_composition(preset, detectors, tracker):
+    """A preset is its parts and the keys it sets (fused: the cascade's tracked slices)."""
     by_name = _run("steady_following", {"preset": preset}, 40)
-    by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40)
+    keys = configuration.presets()[preset]["keys"]
+    assert set(keys) <= {"cascade"}
+    by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40,
+                    keys.get("cascade"))
     assert _boxes(by_name) == _boxes(by_parts)
     assert [r.stages.keys() for r in by_name] == [r.stages.keys() for r in by_parts]
 

@@ -28,9 +28,11 @@ def test_the_preset_lists_its_parts_and_keys():
     p = configuration.presets()[PRESET]
     assert p == {"detectors": ["cascade", "shadow"], "tracker": "phd",
                  "keys": {"merge": {"min_appearance": 0.9, "appearance_lanes": 2}}}
-    # the presets of before set no key: their behaviour is the global defaults'
-    for name in ("thesis", "parallax", "parallax_kalman", "shadow_particles", "phd", "cascade", "fused", "none"):
+    # the presets of before set no key: their behaviour is the global defaults'; fused spreads its tracked scan of
+    # the near sizes over 4 detections, the far ones every time (session 21)
+    for name in ("thesis", "parallax", "parallax_kalman", "shadow_particles", "phd", "cascade", "none"):
         assert configuration.presets()[name]["keys"] == {}
+    assert configuration.presets()["fused"]["keys"] == {"cascade": {"tracked_slices": 4, "tracked_far_m": 35.0}}
 
 
 def test_the_presets_key_is_its_default_and_the_configuration_wins(tmp_path):
@@ -79,7 +81,8 @@ def test_config_doc_lists_the_presets_and_their_keys():
     doc = configuration.markdown()
     assert "## Presets" in doc
     assert f"| `{PRESET}` | cascade, shadow | phd | `merge.appearance_lanes: 2`, `merge.min_appearance: 0.9` |" in doc
-    assert "| `fused` | cascade, shadow, parallax | kalman | - |" in doc
+    assert ("| `fused` | cascade, shadow, parallax | kalman | `cascade.tracked_far_m: 35.0`, `cascade.tracked_slices: 4` |"
+            in doc)
 
 
 def _run(name: str, n: int, **sections) -> list:

@@ -111,7 +111,7 @@ struct CascadeParams {
               "threads the stage runs on, at most the cores the process may use: the window sizes and the verifier "
               "network's crops shared among the caller and the stage's own workers, kept off the caller's core, with "
               "the same windows, groups and probabilities as one thread; fused's capture-to-CAN p99 in the live loop "
-              "14-16 ms with 2 against 20 with 1 (docs/PERFORMANCE.md, sessions 20-21); 1 = the calling thread only, "
+              "11-18 ms with 2 against 14-26 with 1 (docs/PERFORMANCE.md, sessions 20-21); 1 = the calling thread only, "
               "as when pinned to one core");
         m.add("scan_lanes", scan_lanes, 0, 8,
               "windows the own scanner evaluates at once: 0 = the widest this CPU has (8 with AVX2, else 4), 4 = "
