@@ -325,10 +325,11 @@ def default_yaml() -> str:
     """The documented default configuration, every key with its reason (for `headway config default`)."""
     lines = ["# Headway configuration. Give only the keys you change; the rest are these defaults.", ""]
     # keys the default preset sets are shown commented out: written out, they would stay set under another preset
-    preset = schema()["pipeline"]["preset"]["default"]
+    sections = schema()
+    preset = sections["pipeline"]["preset"]["default"]
     by_preset = presets().get(preset, {}).get("keys", {})
     as_text = lambda v: yaml.safe_dump(v, default_flow_style=True).strip().removesuffix("...").strip()  # noqa: E731
-    for sec, keys in schema().items():
+    for sec, keys in sections.items():
         lines.append(f"{sec}:")
         for key, spec in keys.items():
             rng = f" [{spec['min']}, {spec['max']}]" if "min" in spec else ""

@@ -7,12 +7,10 @@ from __future__ import annotations
 
 from typing import Optional
 
+from app.eval.report import _f
+
 # thresholds of the TuSimple score curve shown (the curve holds more; these are where operating points lie)
 CURVE_THRESHOLDS = (0.0, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.99)
-
-
-def _f(x, nd=3) -> str:
-    return "n/a" if x is None else f"{x:.{nd}f}"
 
 
 def _rp(recall, precision) -> str:

@@ -240,7 +240,7 @@ def presets_of(arg: str) -> list[str]:
     """The presets --pipeline names (one, or several separated by commas), each checked against the core's list."""
     from app import config as configuration
 
-    known = configuration.schema()["pipeline"]["preset"]["choices"].split("|")
+    known = list(configuration.presets())
     presets = [p.strip() for p in arg.split(",") if p.strip()]
     bad = [p for p in presets if p not in known]
     if bad or not presets:

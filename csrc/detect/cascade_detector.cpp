@@ -43,6 +43,8 @@ CascadeDetector::~CascadeDetector() = default;
 
 namespace {
 
+const double kCarHeightM = 1.5;  // m; the vehicle whose range tracked_far_m states (a car)
+
 struct Raw {
     cv::Rect2f box;
     float weight;
@@ -101,11 +103,11 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         bands.push_back({f, ws, hs, x0, y0, x1, y1, in0, in1,
                          std::max(0.0, (x1 - x0 - ws) / step + 1) * std::max(0.0, (y1 - y0 - hs) / step + 1)});
     }
-    // The far sizes (tracked_far_m: window heights of a 1.5 m car beyond that range) are scanned every time; the
+    // The far sizes (tracked_far_m: window heights of a car beyond that range) are scanned every time; the
     // rest, all sizes without it, are cut into `slices` blocks.
     size_t far = 0;
     if (slices > 1 && p_.tracked_far_m > 0.0)
-        while (far < bands.size() && bands[far].hs <= cam.fy * 1.5 / p_.tracked_far_m) ++far;
+        while (far < bands.size() && bands[far].hs <= cam.fy * kCarHeightM / p_.tracked_far_m) ++far;
     size_t first = far, last = bands.size();
     if (slices > 1) {
         // Contiguous blocks of sizes (a vehicle's sizes stay together: it is grouped and verified once) of about
