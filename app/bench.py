@@ -3,6 +3,8 @@
 Frames are rendered first (not timed), then fed through ``process()`` - the per-frame code of the
 real-time loop. Frames with a full detection and tracking-only frames are reported apart, because
 the thesis pipeline's cost depends on which kind a frame is.
+
+`headway bench --images DIR`: what `headway detect` spends on each image, part by part (run_image_bench).
 """
 from __future__ import annotations
 
@@ -10,7 +12,9 @@ import contextlib
 import json
 import os
 import platform
-from typing import Optional
+import time
+from pathlib import Path
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -49,6 +53,104 @@ def run_bench(scenario: str = "dense_traffic", preset: Optional[str] = None, wid
         "stages": {bucket: {name: _stats(v) for name, v in stages.items()} for bucket, stages in per_kind.items()
                    if stages},
     }
+
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
+
+
+class BenchError(ValueError):
+    pass
+
+
+def image_paths(sources: Sequence[str], limit: Optional[int] = None) -> list[str]:
+    """Image files: each source a file, or a folder whose images (by suffix) are taken in name order; the first
+    `limit` of all."""
+    paths: list[str] = []
+    for src in sources:
+        p = Path(src)
+        if p.is_dir():
+            found = sorted(str(f) for f in p.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
+            if not found:
+                raise BenchError(f"--images {src}: the folder holds no image ({', '.join(IMAGE_SUFFIXES)}); "
+                                 f"give a folder of images or image files")
+            paths += found
+        elif p.is_file():
+            paths.append(str(p))
+        else:
+            raise BenchError(f"--images {src}: no such file or folder")
+    return paths[:limit] if limit else paths
+
+
+def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, config_path: Optional[str] = None,
+                    limit: Optional[int] = 100, repeats: int = 1) -> dict:
+    """`headway detect`'s work on each image, timed part by part: "read" (the file read, checked whole, decoded
+    and its size checked: detect_images' read_image and frame_size_problem), the core's stages of the
+    detector's single-image stage (lanes; for the cascade, "cascade" = the scan, grouping and suppression and
+    "verifier" = its network's looks; "verify" = the shadow hypotheses and their vertical edges), "core" (the
+    core's whole stage) and "total" (read, the stage and the output entry: what one more image costs
+    `headway detect`, its start-up not counted). Each image size's pipeline detects its first image once untimed
+    first (loading the cascade and the verifier)."""
+    from app.detect_images import DEFAULT_DETECTOR, OPERATING_POINT, STAGES, image_entry, image_pipeline
+    from app.recording import read_image
+
+    detector = detector or DEFAULT_DETECTOR
+    if detector not in STAGES:
+        raise BenchError(f"--detector {detector}: one of {', '.join(STAGES)}")
+    paths = image_paths(sources, limit)
+
+    def read(path):  # as detect_images reads: (gray, "") or (None, why)
+        gray, why = read_image(path)
+        if gray is None:
+            return None, f"cannot be read as an image ({why})"
+        why = configuration.frame_size_problem(gray.shape[1], gray.shape[0])
+        return (None, why) if why else (gray, "")
+
+    base = configuration.load(config_path)
+    pipes: dict[tuple[int, int], Pipeline] = {}
+    times: dict[str, list[float]] = {}
+    skipped: list[str] = []
+    try:
+        for rep in range(repeats):
+            for path in paths:
+                t0 = time.perf_counter()
+                gray, why = read(path)
+                t_read = time.perf_counter()
+                if why:
+                    if rep == 0:
+                        skipped.append(f"{path}: {why}")
+                    continue
+                size = (gray.shape[1], gray.shape[0])
+                if size not in pipes:  # a new size: its pipeline, warmed up (the models loaded) untimed
+                    pipes[size] = image_pipeline(base, *size)
+                    pipes[size].run_stage(STAGES[detector], gray)
+                    t0 = time.perf_counter()
+                    gray, _ = read(path)
+                    t_read = time.perf_counter()
+                r = pipes[size].run_stage(STAGES[detector], gray)
+                image_entry(path, r, OPERATING_POINT[detector])
+                t1 = time.perf_counter()
+                for name, ms in [("read", 1000.0 * (t_read - t0)), *r.stages.items(), ("core", r.total_ms),
+                                 ("total", 1000.0 * (t1 - t0))]:
+                    times.setdefault(name, []).append(ms)
+    finally:
+        for p in pipes.values():
+            p.close()
+    if "total" not in times:
+        raise BenchError("--images: none of the images can be used: " + "; ".join(skipped[:5]))
+    return {"detector": detector, "images": len(times["total"]), "skipped": skipped,
+            "frame_sizes": sorted(f"{w}x{h}" for w, h in pipes),
+            "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
+            "stages": {"image": {name: _stats(v) for name, v in times.items()}}}
+
+
+def format_image_table(report: dict) -> str:
+    lines = [f"headway bench --images: `headway detect --detector {report['detector']}`, per image, "
+             f"{report['images']} images of {', '.join(report['frame_sizes'])} ({report['machine']})", "",
+             "| part | n | median ms | p99 ms |", "| --- | ---: | ---: | ---: |"]
+    for name, s in report["stages"]["image"].items():
+        lines.append(f"| {name} | {s['n']} | {s['median_ms']:.3f} | {s['p99_ms']:.3f} |")
+    lines += [f"skipped {line}" for line in report["skipped"]]
+    return "\n".join(lines)
 
 
 def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, config_path: Optional[str] = None,
@@ -150,6 +252,12 @@ def main(args) -> int:
     if args.latency:
         report = run_latency_bench(args.scenario, args.seconds, args.config, args.preset)
         print(json.dumps(report, indent=2) if args.json else format_latency(report))
+        return 0
+    if args.images:
+        with pinned_to_one_core() as core:
+            report = run_image_bench(args.images, args.detector, args.config, args.limit or None, args.repeats)
+        report["machine"] += f", pinned to core {core}" if core is not None else ", not pinned to a core"
+        print(json.dumps(report, indent=2) if args.json else format_image_table(report))
         return 0
     with pinned_to_one_core() as core:
         report = run_bench(args.scenario, args.preset, args.width, args.height, args.repeats, args.config)

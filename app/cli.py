@@ -228,12 +228,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--preset", help="pipeline preset (default: the configuration's)")
     s.add_argument("--width", type=int, default=640)
     s.add_argument("--height", type=int, default=480)
-    s.add_argument("--repeats", type=int, default=3, help="passes over the scenario")
+    s.add_argument("--repeats", type=int, default=3, help="passes over the scenario (with --images: over the images)")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
     s.add_argument("--latency", action="store_true",
                    help="measure capture-to-CAN latency and the supervisor's CPU per frame through the live loop")
     s.add_argument("--seconds", type=float, default=10.0, help="length of the --latency run")
+    s.add_argument("--images", nargs="+", metavar="PATH",
+                   help="time `headway detect` instead, per image and part (reading and decoding, lanes, the cascade's "
+                        "scan, its verifier, the shadows), on these image files or folders of images")
+    s.add_argument("--detector", choices=["thesis", "cascade", "fused"],
+                   help="with --images: the detector timed (default fused, as headway detect)")
+    s.add_argument("--limit", type=int, default=100, help="with --images: the first this many images (0 = all)")
 
     s = sub.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
     s.add_argument("--pipeline", default="fused",

@@ -38,6 +38,21 @@ DEFAULT_DETECTOR = "fused"  # issue 12: single images get the cascade and the sh
 OPERATING_POINT = {"thesis": 0.0, "cascade": 0.77, "fused": 0.79}
 
 
+def image_pipeline(base: dict, width: int, height: int) -> Pipeline:
+    """The pipeline that detects in images of this size: the configuration with its camera scaled to them."""
+    cfg = dict(base)
+    cfg["camera"] = configuration.scaled_camera(base["camera"], width, height)
+    return Pipeline(configuration.core_sections(cfg))
+
+
+def image_entry(path: str, result, min_score: float) -> dict:
+    """The output's entry of one image: its detections scoring at least `min_score`."""
+    return {"file_name": Path(path).name, "bbox": [
+        {"left": round(t.box[0], 1), "top": round(t.box[1], 1), "right": round(t.box[2], 1),
+         "bottom": round(t.box[3], 1), "score": round(t.confidence, 4)}
+        for t in result.tracks if t.confidence >= min_score]}
+
+
 def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False,
                   bad: Optional[list[str]] = None, detector: str = DEFAULT_DETECTOR,
                   min_score: Optional[float] = None) -> list[dict]:
@@ -67,14 +82,8 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
                 continue
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # one pipeline per image size, camera scaled to it
-                cfg = dict(base)
-                cfg["camera"] = configuration.scaled_camera(base["camera"], *size)
-                pipes[size] = Pipeline(configuration.core_sections(cfg))
-            r = pipes[size].run_stage(stage, gray)
-            out.append({"file_name": Path(path).name, "bbox": [
-                {"left": round(t.box[0], 1), "top": round(t.box[1], 1), "right": round(t.box[2], 1),
-                 "bottom": round(t.box[3], 1), "score": round(t.confidence, 4)}
-                for t in r.tracks if t.confidence >= min_score]})
+                pipes[size] = image_pipeline(base, *size)
+            out.append(image_entry(path, pipes[size].run_stage(stage, gray), min_score))
     finally:
         for p in pipes.values():
             p.close()

@@ -104,6 +104,29 @@ def test_bench_reports_median_and_p99_per_stage():
     assert all(s["p99_ms"] >= s["median_ms"] > 0 for s in stages.values())
 
 
+def test_image_bench_times_headway_detect_part_by_part(tmp_path):
+    """`bench --images` times what `headway detect` spends on each image: reading, the core's parts (the cascade's
+    scan and its verifier apart), the core's whole stage and the total; the parts add up within each."""
+    images = data_path("tusimple", "supp", "images")
+    r = headway("bench", "--images", str(images), "--limit", "3", "--repeats", "2", "--json")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert rep["detector"] == "fused" and rep["images"] == 6 and rep["frame_sizes"] == ["1280x720"]
+    parts = rep["stages"]["image"]
+    assert list(parts) == ["read", "lanes", "cascade", "verifier", "verify", "core", "total"]
+    assert all(s["n"] == 6 and s["p99_ms"] >= s["median_ms"] > 0 for s in parts.values())
+    mean = {k: s["mean_ms"] for k, s in parts.items()}
+    assert mean["core"] >= mean["lanes"] + mean["cascade"] + mean["verifier"] + mean["verify"] - 1e-3
+    assert mean["total"] >= mean["read"] + mean["core"] - 1e-3
+    # the network's looks are timed as the verifier's, not the scan's: without a verifier that part is empty
+    (tmp_path / "off.yaml").write_text("cascade: {verifier: \"off\"}\n")
+    r = headway("bench", "--images", str(images), "--limit", "2", "--repeats", "1", "--config",
+                str(tmp_path / "off.yaml"), "--json")
+    assert r.returncode == 0, r.stderr
+    parts = json.loads(r.stdout)["stages"]["image"]
+    assert parts["verifier"]["p99_ms"] < 0.05 < parts["cascade"]["median_ms"]
+
+
 def test_latency_bench_runs_the_preset_asked_for():
     """`bench --latency --preset P` measures P's real-time loop (it used to run the configuration's default
     whatever --preset said) and says which preset it measured."""
@@ -123,9 +146,13 @@ def test_latency_bench_runs_the_preset_asked_for():
     (["sim", "BADSCENARIO", "--out", "OUT"], "vehicles[0].speed_kmh"),
     (["detect", "NOTVIDEO", "--out", "OUT"], "cannot be read as an image"),
     (["replay", "steady_following", "--config", "BADCONFIG"], "camera.fx"),
+    (["bench", "--images", "/nonexistent/images"], "no such file or folder"),
+    (["bench", "--images", "NOTVIDEO"], "cannot be read as an image"),
+    (["bench", "--images", "EMPTY"], "holds no image"),
 ])
 def test_bad_input_is_one_clear_line(tmp_path, args, message):
     (tmp_path / "frames").mkdir()
+    (tmp_path / "empty").mkdir()
     cv2.imwrite(str(tmp_path / "frames" / "0.png"), np.zeros((48, 64), np.uint8))
     (tmp_path / "notvideo.mp4").write_text("not a video")
     (tmp_path / "bad.yaml").write_text("name: bad\nduration_s: 2\nvehicles:\n  - {id: 1, lane: 0, z_m: 30, "
@@ -133,7 +160,7 @@ def test_bad_input_is_one_clear_line(tmp_path, args, message):
     (tmp_path / "bad_config.yaml").write_text("camera: {fx: wide}\n")
     subst = {"FOLDER": str(tmp_path / "frames"), "NOTVIDEO": str(tmp_path / "notvideo.mp4"),
              "BADSCENARIO": str(tmp_path / "bad.yaml"), "OUT": str(tmp_path / "out"),
-             "BADCONFIG": str(tmp_path / "bad_config.yaml")}
+             "BADCONFIG": str(tmp_path / "bad_config.yaml"), "EMPTY": str(tmp_path / "empty")}
     r = headway(*[subst.get(a, a) for a in args])
     assert r.returncode in (1, 2)
     assert message in r.stderr, r.stderr

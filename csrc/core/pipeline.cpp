@@ -158,10 +158,12 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
     } else if (stage == "cascade" || stage == "fused") {
         // The trained Haar cascade (detect/cascade_detector.hpp), alone or merged with the verified shadow
         // detections (detect/fuse_detections.hpp). Loaded on first use: most compositions never need it.
-        Stopwatch sw;
-        if (!cascade_) cascade_ = std::make_unique<CascadeDetector>(cfg_.cascade);
-        const auto cdets = cascade_->detect(gray, out.lanes, cfg_.camera);
-        out.times.add("cascade", sw.ms());
+        if (!cascade_) {  // its loading counted as the scan's: the first image pays it
+            Stopwatch sw;
+            cascade_ = std::make_unique<CascadeDetector>(cfg_.cascade);
+            out.times.add("cascade", sw.ms());
+        }
+        const auto cdets = cascade_->detect(gray, out.lanes, cfg_.camera, true, 0, 1, &out.times);
         auto add = [&](const cv::Rect2f &box, float confidence) {
             TrackState t;
             t.box = box;

@@ -1,4 +1,5 @@
 #include "detect/cascade_detector.hpp"
+#include "base/stopwatch.hpp"
 #include "base/worker_pool.hpp"
 #include "detect/haar_cascade.hpp"
 #include "detect/vehicle_verifier.hpp"
@@ -55,8 +56,20 @@ struct Raw {
 
 std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const LaneModel &lanes,
                                                       const CameraParams &cam, bool single_image, int slice,
-                                                      int slices) const {
+                                                      int slices, StageTimes *times) const {
     CV_Assert(slices >= 1 && slice >= 0 && slice < slices);
+    Stopwatch whole;
+    double verifier_ms = 0.0;
+    struct Report {  // on every way out: the call's time, split into the verifier's and the rest
+        StageTimes *times;
+        const Stopwatch &whole;
+        const double &verifier_ms;
+        ~Report() {
+            if (!times) return;
+            times->add("cascade", float(whole.ms() - verifier_ms));
+            times->add("verifier", float(verifier_ms));
+        }
+    } report{times, whole, verifier_ms};
     CV_Assert(gray.type() == CV_8UC1);
     const RoadPrior prior = make_road_prior(gray.size(), lanes, cam, p_.road);
     std::vector<Raw> raw;
@@ -224,6 +237,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
     }
     const VehicleVerifier *verifier = single_image || tracked_same_ ? verifier_.get() : tracked_.get();
     if (verifier) {  // every group of the frame at once (the CNN verifier runs them as one batch)
+        Stopwatch sv;
         std::vector<cv::Rect2f> boxes;
         std::vector<int> ns;
         std::vector<size_t> judged;  // groups of fewer than verify_min_neighbors windows keep n / (n + half)
@@ -275,6 +289,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             out[judged[k]].placed = boxes[k];  // moved by the box output when the verifier has one and `refine`
             if (report_placed) out[judged[k]].box = boxes[k];
         }
+        verifier_ms = sv.ms();
     }
     if (p_.nms_iou >= 1.0) return out;
     // non-maximum suppression by confidence: most confident first, drop what overlaps a kept one

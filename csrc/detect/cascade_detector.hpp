@@ -240,8 +240,11 @@ public:
     // a tracked pipeline only with refine_tracked (else each detection keeps its group's mean box).
     // `slice` of `slices`: only that block of the window sizes is scanned (contiguous sizes of about equal cost,
     // smallest first; tracked_slices), with the far sizes (tracked_far_m) every time; 0 of 1 = every size.
+    // `times`: where the call's time goes, as two stages: "cascade" (the scan, grouping and suppression) and
+    // "verifier" (the verifier's looks at the groups), so that a bench shows which of the two a budget needs.
     std::vector<CascadeDetection> detect(const cv::Mat &gray, const LaneModel &lanes, const CameraParams &cam,
-                                         bool single_image = true, int slice = 0, int slices = 1) const;
+                                         bool single_image = true, int slice = 0, int slices = 1,
+                                         StageTimes *times = nullptr) const;
 
 private:
     CascadeParams p_;

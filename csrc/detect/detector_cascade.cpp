@@ -1,20 +1,16 @@
 #include "detect/detector_cascade.hpp"
 
-#include "base/stopwatch.hpp"
-
 namespace hw {
 
 bool CascadeDetectorPart::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
-    Stopwatch sw;
     const int slices = ctx.single_image ? 1 : slices_;
     const int slice = slices > 1 ? next_slice_ : 0;
     if (slices > 1) next_slice_ = (next_slice_ + 1) % slices;
-    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera, ctx.single_image, slice, slices)) {
+    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera, ctx.single_image, slice, slices, &times)) {
         Hypothesis h = hypothesis_of(d.box, d.confidence, d.stage_sum, "cascade");
         h.appearance = d.confidence;
         out.push_back(h);
     }
-    times.add("cascade", sw.ms());
     return true;
 }
 

@@ -23,12 +23,12 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 8
+#define HW_ABI_VERSION 9
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
 #define HW_LANE_POINTS 12
-#define HW_MAX_STAGES 12
+#define HW_MAX_STAGES 16
 #define HW_STAGE_NAME_LEN 16
 
 /* Status codes returned by every call. */
