@@ -90,7 +90,7 @@ def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, conf
     core's whole stage) and "total" (read, the stage and the output entry: what one more image costs
     `headway detect`, its start-up not counted). Each image size's pipeline detects its first image once untimed
     first (loading the cascade and the verifier)."""
-    from app.detect_images import DEFAULT_DETECTOR, OPERATING_POINT, STAGES, image_entry, image_pipeline
+    from app.detect_images import DEFAULT_DETECTOR, OPERATING_POINT, STAGES, detector_config, image_entry, image_pipeline
     from app.recording import read_image
 
     detector = detector or DEFAULT_DETECTOR
@@ -105,7 +105,7 @@ def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, conf
         why = configuration.frame_size_problem(gray.shape[1], gray.shape[0])
         return (None, why) if why else (gray, "")
 
-    base = configuration.load(config_path)
+    base = detector_config(config_path, detector)
     pipes: dict[tuple[int, int], Pipeline] = {}
     times: dict[str, list[float]] = {}
     skipped: list[str] = []

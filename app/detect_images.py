@@ -38,6 +38,16 @@ DEFAULT_DETECTOR = "fused"  # issue 12: single images get the cascade and the sh
 OPERATING_POINT = {"thesis": 0.0, "cascade": 0.77, "fused": 0.79}
 
 
+# --detector thesis is the thesis detector alone, whatever composition the configuration's preset names (the
+# default preset, fused, would otherwise give the core's "detect" stage the cascade too)
+DETECTOR_CONFIG = {"thesis": {"pipeline": {"preset": "thesis", "detectors": ["shadow"]}}}
+
+
+def detector_config(config_path: Optional[str], detector: str) -> dict:
+    """The configuration `detector` runs with: the file's (or the defaults), with what the detector fixes."""
+    return configuration.load(config_path, DETECTOR_CONFIG.get(detector))
+
+
 def image_pipeline(base: dict, width: int, height: int) -> Pipeline:
     """The pipeline that detects in images of this size: the configuration with its camera scaled to them."""
     cfg = dict(base)
@@ -65,7 +75,7 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
     if not 0.0 <= min_score <= 1.0:
         raise DetectError(f"--min-score {min_score}: scores lie in [0, 1]; give a value in that range "
                           f"(0 writes every detection)")
-    base = configuration.load(config_path)
+    base = detector_config(config_path, detector)
     pipes: dict[tuple[int, int], Pipeline] = {}
     out = []
     try:

@@ -40,6 +40,27 @@ def test_detect_writes_only_detections_at_the_operating_point(tmp_path):
     assert [e["file_name"] for e in runs["thesis"]] == [e["file_name"] for e in runs["default"]]
 
 
+def test_detector_thesis_is_the_thesis_detector_alone_whatever_the_configuration_composes(tmp_path):
+    """`--detector thesis` is shadows + vertical edges alone. Since fused became the default preset, the core's
+    "detect" stage under the default configuration ran the cascade beside the shadows, and `--detector thesis`
+    wrote their merge (other scores, cascade boxes). Now it writes what the thesis preset finds, under the default
+    configuration and under one that composes the cascade and the shadows explicitly."""
+    images = [str(p) for p in sorted(data_path("tusimple", "supp", "images").glob("*.jpg"))[:3]]
+    configs = {"thesis": "pipeline: {preset: thesis}\n", "composed": "pipeline: {detectors: [cascade, shadow]}\n"}
+    runs = {}
+    for name in ("default", *configs):
+        extra = []
+        if name in configs:
+            (tmp_path / f"{name}.yaml").write_text(configs[name])
+            extra = ["--config", str(tmp_path / f"{name}.yaml")]
+        out = tmp_path / f"{name}.json"
+        r = headway("detect", *images, "--out", str(out), "--detector", "thesis", *extra)
+        assert r.returncode == 0, r.stderr
+        runs[name] = json.loads(out.read_text())
+    assert any(e["bbox"] for e in runs["thesis"])
+    assert runs["default"] == runs["thesis"] == runs["composed"]
+
+
 @pytest.mark.parametrize("value", ["1.5", "-0.1", "nan"])
 def test_a_min_score_outside_0_1_is_one_clear_line(tmp_path, value):
     r = headway("detect", str(tmp_path / "any.jpg"), "--out", str(tmp_path / "o.json"), "--min-score", value)
