@@ -84,26 +84,17 @@ def image_paths(sources: Sequence[str], limit: Optional[int] = None) -> list[str
 def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, config_path: Optional[str] = None,
                     limit: Optional[int] = 100, repeats: int = 1) -> dict:
     """`headway detect`'s work on each image, timed part by part: "read" (the file read, checked whole, decoded
-    and its size checked: detect_images' read_image and frame_size_problem), the core's stages of the
+    and its size checked: detect_images.read_usable), the core's stages of the
     detector's single-image stage (lanes; for the cascade, "cascade" = the scan, grouping and suppression and
     "verifier" = its network's looks; "verify" = the shadow hypotheses and their vertical edges), "core" (the
     core's whole stage) and "total" (read, the stage and the output entry: what one more image costs
     `headway detect`, its start-up not counted). Each image size's pipeline detects its first image once untimed
     first (loading the cascade and the verifier)."""
-    from app.detect_images import DEFAULT_DETECTOR, OPERATING_POINT, STAGES, detector_config, image_entry, image_pipeline
-    from app.recording import read_image
+    from app.detect_images import (DEFAULT_DETECTOR, OPERATING_POINT, STAGES, detector_config, image_entry,
+                                   image_pipeline, read_usable)
 
     detector = detector or DEFAULT_DETECTOR
-    if detector not in STAGES:
-        raise BenchError(f"--detector {detector}: one of {', '.join(STAGES)}")
     paths = image_paths(sources, limit)
-
-    def read(path):  # as detect_images reads: (gray, "") or (None, why)
-        gray, why = read_image(path)
-        if gray is None:
-            return None, f"cannot be read as an image ({why})"
-        why = configuration.frame_size_problem(gray.shape[1], gray.shape[0])
-        return (None, why) if why else (gray, "")
 
     base = detector_config(config_path, detector)
     pipes: dict[tuple[int, int], Pipeline] = {}
@@ -113,7 +104,7 @@ def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, conf
         for rep in range(repeats):
             for path in paths:
                 t0 = time.perf_counter()
-                gray, why = read(path)
+                gray, why = read_usable(path)
                 t_read = time.perf_counter()
                 if why:
                     if rep == 0:
@@ -124,7 +115,7 @@ def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, conf
                     pipes[size] = image_pipeline(base, *size)
                     pipes[size].run_stage(STAGES[detector], gray)
                     t0 = time.perf_counter()
-                    gray, _ = read(path)
+                    gray, _ = read_usable(path)
                     t_read = time.perf_counter()
                 r = pipes[size].run_stage(STAGES[detector], gray)
                 image_entry(path, r, OPERATING_POINT[detector])

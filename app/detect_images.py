@@ -48,6 +48,15 @@ def detector_config(config_path: Optional[str], detector: str) -> dict:
     return configuration.load(config_path, DETECTOR_CONFIG.get(detector))
 
 
+def read_usable(path: str) -> tuple:
+    """(gray, "") or (None, why): the image read whole and decoded, at a size a camera may have."""
+    gray, why = read_image(path)
+    if gray is None:
+        return None, f"cannot be read as an image ({why})"
+    why = configuration.frame_size_problem(gray.shape[1], gray.shape[0])
+    return (None, why) if why else (gray, "")
+
+
 def image_pipeline(base: dict, width: int, height: int) -> Pipeline:
     """The pipeline that detects in images of this size: the configuration with its camera scaled to them."""
     cfg = dict(base)
@@ -80,11 +89,7 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
     out = []
     try:
         for path in paths:
-            gray, why = read_image(path)
-            if gray is None:
-                why = f"cannot be read as an image ({why})"
-            else:
-                why = configuration.frame_size_problem(gray.shape[1], gray.shape[0]) or ""
+            gray, why = read_usable(path)
             if why:
                 if bad is None:
                     raise DetectError(f"{path}: {why}")
