@@ -100,6 +100,14 @@ def test_missing_patches_fail_with_the_folder_and_the_plain_option(tmp_path, mon
     assert next(render(dataclasses.replace(scenario, vehicle_look="plain"), frames=[0])).image.shape == (480, 640)
 
 
+def test_the_demo_learns_why_it_must_draw_plain(tmp_path, patches):
+    """`headway demo` warns with this reason and renders plain (app/demo.py); with the data there is none."""
+    assert sprite_source.patches_problem() == ""
+    empty = tmp_path / "patches"
+    (empty / "GTI_Far").mkdir(parents=True)
+    assert str(empty) in sprite_source.patches_problem(empty) and "vehicle_look: plain" in sprite_source.patches_problem(empty)
+
+
 def test_an_unknown_look_is_a_scenario_error():
     with pytest.raises(ScenarioError, match=r"vehicle_look: expected one of real, plain, got 'photo'"):
         parse_scenario({"duration_s": 1.0, "vehicle_look": "photo", "ego": {"speed_kmh": 50}}, "scenario x.yaml")
