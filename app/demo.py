@@ -10,6 +10,7 @@ from pathlib import Path
 
 from app.eval.matching import iou_matrix
 from app.replay import replay_scenario
+from app.sim.sprites import patches_problem
 
 DEMO_SCENARIO = "cut_in"
 
@@ -29,10 +30,14 @@ def main(args) -> int:
                 if any(t.confirmed and iou_matrix([t.box], [v["box"]])[0, 0] >= 0.5 for t in r.tracks):
                     counts["found"] += 1
 
+    # The demo must run on a fresh install without ../shared/data: it says so and draws plain vehicles.
+    problem = patches_problem()
+    if problem:
+        print(f"warning: {problem}; the demo draws plain vehicles")
     with truth_f:
         s = replay_scenario(args.scenario, config_path=args.config, out_video=str(out / "annotated.mp4"),
                             tracks_path=str(out / "tracks.jsonl"), can_out=str(out / "can_out.log"),
-                            on_result=on_result)
+                            on_result=on_result, vehicle_look="plain" if problem else None)
     recall = counts["found"] / counts["truth"] if counts["truth"] else float("nan")
     summary = s.text() + (f"\n  vehicles within 60 m tracked (IoU >= 0.5): {counts['found']} of "
                           f"{counts['truth']} vehicle-frames ({recall:.0%})")

@@ -168,8 +168,9 @@ def replay_recording(source: str, config_path: Optional[str] = None, fps: Option
 def replay_scenario(source: str, config_path: Optional[str] = None, out_video: Optional[str] = None,
                     tracks_path: Optional[str] = None, can_in: Optional[str] = None, can_out: Optional[str] = None,
                     on_result: Optional[Callable] = None, progress: bool = True,
-                    overrides: Optional[dict] = None) -> ReplaySummary:
-    """`overrides`: configuration values applied over the file's (same shape, e.g. {"pipeline": {"preset": ...}})."""
+                    overrides: Optional[dict] = None, vehicle_look: Optional[str] = None) -> ReplaySummary:
+    """`overrides`: configuration values applied over the file's (same shape, e.g. {"pipeline": {"preset": ...}});
+    `vehicle_look` ("real" or "plain") replaces the scenario's own."""
     from app.sim import ScenarioError, frame_count, load_scenario, render
     from app.sim.can_log import write_ego_speed_log
     from app.sim.frames import scenario_camera
@@ -179,6 +180,8 @@ def replay_scenario(source: str, config_path: Optional[str] = None, out_video: O
         scenario = load_scenario(source)
     except ScenarioError as exc:
         raise ReplayError(str(exc)) from None
+    if vehicle_look is not None:
+        scenario = dataclasses.replace(scenario, vehicle_look=vehicle_look)
     cfg = configuration.load(config_path, overrides)
     # The renderer knows its camera exactly, as a calibrated car would: use it.
     cfg["camera"].update(dataclasses.asdict(scenario_camera(scenario)))

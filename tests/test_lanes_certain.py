@@ -32,8 +32,9 @@ def test_lanes_guessed_on_an_unmarked_road_are_never_certain(tmp_path):
 def test_wide_bars_are_no_paint_evidence(tmp_path):
     """What keeps the unmarked road uncertain with lanes.cross_inner_edges (on by default): the marking filter takes the
     asphalt between two dark vehicles for a bar 1-5 m wide, such bars line up, and lanes.evidence_max_width_m (0.45 m)
-    does not count them as paint. Without that test (0) the model is believed on 25 of 330 frames (measured)."""
+    does not count them as paint. Without that test (0) the model is believed on 25 of 330 frames (measured on the
+    plain drawn vehicles, docs/sim.md "Real-looking vehicles"; with the real look on 6)."""
     results = []
     replay_scenario("congestion_no_markings", progress=False, overrides={"lanes": {"evidence_max_width_m": 0.0}},
-                    on_result=lambda r, *_: results.append(r))
+                    on_result=lambda r, *_: results.append(r), vehicle_look="plain")
     assert sum(r.lanes_certain for r in results) >= 10

@@ -101,7 +101,8 @@ def test_a_shadow_cast_past_the_vehicle_up_to_a_lane_marking_is_not_its_width(su
                        for f in fr)
 
     for z_m in (20.0, 28.0):
-        data = {"duration_s": 2.0, "seed": 3, "lighting": {"sun_side_m": sun_side_m}, "ego": {"speed_kmh": 50},
+        data = {"duration_s": 2.0, "seed": 3, "vehicle_look": "plain", "lighting": {"sun_side_m": sun_side_m},
+                "ego": {"speed_kmh": 50},
                 "vehicles": [{"id": 1, "lane": lane, "z_m": z_m, "speed_kmh": 50, "shade": "dark"}]}
         scenario = parse_scenario(data, f"scenario low sun, lane {lane}, {z_m:.0f} m")
         fr = list(render(scenario))

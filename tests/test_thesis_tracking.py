@@ -225,7 +225,8 @@ def test_boxes_keep_their_width_per_depth_through_the_calibration_drive(tmp_path
     from app.eval.synthetic import evaluate_scenario, summarize
 
     def mota(config_path=None) -> float:
-        return summarize([evaluate_scenario("calibration_drive", "thesis", config_path)])["per_scenario"]["calibration_drive"]["mota"]
+        run = evaluate_scenario("calibration_drive", "thesis", config_path, vehicle_look="plain")
+        return summarize([run])["per_scenario"]["calibration_drive"]["mota"]
 
     off = tmp_path / "off.yaml"
     off.write_text("kalman: {max_width_depth_change: 100}\n")

@@ -53,8 +53,10 @@ def warnings_in_can_log(path: str) -> list[tuple[float, int, Optional[float]]]:
     return out
 
 
-def evaluate(name: str, config_path: Optional[str] = None, preset: Optional[str] = None) -> dict:
-    """`preset`: the pipeline preset to run (None: the configuration's)."""
+def evaluate(name: str, config_path: Optional[str] = None, preset: Optional[str] = None,
+             vehicle_look: Optional[str] = None) -> dict:
+    """`preset`: the pipeline preset to run (None: the configuration's); `vehicle_look`: "real" or "plain" instead of
+    the scenario's own (docs/sim.md)."""
     truth_ttc: list[tuple[float, Optional[float]]] = []
 
     def on_result(r, decision, truth):
@@ -63,7 +65,7 @@ def evaluate(name: str, config_path: Optional[str] = None, preset: Optional[str]
     with tempfile.TemporaryDirectory() as tmp:
         can_out = str(Path(tmp) / "out.log")
         s = replay_scenario(name, config_path=config_path, can_out=can_out, on_result=on_result, progress=False,
-                            overrides={"pipeline": {"preset": preset}} if preset else None)
+                            overrides={"pipeline": {"preset": preset}} if preset else None, vehicle_look=vehicle_look)
         changes = warnings_in_can_log(can_out)
     warnings = [(t, ttc) for t, level, ttc in changes if level == FcwLevel.WARNING]
     out = {"scenario": name, "frames": s.frames, "warnings": len(warnings),

@@ -48,19 +48,21 @@ def _phase(road: dict) -> str:
 
 
 def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = None, preset: str = "thesis",
-                   max_range_m: float = 60.0) -> list[dict]:
+                   max_range_m: float = 60.0, vehicle_look: Optional[str] = None) -> list[dict]:
     """Renders `scenario` once and runs one pipeline per run on the same frames: each run's camera is
     mis-configured by its offsets (signs: + pitch, + yaw, + height; default: the issue's 2 deg, 2 deg, 15 %),
     self-calibration on or off. Reports when every estimate got within TOLERANCE for good, the largest
     errors afterwards (also per phase of the drive: straight, curve, hill, lane change) and the range
     error afterwards. The CAN bus gives the ego speed and the true yaw rate (the curves', the lane changes'),
     unless a run says ``can_yaw_rate: False``; a run's ``self_calibration`` and ``road`` mappings override
-    those sections."""
+    those sections. `vehicle_look` ("real" or "plain", docs/sim.md) replaces the scenario's own."""
     from app.sim import load_scenario, render
     from app.sim.frames import scenario_camera
 
     runs = runs or [{"offsets": None, "enabled": True}]
     sc = load_scenario(scenario)
+    if vehicle_look is not None:
+        sc = dataclasses.replace(sc, vehicle_look=vehicle_look)
     true = dataclasses.asdict(scenario_camera(sc))
     pipes, states = [], []
     for run in runs:

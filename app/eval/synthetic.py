@@ -6,6 +6,7 @@ Ground truth: vehicles within `max_range_m` (60 m) whose box is at least half vi
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Callable, Optional
 
 import motmetrics as mm
@@ -19,11 +20,15 @@ RANGE_BANDS = ((0, 20), (20, 40), (40, 60), (60, 90))
 
 
 def evaluate_scenario(name: str, preset: str, config_path: Optional[str] = None, max_range_m: float = 60.0,
-                      min_visible: float = 0.5, on_frame: Optional[Callable] = None) -> dict:
+                      min_visible: float = 0.5, on_frame: Optional[Callable] = None,
+                      vehicle_look: Optional[str] = None) -> dict:
+    """`vehicle_look` ("real" or "plain", docs/sim.md) replaces the scenario's own."""
     from app.sim import load_scenario, render
     from app.sim.frames import scenario_camera
 
     sc = load_scenario(name)
+    if vehicle_look is not None:
+        sc = dataclasses.replace(sc, vehicle_look=vehicle_look)
     cfg = configuration.load(config_path, {"pipeline": {"preset": preset}})
     cfg["camera"].update(dataclasses.asdict(scenario_camera(sc)))
     score = TrackScorer(max_range_m, min_visible)
@@ -65,19 +70,22 @@ def summarize(results: list[dict]) -> dict:
 
 
 def evaluate_suite(preset: str, scenarios: Optional[list[str]] = None, config_path: Optional[str] = None,
-                   progress: Optional[Callable[[str], None]] = None, mapper: Optional[Callable] = None) -> dict:
-    """`mapper(fn, arg_list, names, desc)`, when given, runs the scenarios (app/fleet/engine.map_ordered)."""
+                   progress: Optional[Callable[[str], None]] = None, mapper: Optional[Callable] = None,
+                   vehicle_look: Optional[str] = None) -> dict:
+    """`mapper(fn, arg_list, names, desc)`, when given, runs the scenarios (app/fleet/engine.map_ordered);
+    `vehicle_look` replaces every scenario's own (None: each scenario's, "real" unless it says)."""
     from app.sim import list_scenarios
 
     names = scenarios or list_scenarios()
     if mapper is not None:
-        results = mapper(evaluate_scenario, [(n, preset, config_path) for n in names], names, "synthetic")
+        results = mapper(functools.partial(evaluate_scenario, vehicle_look=vehicle_look),
+                         [(n, preset, config_path) for n in names], names, "synthetic")
     else:
         results = []
         for name in names:
             if progress:
                 progress(name)
-            results.append(evaluate_scenario(name, preset, config_path))
+            results.append(evaluate_scenario(name, preset, config_path, vehicle_look=vehicle_look))
     out = summarize(results)
     out["confirm_delay_frames"] = {r["scenario"]: r["confirm_delay_frames"] for r in results}
     return out

@@ -6,6 +6,7 @@ simulator can be used and timed on its own.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 
@@ -13,6 +14,7 @@ import cv2
 import numpy as np
 
 from . import ScenarioError, list_scenarios, load_scenario, render, write_scenario
+from .scenario import VEHICLE_LOOKS
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,12 +28,20 @@ def main(argv: list[str] | None = None) -> int:
     p_time = sub.add_parser("time", help="render time per frame (image + truth, no file output)")
     p_time.add_argument("scenario", nargs="*", help="default: every shipped scenario")
     p_time.add_argument("--threads", type=int, default=None, help="OpenCV threads (default: OpenCV's choice)")
+    for p in (p_render, p_time):
+        p.add_argument("--vehicle-look", choices=VEHICLE_LOOKS, default=None,
+                       help="draw the vehicles this way instead of the scenario's own vehicle_look (docs/sim.md)")
     args = parser.parse_args(argv)
+
+    def scenario(name):
+        loaded = load_scenario(name)
+        return loaded if args.vehicle_look is None else dataclasses.replace(loaded, vehicle_look=args.vehicle_look)
+
     try:
         if args.command == "list":
             print("\n".join(list_scenarios()))
         elif args.command == "render":
-            summary = write_scenario(load_scenario(args.scenario), args.out_dir, video=args.video,
+            summary = write_scenario(scenario(args.scenario), args.out_dir, video=args.video,
                                      progress=lambda i, n: print(f"\r{i}/{n}", end="", file=sys.stderr))
             print(file=sys.stderr)
             print(f"{summary['n_frames']} frames -> {summary['out_dir']}")
@@ -39,12 +49,12 @@ def main(argv: list[str] | None = None) -> int:
             if args.threads is not None:
                 cv2.setNumThreads(args.threads)
             for name in args.scenario or list_scenarios():
-                scenario = load_scenario(name)
+                loaded = scenario(name)
                 # Per frame: wall time and this process's CPU time; medians ignore the frames where a
                 # busy machine preempted us (cache misses caused by neighbours still count).
                 wall_ms, cpu_ms = [], []
                 wall, cpu = time.perf_counter(), time.process_time()
-                for _ in render(scenario):
+                for _ in render(loaded):
                     wall_ms.append(1e3 * (time.perf_counter() - wall))
                     cpu_ms.append(1e3 * (time.process_time() - cpu))
                     wall, cpu = time.perf_counter(), time.process_time()

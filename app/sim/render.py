@@ -15,6 +15,7 @@ from .camera import Camera
 from .road import Ground, Sky
 from .scenario import Scenario
 from .scenery import Scenery
+from .sprite_painter import SpritePainter
 from .truth import depth_order
 from .vehicles import VehiclePainter
 from .world import WorldState
@@ -31,7 +32,7 @@ class Renderer:
         self.ground = Ground(scenario, np.random.default_rng([seed, 1]))
         self.sky = Sky(scenario, np.random.default_rng([seed, 2]))
         self.scenery = Scenery(scenario, np.random.default_rng([seed, 3]), max_odometer_m)
-        self.vehicles = VehiclePainter(scenario)
+        self.vehicles = SpritePainter(scenario) if scenario.vehicle_look == "real" else VehiclePainter(scenario)
         self.seed = seed
         sigma = scenario.lighting.noise_sigma
         shape = (camera.height + _NOISE_MARGIN, camera.width + _NOISE_MARGIN)

@@ -160,6 +160,9 @@ class Scenario:
     ego: EgoSpec
     vehicles: tuple[VehicleSpec, ...]
     source: str = "<memory>"
+    # "real": cars and vans drawn from real rear views (app/sim/sprites.py, needs ../shared/data/patches);
+    # "plain": drawn rear faces whose dark gap and outline are the shadow method's cues (app/sim/vehicles.py).
+    vehicle_look: str = "real"
 
     @property
     def label(self) -> str:
@@ -257,7 +260,8 @@ def _show(value: Any) -> str:
 
 # --- sections -----------------------------------------------------------------------------------
 _TOP_KEYS = ("name", "description", "duration_s", "fps", "seed", "camera", "road", "shake", "lighting", "ego",
-             "vehicles")
+             "vehicles", "vehicle_look")
+VEHICLE_LOOKS = ("real", "plain")
 _CAMERA_LIMITS = {
     "width": (16, 8192), "height": (16, 8192), "fx": (50.0, 20000.0), "fy": (50.0, 20000.0),
     "cx": (0.0, 8192.0), "cy": (0.0, 8192.0), "height_m": (0.3, 5.0), "pitch_deg": (-15.0, 15.0),
@@ -424,7 +428,8 @@ def parse_scenario(data: Any, where: str, default_name: str = "scenario", source
         duration_s=duration_s, fps=top.number("fps", 30.0, 1.0, 240.0), seed=seed,
         camera=read_camera(where, top.data.get("camera"), "camera"), road=road,
         shake=_read_shake(top),
-        lighting=_read_lighting(top), ego=_read_ego(top, road), vehicles=vehicles, source=source)
+        lighting=_read_lighting(top), ego=_read_ego(top, road), vehicles=vehicles, source=source,
+        vehicle_look=top.string("vehicle_look", Scenario.vehicle_look, VEHICLE_LOOKS))
 
 
 def resolve_path(path_or_name: str | Path) -> Path:
@@ -496,5 +501,5 @@ def scenario_to_dict(scenario: Scenario) -> dict:
         "name": scenario.name, "description": scenario.description, "duration_s": scenario.duration_s,
         "fps": scenario.fps, "seed": scenario.seed, "camera": dict(scenario.camera), "road": road,
         "shake": dataclasses.asdict(scenario.shake), "lighting": dataclasses.asdict(scenario.lighting),
-        "ego": ego, "vehicles": vehicles,
+        "ego": ego, "vehicles": vehicles, "vehicle_look": scenario.vehicle_look,
     }
