@@ -15,6 +15,7 @@ decoding before the container's count says how many of its frames were lost.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Optional, Union
@@ -42,9 +43,18 @@ def is_image_file(path: Union[str, Path]) -> bool:
     return Path(path).suffix.lower() in IMAGE_EXTS
 
 
+def natural_key(name: str) -> tuple:
+    """Sort key of a file name in natural order: runs of digits compare as numbers, so 2.jpg comes before 10.jpg
+    (TuSimple's clips are 1.jpg .. 20.jpg); names equal as numbers (01.jpg, 1.jpg) fall back to plain order. The
+    C++ image-folder source sorts the same way (natural_name_less in csrc/capture)."""
+    parts = re.split(r"(\d+)", name)  # text, digits, text, ...: a number always meets a number
+    return tuple(int(x) if i % 2 else x for i, x in enumerate(parts)), name
+
+
 def folder_images(folder: Union[str, Path]) -> list[Path]:
-    """The image files of a folder, sorted by name (the order they are played in)."""
-    return sorted(x for x in Path(folder).iterdir() if x.is_file() and is_image_file(x))
+    """The image files of a folder in natural order (natural_key: the order they are played in)."""
+    return sorted((x for x in Path(folder).iterdir() if x.is_file() and is_image_file(x)),
+                  key=lambda x: natural_key(x.name))
 
 
 def check_fps(fps: float, what: str = "--fps") -> float:
