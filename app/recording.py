@@ -117,7 +117,12 @@ class Recording:
 
     def frames(self) -> Iterator[tuple[int, float, np.ndarray]]:
         """(frame number, media time s, gray image) for every usable frame, in order."""
-        return self._folder_frames() if self.kind == "folder" else self._video_frames()
+        return ((i, t, gray) for i, t, gray, _bgr in self.colour_frames(False))
+
+    def colour_frames(self, colour: bool = True) -> Iterator[tuple[int, float, np.ndarray, Optional[np.ndarray]]]:
+        """(frame number, media time s, gray image, BGR image) for every usable frame, in order: the gray image
+        exactly as frames() gives it (what the core sees), the BGR one for drawing (None unless `colour`)."""
+        return self._folder_frames(colour) if self.kind == "folder" else self._video_frames(colour)
 
     def read_all(self, max_frames: Optional[int] = None) -> list[np.ndarray]:
         out = []
@@ -135,15 +140,15 @@ class Recording:
         self.decoded += 1
         return True
 
-    def _folder_frames(self) -> Iterator[tuple[int, float, np.ndarray]]:
+    def _folder_frames(self, colour: bool):
         for i, name in enumerate(self._names):
             img, why = read_image(name)
             if img is None:
                 self.skipped.append(f"{name.name}: {why}")
             elif self._usable(name.name, img):
-                yield i, i / self.fps, img
+                yield i, i / self.fps, img, read_image(name, cv2.IMREAD_COLOR)[0] if colour else None
 
-    def _video_frames(self) -> Iterator[tuple[int, float, np.ndarray]]:
+    def _video_frames(self, colour: bool):
         cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
         i, failed = 0, 0  # frame number of the next read; failed reads in a row before it
         try:
@@ -162,7 +167,7 @@ class Recording:
                     failed = 0
                 gray = bgr if bgr.ndim == 2 else cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
                 if self._usable(f"frame {i}", gray):
-                    yield i, i / self.fps, gray
+                    yield i, i / self.fps, gray, bgr if colour and bgr.ndim == 3 else None
                 i += 1
         finally:
             cap.release()

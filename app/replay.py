@@ -120,7 +120,7 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
             raise ReplayError(str(exc)) from None
         sup = Stack(cfg, session)
         bar = stack.enter_context(_progress(n_frames, label, progress))
-        for index, t_s, gray, truth in frames:
+        for index, t_s, gray, truth, colour in frames:
             r = pipe.process(gray, t_s)
             decision = sup.step(r, r.t_s, pipe)
             summary.add(r)
@@ -129,7 +129,7 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
             if writer:
                 writer.write(r, decision.level)
             if video:
-                video.write(annotate(gray, r, truth, decision.level))
+                video.write(annotate(gray if colour is None else colour, r, truth, decision))
             if on_result:
                 on_result(r, decision, truth)
             if bar is not None:
@@ -159,7 +159,8 @@ def replay_recording(source: str, config_path: Optional[str] = None, fps: Option
     if (cfg["camera"]["width"], cfg["camera"]["height"]) != size:
         # a camera calibrated for another size: same field of view, intrinsics scaled to the recording
         cfg["camera"] = configuration.scaled_camera(cfg["camera"], *size)
-    out = _run(((i, t, g, None) for i, t, g in rec.frames()), cfg, summary, rec.expected, Path(source).name,
+    frames = ((i, t, g, None, bgr) for i, t, g, bgr in rec.colour_frames(colour=out_video is not None))
+    out = _run(frames, cfg, summary, rec.expected, Path(source).name,
                out_video, rec.fps, tracks_path, can_in, can_out, on_result, progress)
     summary.decoded = rec.account()
     return out
@@ -191,7 +192,7 @@ def replay_scenario(source: str, config_path: Optional[str] = None, out_video: O
             can_in = str(Path(tmp) / "ego_speed.log")
             write_ego_speed_log(Path(can_in), world.ego, float(world.times_s[-1]))
             cfg["vehicle"].update(speed_dbc=str(SIM_DBC), speed_message="EGO_SPEED", speed_signals="SPEED_MPS")
-        frames = ((f.index, f.t_s, f.image, f.truth) for f in render(scenario))
+        frames = ((f.index, f.t_s, f.image, f.truth, None) for f in render(scenario))
         return _run(frames, cfg, summary, n, scenario.name, out_video, scenario.fps, tracks_path, can_in, can_out,
                     on_result, progress)
 
