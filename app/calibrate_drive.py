@@ -1,9 +1,9 @@
 """`headway calibrate --from-video CLIP`: the camera's mounting (pitch, yaw, height) from a drive on a marked road.
 
 The clip is replayed through the whole stack as `headway replay` does, with the configuration given (its camera's
-intrinsics, and its height as the starting value); self-calibration (csrc/geometry/self_calibration.*,
-docs/calibration.md) finds pitch and yaw from the lanes' vanishing point over its search range and the height from
-the lane width. The estimate at the clip's end, with its 1-sigma, is printed and written into the camera section of
+intrinsics, and its height as the starting value) and self-calibration from scratch (self_calibration.enabled and
+from_scratch: csrc/geometry/self_calibration.*, docs/calibration.md): pitch and yaw from the lanes' vanishing point
+over the search range, the configured ones ignored, and the height from the lane width. The estimate at the clip's end, with its 1-sigma, is printed and written into the camera section of
 a copy of the configuration, so that the next run starts from it.
 """
 from __future__ import annotations
@@ -33,12 +33,10 @@ def calibrate_drive(clip: str, config_path: Optional[str] = None, fps: Optional[
         if seen["converged_frame"] is None and (r.calibration or {}).get("state") == "converged":
             seen["converged_frame"] = seen["frames"] - 1
 
-    replay_recording(clip, config_path=config_path, fps=fps, on_result=keep, progress=False)
+    replay_recording(clip, config_path=config_path, fps=fps, on_result=keep, progress=False,
+                     overrides={"self_calibration": {"enabled": True, "from_scratch": True}})
     cal = seen["last"]
-    if not cal or not cal.get("active"):
-        raise DriveCalibrationError(f"{clip}: self-calibration is switched off in the configuration "
-                                    "(self_calibration.enabled: false); switch it on to calibrate from a drive")
-    if cal["updates"] == 0:
+    if not cal or cal["updates"] == 0:
         raise DriveCalibrationError(f"{clip}: no frame had both ego lane boundaries measured on a straight road: "
                                     f"nothing to calibrate from ({seen['frames']} frames); give a drive on a marked "
                                     "road, and check the camera's intrinsics and camera.hood_frac")

@@ -147,11 +147,13 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
 def replay_recording(source: str, config_path: Optional[str] = None, fps: Optional[float] = None,
                      out_video: Optional[str] = None, tracks_path: Optional[str] = None,
                      can_in: Optional[str] = None, can_out: Optional[str] = None,
-                     on_result: Optional[Callable] = None, progress: bool = True) -> ReplaySummary:
+                     on_result: Optional[Callable] = None, progress: bool = True,
+                     overrides: Optional[dict] = None) -> ReplaySummary:
+    """`overrides`: configuration values applied over the file's (same shape, e.g. {"self_calibration": {...}})."""
     summary = ReplaySummary(source)
     rec = _recording(source, fps)
     summary.skipped = rec.skipped  # the reader lists what it could not use, as it goes
-    cfg = configuration.load(config_path)
+    cfg = configuration.load(config_path, overrides)
     size = rec.size
     problem = configuration.frame_size_problem(*size)
     if problem:

@@ -90,11 +90,9 @@ def test_nothing_is_reported_beyond_a_solid_ego_boundary(tmp_path):
 
 
 def _clips_with(tmp_path, lanes: dict) -> dict:
-    """The clips scored with these lanes keys set (per clip by its set/clip folder), the lanes searching around the
-    configured camera (TuSimple's pitch given, self-calibration off), as each option was measured."""
+    """The clips scored with these lanes keys set (per clip by its set/clip folder)."""
     cfg = tmp_path / "lanes.yaml"
-    cfg.write_text("lanes:\n" + "".join(f"  {k}: {str(v).lower()}\n" for k, v in lanes.items())
-                   + "self_calibration:\n  enabled: false\n")
+    cfg.write_text("lanes:\n" + "".join(f"  {k}: {str(v).lower()}\n" for k, v in lanes.items()))
     m = lane_clips.evaluate(str(data_path("tusimple", "lane_clips")), config_path=str(cfg))
     m["clip"] = {"/".join(x["raw_file"].split("/")[1:3]): x for x in m["per_image"]}
     return m

@@ -144,9 +144,9 @@ def synthetic(scenario: str = "calibration_drive", offsets: Optional[dict] = Non
 
 
 def lane_clips(data: str, within_deg: float = 0.3) -> dict:
-    """The 12 real lane clips replayed as `headway replay CLIP --fps 20 --config F` does, twice: with only what
-    TuSimple's calibration.txt holds (intrinsics, 1.80 m height) and the hood line ("from_scratch"), and with the
-    pitch given as well ("pitch_given"). Per run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's
+    """The 12 real lane clips replayed as `headway replay CLIP --fps 20 --config F` does, twice, F with
+    self_calibration.from_scratch: with only what TuSimple's calibration.txt holds (intrinsics, 1.80 m height) and
+    the hood line ("from_scratch"), and with the pitch given as well ("pitch_given"). Per run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's
     estimate at the last frame and, from scratch, the first frame from which pitch and yaw stay within `within_deg`
     of the last frame's estimate with the pitch given (None: not within at the end)."""
     import tempfile
@@ -158,7 +158,7 @@ def lane_clips(data: str, within_deg: float = 0.3) -> dict:
     course: dict = {}
     with tempfile.TemporaryDirectory(prefix="headway-calib-") as tmp:
         for run, pitch in (("from_scratch", None), ("pitch_given", TUSIMPLE_LANE_PITCH_DEG)):
-            cfg = clips_eval.write_camera_config(str(Path(tmp) / f"{run}.yaml"), pitch)
+            cfg = clips_eval.write_camera_config(str(Path(tmp) / f"{run}.yaml"), pitch, from_scratch=True)
             per: dict = {}
             m = clips_eval.evaluate_replay(clips, cfg, on_frame=lambda lab, r, per=per: per.setdefault(
                 "/".join(lab["raw_file"].split("/")[1:3]), []).append(r.calibration))

@@ -19,7 +19,7 @@ Pipeline::Pipeline(const Config &cfg)
 }
 
 void Pipeline::set_lane_search() {
-    if (!cfg_.self_calibration.enabled) return;
+    if (!cfg_.self_calibration.enabled || !cfg_.self_calibration.from_scratch) return;
     CameraParams cam = calib_.camera();
     const double tol = cfg_.lanes.assembly.horizon_tolerance_deg;
     const auto [centre, half_width] = calib_.search_window();
@@ -70,9 +70,9 @@ FrameOutput Pipeline::process(const Frame &frame) {
             motion = &parts_.road->update(frame.gray, frame.t_s, out.lanes, ego, last_tracks_, out.times);
             out.road = motion->motion;
         }
-        // the camera as self-calibration has it (the previous frame's estimate): a mounting found from scratch
+        // from scratch, the camera as self-calibration has it (the previous frame's estimate): the mounting found
         // places the detectors' road prior too
-        const CameraParams cam = calib_.camera();
+        const CameraParams cam = cfg_.self_calibration.from_scratch ? calib_.camera() : cfg_.camera;
         const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cam, ego, motion};
         parts_.tracker->step(ctx, parts_.detectors, out.tracks, out.times, out.full_detection);
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());

@@ -25,9 +25,12 @@ double slope(const std::deque<std::pair<double, double>> &s) {
 void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("enabled", enabled, "estimate the camera's pitch, yaw and height from the lanes while driving; "
                               "false = the camera section is used as configured");
+    m.add("from_scratch", from_scratch,
+          "pitch and yaw not known: found from the lanes over pitch_min_deg..pitch_max_deg and +-yaw_max_abs_deg (the "
+          "lanes search there too), the configured values a starting point only, the limits around the converged "
+          "estimate (headway calibrate --from-video sets it)");
     m.add("prior_sigma_deg", prior_sigma_deg, 0.01, 30.0,
-          "deg; 1-sigma trust in the configured pitch and yaw; 10: a starting value only, the lanes find them; "
-          "a surveyed mounting can say 0.2");
+          "deg; 1-sigma trust in the configured pitch and yaw (the prior); a surveyed mounting can say 0.2");
     m.add("prior_sigma_height", prior_sigma_height, 0.001, 1.0,
           "relative; 1-sigma trust in the configured camera height");
     m.add("angle_noise_deg", angle_noise_deg, 0.01, 10.0,
@@ -38,21 +41,21 @@ void SelfCalibrationParams::bind(ParamMap &m) {
           "deg/sqrt(s); random walk of the true angles (load, tyre pressure); bounds how long the estimate remembers");
     m.add("height_drift_s", height_drift_s, 0.0, 1.0, "relative/sqrt(s); random walk of the true height");
     m.add("pitch_min_deg", pitch_min_deg, -30.0, 30.0,
-          "deg; lowest pitch searched (the lanes' vanishing point too) until pitch and yaw have converged");
+          "deg; from_scratch: lowest pitch searched (the lanes' vanishing point too) until pitch and yaw converge");
     m.add("pitch_max_deg", pitch_max_deg, -30.0, 30.0,
-          "deg; highest pitch searched (looking down) until pitch and yaw have converged");
-    m.add("yaw_max_abs_deg", yaw_max_abs_deg, 0.0, 30.0, "deg; the yaw is searched within +- this until converged");
+          "deg; from_scratch: highest pitch searched (looking down) until pitch and yaw converge");
+    m.add("yaw_max_abs_deg", yaw_max_abs_deg, 0.0, 30.0, "deg; from_scratch: the yaw is searched within +- this");
     m.add("max_pitch_dev_deg", max_pitch_dev_deg, 0.0, 20.0,
-          "deg; once converged, the pitch estimate stays within its converged value +- this (a wrong marking "
-          "cannot drag it further)");
+          "deg; the pitch estimate stays within the configured pitch +- this (from_scratch: within its converged "
+          "value +- this, once converged); a wrong marking cannot drag it further");
     m.add("max_yaw_dev_deg", max_yaw_dev_deg, 0.0, 20.0,
-          "deg; once converged, the yaw estimate stays within its converged value +- this");
+          "deg; the yaw estimate stays within the configured yaw +- this (from_scratch: its converged value's)");
     m.add("max_height_dev", max_height_dev, 0.0, 0.9,
           "relative; the height estimate stays within the configured height * (1 +- this)");
     m.add("lateral_rate_window_s", lateral_rate_window_s, 0.05, 10.0,
           "s; the lateral rate is the offset's least-squares slope over this long (measured from half of it on)");
     m.add("search_sigmas", search_sigmas, 1.0, 20.0,
-          "sigma; until converged the lanes search the vanishing point within the pitch estimate +- this many of "
+          "sigma; from_scratch, until converged the lanes search the vanishing point within the pitch estimate +- this many of "
           "its sigmas (within the search range; at least lanes.horizon_tolerance_deg)");
     m.add("max_lateral_rate_mps", max_lateral_rate_mps, 0.0, 5.0,
           "m/s; faster lateral motion within the lane is a lane change (~1 m/s), when the car is turned against "
@@ -144,11 +147,14 @@ void SelfCalibration::reset() {
     anchor_pitch_ = anchor_yaw_ = NAN;
     pitch_ = {cfg_.pitch_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
     yaw_ = {cfg_.yaw_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
-    // A prior whose search_sigmas span covers the search range says nothing the range does not (the default, 10
-    // deg): the first measurement is the estimate, so a pitch given or not gives the same estimate from then on.
-    // A narrow prior (a surveyed mounting) is weighed against the measurements.
-    pitch_.diffuse = p_.search_sigmas * p_.prior_sigma_deg >= 0.5 * (p_.pitch_max_deg - p_.pitch_min_deg);
-    yaw_.diffuse = p_.search_sigmas * p_.prior_sigma_deg >= p_.yaw_max_abs_deg;
+    // From scratch the configured pitch and yaw say nothing: their uncertainty is the search range's (the lanes search
+    // all of it) and the first measurement is the estimate, so a pitch given or not gives the same estimate from then
+    // on.
+    pitch_.diffuse = yaw_.diffuse = p_.from_scratch;
+    if (p_.from_scratch) {
+        pitch_.var = std::pow(p_.pitch_max_deg - p_.pitch_min_deg, 2);
+        yaw_.var = std::pow(2.0 * p_.yaw_max_abs_deg, 2);
+    }
     clamp_angles();  // a configured value outside the search range starts at its end
     height_ = {1.0, p_.prior_sigma_height * p_.prior_sigma_height};
     last_t_ = last_curve_t_ = yaw_rate_smooth_ = NAN;
@@ -182,7 +188,10 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     if (turning) last_curve_t_ = t_s;
     const bool straight = !(std::isfinite(last_curve_t_) && t_s - last_curve_t_ <= p_.curve_hold_s);
 
-    const bool measured = lanes.valid && lanes.ego_left.observed && lanes.ego_right.observed &&
+    // from scratch a believed model only (paint along both ego boundaries, lanes.evidence_min): on an unmarked road
+    // the lane stage assembles "lanes" from vehicle sides, and the first measurement is the estimate
+    const bool measured = lanes.valid && (lanes.certain || !p_.from_scratch) && lanes.ego_left.observed &&
+                          lanes.ego_right.observed &&
                           std::isfinite(lanes.vanishing_point.x) && std::isfinite(lanes.vanishing_point.y);
     if (!measured) return;
     const double vh = lanes.vanishing_point.y, uvp = lanes.vanishing_point.x;
@@ -260,6 +269,11 @@ bool SelfCalibration::yaw_update(double yaw, const CameraParams &assumed, const 
 }
 
 void SelfCalibration::clamp_angles() {
+    if (!p_.from_scratch) {
+        pitch_.x = std::clamp(pitch_.x, cfg_.pitch_deg - p_.max_pitch_dev_deg, cfg_.pitch_deg + p_.max_pitch_dev_deg);
+        yaw_.x = std::clamp(yaw_.x, cfg_.yaw_deg - p_.max_yaw_dev_deg, cfg_.yaw_deg + p_.max_yaw_dev_deg);
+        return;
+    }
     double plo = p_.pitch_min_deg, phi = p_.pitch_max_deg, ylo = -p_.yaw_max_abs_deg, yhi = p_.yaw_max_abs_deg;
     if (anchored_) {
         plo = std::max(plo, anchor_pitch_ - p_.max_pitch_dev_deg);
@@ -299,10 +313,12 @@ CalibrationEstimate SelfCalibration::estimate() const {
     e.updates = updates_;
     if (!p_.enabled) {
         e.state = CalibrationState::kOff;
-    } else if (at_bound(pitch_.x, p_.pitch_min_deg, p_.pitch_max_deg) ||
-               at_bound(yaw_.x, -p_.yaw_max_abs_deg, p_.yaw_max_abs_deg) ||
-               (anchored_ && (std::abs(pitch_.x - anchor_pitch_) >= p_.max_pitch_dev_deg - 1e-9 ||
-                              std::abs(yaw_.x - anchor_yaw_) >= p_.max_yaw_dev_deg - 1e-9)) ||
+    } else if ((p_.from_scratch ? at_bound(pitch_.x, p_.pitch_min_deg, p_.pitch_max_deg) ||
+                                      at_bound(yaw_.x, -p_.yaw_max_abs_deg, p_.yaw_max_abs_deg) ||
+                                      (anchored_ && (std::abs(pitch_.x - anchor_pitch_) >= p_.max_pitch_dev_deg - 1e-9 ||
+                                                     std::abs(yaw_.x - anchor_yaw_) >= p_.max_yaw_dev_deg - 1e-9))
+                                    : std::abs(pitch_.x - cfg_.pitch_deg) >= p_.max_pitch_dev_deg ||
+                                      std::abs(yaw_.x - cfg_.yaw_deg) >= p_.max_yaw_dev_deg) ||
                std::abs(height_.x - 1.0) >= p_.max_height_dev) {
         e.state = CalibrationState::kAtLimit;  // clamped there by update()
     } else if (e.pitch_sigma_deg <= p_.converged_sigma_deg && e.yaw_sigma_deg <= p_.converged_sigma_deg &&

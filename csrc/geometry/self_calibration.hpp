@@ -49,14 +49,16 @@
 //     out in a row are no outliers but an estimate that went wrong (the lane tracker's first frames
 //     from a wrong camera, an estimate stuck at a limit): its variance goes back to the prior's and
 //     the next measurement is taken with the prior's gain,
-// The configured pitch and yaw are a starting value only (prior_sigma_deg 10): until pitch and yaw have converged
-// (both 1-sigma within converged_sigma_deg) the estimate is searched over a wide range (pitch_min_deg ..
-// pitch_max_deg, +- yaw_max_abs_deg), and the lane stage searches the vanishing point over that range too
-// (LaneTracker::set_search_window, search_window()); so a camera given only its intrinsics and height
-// converges. From then on the converged angles +- max_pitch_dev_deg / max_yaw_dev_deg guard the estimate (a wrong
-// marking cannot drag it further) and the lanes search around it. The height stays within the configured height
-// +- max_height_dev. Off (enabled: false), the configured camera is used unchanged. The state (CalibrationState)
-// says which of off, learning, converged (every 1-sigma within converged_sigma_*) or held at a limit the estimate is.
+// and the estimate is clamped to the configured value +- the limits. From scratch (from_scratch: true) the configured
+// pitch and yaw are a starting value only: until pitch and yaw have converged (both 1-sigma within
+// converged_sigma_deg) the estimate is searched over a wide range (pitch_min_deg .. pitch_max_deg, +-
+// yaw_max_abs_deg), the first measurement from a believed lane model (paint along both ego lines) is the estimate,
+// and the lane stage searches the vanishing point over that range too (LaneTracker::set_search_window,
+// search_window()); so a camera given only its intrinsics and height converges. From then on the converged angles
+// +- max_pitch_dev_deg / max_yaw_dev_deg guard the estimate (a wrong marking cannot drag it further). The height
+// stays within the configured height +- max_height_dev. Off (enabled: false), the configured camera is used
+// unchanged. The state (CalibrationState) says which of off, learning, converged (every 1-sigma within
+// converged_sigma_*) or held at a limit the estimate is.
 #pragma once
 
 #include "base/params.hpp"
@@ -72,17 +74,19 @@ namespace hw {
 
 struct SelfCalibrationParams {
     bool enabled = true;               // estimate pitch, yaw and height while driving
-    double prior_sigma_deg = 10.0;     // 1-sigma trust in the configured pitch and yaw (10: a starting value only)
+    bool from_scratch = false;         // pitch and yaw unknown: searched over the ranges below, the lanes too
+    double prior_sigma_deg = 2.0;      // 1-sigma trust in the configured pitch and yaw (from_scratch: none)
     double prior_sigma_height = 0.15;  // 1-sigma trust in the configured height, relative
     double angle_noise_deg = 0.5;      // 1-sigma of one frame's vanishing-point angle
     double height_noise = 0.06;        // 1-sigma of one frame's lane-width height, relative
     double angle_drift_deg_s = 0.01;   // random walk of the true angles (load, tyre pressure)
     double height_drift_s = 0.001;     // random walk of the true height, relative per sqrt(s)
-    double pitch_min_deg = -5.0;       // the pitch is searched over [pitch_min_deg, pitch_max_deg] until it converges
+    double pitch_min_deg = -5.0;       // from_scratch: the pitch is searched over [pitch_min_deg, pitch_max_deg]
     double pitch_max_deg = 20.0;
-    double yaw_max_abs_deg = 10.0;     // the yaw likewise over +- this
-    double max_pitch_dev_deg = 3.0;    // once converged, the pitch estimate stays within its converged value +- this
-    double max_yaw_dev_deg = 3.0;      // once converged, the yaw estimate stays within its converged value +- this
+    double yaw_max_abs_deg = 10.0;     // from_scratch: the yaw likewise over +- this
+    double max_pitch_dev_deg = 3.0;    // the pitch estimate stays within the configured pitch +- this (from_scratch:
+                                       // within its converged value +- this, once converged)
+    double max_yaw_dev_deg = 3.0;      // the yaw likewise
     double max_height_dev = 0.25;      // the estimate stays within the configured height * (1 +- this)
     RoadParams road;                   // section "road": lane_width_m, the ego-lane width assumed for the height
     double max_lateral_rate_mps = 0.3; // faster lateral motion in the lane is a lane change: no yaw update
@@ -147,9 +151,9 @@ public:
     // The configured camera with the estimated pitch, yaw and height.
     CameraParams camera() const;
     CalibrationEstimate estimate() const;
-    // Until pitch and yaw have converged once, the whole range they may take (pitch_min_deg .. pitch_max_deg,
-    // +- yaw_max_abs_deg); then their converged values +- max_*_dev_deg guard the estimate.
-    bool searching() const { return !anchored_; }
+    // From scratch, until pitch and yaw have converged once: the whole range they may take (pitch_min_deg ..
+    // pitch_max_deg, +- yaw_max_abs_deg); then their converged values +- max_*_dev_deg guard the estimate.
+    bool searching() const { return p_.from_scratch && !anchored_; }
     // The pitches where the lanes' vanishing point may lie while searching: the estimate +- search_sigmas of its
     // sigma, within the search range, as (centre, half-width) in deg. At the start, the whole range whatever the
     // configured pitch: a pitch given or not, the lanes search the same window until the first measurement.
@@ -160,7 +164,7 @@ private:
     struct Scalar {  // 1-D Kalman filter on a random walk
         double x = 0, var = 0;
         int rejected = 0;  // measurements gated out in a row
-        bool diffuse = false;  // the prior says nothing the search range does not: the first measurement is the estimate
+        bool diffuse = false;  // from scratch, no measurement yet: the first measurement is the estimate
         void predict(double q) { var += q; }
         // Kalman update with the innovation gate; after `reacquire` rejections in a row, var = max(var, prior_var)
         bool update(double z, double r, double gate_sigma, int reacquire, double prior_var);
