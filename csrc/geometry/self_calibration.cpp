@@ -53,7 +53,8 @@ void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("max_height_dev", max_height_dev, 0.0, 0.9,
           "relative; the height estimate stays within the configured height * (1 +- this)");
     m.add("lateral_rate_window_s", lateral_rate_window_s, 0.05, 10.0,
-          "s; the lateral rate is the offset's least-squares slope over this long (measured from half of it on)");
+          "s; from_scratch: the lateral rate is the offset's least-squares slope over this long (measured from half of "
+          "it on); otherwise frame to frame");
     m.add("search_sigmas", search_sigmas, 1.0, 20.0,
           "sigma; from_scratch, until converged the lanes search the vanishing point within the pitch estimate +- this many of "
           "its sigmas (within the search range; at least lanes.horizon_tolerance_deg)");
@@ -157,7 +158,7 @@ void SelfCalibration::reset() {
     }
     clamp_angles();  // a configured value outside the search range starts at its end
     height_ = {1.0, p_.prior_sigma_height * p_.prior_sigma_height};
-    last_t_ = last_curve_t_ = yaw_rate_smooth_ = NAN;
+    last_t_ = last_offset_m_ = last_curve_t_ = yaw_rate_smooth_ = NAN;
     offsets_.clear();
     updates_ = 0;
 }
@@ -193,7 +194,10 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     const bool measured = lanes.valid && (lanes.certain || !p_.from_scratch) && lanes.ego_left.observed &&
                           lanes.ego_right.observed &&
                           std::isfinite(lanes.vanishing_point.x) && std::isfinite(lanes.vanishing_point.y);
-    if (!measured) return;
+    if (!measured) {
+        last_offset_m_ = NAN;
+        return;
+    }
     const double vh = lanes.vanishing_point.y, uvp = lanes.vanishing_point.x;
     // two rows of the boundaries below the horizon: the lines' lower ends and halfway up to the horizon
     const double v1 = std::max(lanes.ego_left.bottom.y, lanes.ego_right.bottom.y);
@@ -203,12 +207,21 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     // lateral offset of the lane centre from the image axis, in metres at row v1 (scale W / w1)
     const double centre = 0.5 * (lanes.ego_left.x_at(float(v1)) + lanes.ego_right.x_at(float(v1)));
     const double offset_m = (centre - cfg_.cx) * p_.road.lane_width_m / w1;
-    // the lateral rate: the least-squares slope of the offset over the last lateral_rate_window_s (one frame's
-    // offset jitters by a few cm with the marking edges: frame to frame at 20 fps that reads 1-2 m/s)
+    // The lateral rate. From scratch: the least-squares slope of the offset over the last lateral_rate_window_s (one
+    // frame's offset jitters by a few cm with the marking edges: frame to frame at 20 fps that reads 1-2 m/s, and on
+    // the real lane clips it let 0-2 frames of 20 through). Otherwise frame to frame, as the synthetic suite was
+    // measured with.
     offsets_.emplace_back(t_s, offset_m);
     while (offsets_.front().first < t_s - p_.lateral_rate_window_s) offsets_.pop_front();
-    const bool steady_lane = offsets_.size() >= 3 && t_s - offsets_.front().first >= 0.5 * p_.lateral_rate_window_s &&
-                             std::abs(slope(offsets_)) <= p_.max_lateral_rate_mps;
+    const bool steady_lane =
+        p_.from_scratch ? offsets_.size() >= 3 && t_s - offsets_.front().first >= 0.5 * p_.lateral_rate_window_s &&
+                              std::abs(slope(offsets_)) <= p_.max_lateral_rate_mps
+                        : std::isfinite(last_offset_m_) && dt > 0 &&
+                              std::abs(offset_m - last_offset_m_) / dt <= p_.max_lateral_rate_mps;
+    last_offset_m_ = offset_m;
+    // From scratch the pitch and height are measured in every such frame (below); otherwise only in a steady lane on
+    // a straight road, as the yaw.
+    if (!p_.from_scratch && (!steady_lane || !straight)) return;
 
     const double pitch = std::atan((cfg_.cy - vh) / cfg_.fy) / kDeg;
     const double yaw = std::atan((cfg_.cx - uvp) / cfg_.fx) / kDeg;
@@ -217,9 +230,8 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     const double r_ang = p_.angle_noise_deg * p_.angle_noise_deg;
     const double prior_ang = p_.prior_sigma_deg * p_.prior_sigma_deg;
     const int n = p_.reacquire_after;
-    // The pitch (vanishing row) and the height (lane width against the row) in every frame with both boundaries
-    // measured: a lane change turns the car against the lane and a curve bends the boundaries sideways, which moves
-    // the vanishing column (the yaw), not its row.
+    // The pitch (vanishing row) and the height (lane width against the row): a lane change turns the car against the
+    // lane and a curve bends the boundaries sideways, which moves the vanishing column (the yaw), not its row.
     bool used = pitch_.update(pitch, r_ang, p_.gate_sigma, n, prior_ang);
     used |= height_.update(h / cfg_.height_m, p_.height_noise * p_.height_noise, p_.gate_sigma, n,
                            p_.prior_sigma_height * p_.prior_sigma_height);

@@ -90,7 +90,7 @@ struct SelfCalibrationParams {
     double max_height_dev = 0.25;      // the estimate stays within the configured height * (1 +- this)
     RoadParams road;                   // section "road": lane_width_m, the ego-lane width assumed for the height
     double max_lateral_rate_mps = 0.3; // faster lateral motion in the lane is a lane change: no yaw update
-    double lateral_rate_window_s = 0.5; // the lateral rate is the offset's slope over this long
+    double lateral_rate_window_s = 0.5; // from_scratch: the lateral rate is the offset's slope over this long
     double search_sigmas = 3.0;        // until converged the lanes search the pitch estimate +- this many sigmas
     double max_yaw_rate_rps = 0.02;    // faster turning is a curve: no update (also without a known speed)
     double max_curvature_1pm = 1e-4;   // |yaw rate| / speed above this is a curve: no update (radius < 10 km)
@@ -172,7 +172,7 @@ private:
     SelfCalibrationParams p_;
     CameraParams cfg_;
     Scalar pitch_, yaw_, height_;  // deg, deg, relative to the configured height (1 = as configured)
-    double last_t_ = NAN;
+    double last_t_ = NAN, last_offset_m_ = NAN;
     std::deque<std::pair<double, double>> offsets_;  // (t s, lateral offset m) over the last lateral_rate_window_s
     double last_curve_t_ = NAN;  // time of the last frame on a curve
     double yaw_rate_smooth_ = NAN;  // rad/s, the yaw rate low-passed over yaw_rate_smoothing_s
