@@ -33,7 +33,7 @@ FCW_BANNER = {FcwLevel.NONE: ("FCW clear", _GREEN), FcwLevel.PREWARNING: ("CAUTI
 CALIBRATION_COLOUR = {"converged": _GREEN, "learning": _AMBER, "at_limit": _RED, "off": _GREY}
 BAR_HEIGHT_PX = 56       # at 720 rows
 FONT = cv2.FONT_HERSHEY_SIMPLEX
-LABEL_SCALE = 0.75       # at 720 rows: capital letters ~16 px tall
+LABEL_SCALE = 0.75       # at 720 rows: text 17 px tall (cv2.getTextSize)
 BAR_SCALE = 0.7
 
 

@@ -63,6 +63,7 @@ def test_a_colour_recording_gives_a_colour_video(tmp_path):
 
 
 def test_a_track_label_is_readable_at_1280x720():
-    """Capital letters of a track's label at least 14 px tall at 720 rows (at font scale 0.4 they were 8 px)."""
+    """A track's label at least 14 px tall at 720 rows (cv2.getTextSize: 17 px; at font scale 0.4 with 1-px strokes,
+    9 px)."""
     (_w, h), _ = cv2.getTextSize("#12 23 m 2.1 s", annotate.FONT, annotate.LABEL_SCALE, 2)
     assert h >= 14
