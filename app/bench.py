@@ -20,6 +20,7 @@ import numpy as np
 
 from app import config as configuration
 from app.core import Pipeline
+from app.recording import natural_key
 
 
 def _stats(values: list[float]) -> dict:
@@ -69,7 +70,8 @@ def image_paths(sources: Sequence[str], limit: Optional[int] = None) -> list[str
     for src in sources:
         p = Path(src)
         if p.is_dir():
-            found = sorted(str(f) for f in p.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
+            found = sorted((str(f) for f in p.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES),
+                           key=lambda f: natural_key(Path(f).name))
             if not found:
                 raise BenchError(f"--images {src}: the folder holds no image ({', '.join(IMAGE_SUFFIXES)}); "
                                  f"give a folder of images or image files")

@@ -1,4 +1,5 @@
-"""`headway calibrate`: the camera's intrinsics and lens distortion from chessboard photos.
+"""`headway calibrate`: the camera's intrinsics and lens distortion from chessboard photos (the mounting from a
+drive, `--from-video`, is app/calibrate_drive.py).
 
 For each photo: cv2.findChessboardCorners finds the board's inner corners, cv2.cornerSubPix refines
 them to a tenth of a pixel; cv2.calibrateCamera then fits K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]
@@ -163,6 +164,14 @@ def write_yaml(cal: Calibration, out: str | Path) -> None:
 
 
 def main(args) -> int:
+    if args.from_video:
+        if args.images:
+            raise ValueError("give chessboard photos or --from-video CLIP, not both")
+        from app import calibrate_drive
+
+        return calibrate_drive.main(args)
+    if not args.images:
+        raise ValueError("give chessboard photos (intrinsics) or --from-video CLIP (the mounting from a drive)")
     board = parse_board(args.board)
     cal = calibrate(args.images, board)
     write_yaml(cal, args.out)

@@ -325,10 +325,16 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")
 
-    s = sub.add_parser("calibrate", help="camera intrinsics and lens distortion from chessboard photos -> camera: YAML")
-    s.add_argument("images", nargs="+", help="chessboard photos from the camera, the board in different poses")
+    s = sub.add_parser("calibrate", help="camera intrinsics and lens distortion from chessboard photos, or the "
+                                         "mounting (pitch, yaw, height) from a drive (--from-video) -> YAML")
+    s.add_argument("images", nargs="*", help="chessboard photos from the camera, the board in different poses")
     s.add_argument("--board", default="9x6", help="inner corners per row x per column (default 9x6)")
-    s.add_argument("--out", required=True, help="write the camera section here (.yaml)")
+    s.add_argument("--from-video", metavar="CLIP",
+                   help="a drive on a marked road (video file or image folder): self-calibration's pitch, yaw and "
+                        "height with their sigmas, written into the camera section of --config's copy")
+    s.add_argument("--config", help="with --from-video: the configuration with the camera's intrinsics (and height)")
+    s.add_argument("--fps", type=float, help="with --from-video: an image folder's frame rate")
+    s.add_argument("--out", required=True, help="write the configuration here (.yaml)")
 
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")

@@ -115,6 +115,7 @@ class FcwOutput:
     required_decel_mps2: Optional[float]
     suppressed_by: Optional[str]    # why a threat did not warn: "ego_speed_unavailable", "brake", ...
     changed: bool                   # level differs from the previous step
+    ego_speed_mps: Optional[float] = None  # the ego speed the decision was made with (None: unknown)
 
 
 @dataclass
@@ -236,4 +237,4 @@ class FcwStateMachine:
         return FcwOutput(level=level, ttc_used_s=ttc, ttc_source=source,
                          lead_id=lead.id if lead else None, lead_range_m=lead.range_m if lead else None,
                          lead_range_rate_mps=lead.range_rate_mps if lead else None, required_decel_mps2=a_req,
-                         suppressed_by=suppressed, changed=changed)
+                         suppressed_by=suppressed, changed=changed, ego_speed_mps=ego.speed_mps)

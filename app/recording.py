@@ -15,6 +15,7 @@ decoding before the container's count says how many of its frames were lost.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Optional, Union
@@ -42,9 +43,18 @@ def is_image_file(path: Union[str, Path]) -> bool:
     return Path(path).suffix.lower() in IMAGE_EXTS
 
 
+def natural_key(name: str) -> tuple:
+    """Sort key of a file name in natural order: runs of digits compare as numbers, so 2.jpg comes before 10.jpg
+    (TuSimple's clips are 1.jpg .. 20.jpg); names equal as numbers (01.jpg, 1.jpg) fall back to plain order. The
+    C++ image-folder source sorts the same way (natural_name_less in csrc/capture)."""
+    parts = re.split(r"(\d+)", name)  # text, digits, text, ...: a number always meets a number
+    return tuple(int(x) if i % 2 else x for i, x in enumerate(parts)), name
+
+
 def folder_images(folder: Union[str, Path]) -> list[Path]:
-    """The image files of a folder, sorted by name (the order they are played in)."""
-    return sorted(x for x in Path(folder).iterdir() if x.is_file() and is_image_file(x))
+    """The image files of a folder in natural order (natural_key: the order they are played in)."""
+    return sorted((x for x in Path(folder).iterdir() if x.is_file() and is_image_file(x)),
+                  key=lambda x: natural_key(x.name))
 
 
 def check_fps(fps: float, what: str = "--fps") -> float:
@@ -107,7 +117,12 @@ class Recording:
 
     def frames(self) -> Iterator[tuple[int, float, np.ndarray]]:
         """(frame number, media time s, gray image) for every usable frame, in order."""
-        return self._folder_frames() if self.kind == "folder" else self._video_frames()
+        return ((i, t, gray) for i, t, gray, _bgr in self.colour_frames(False))
+
+    def colour_frames(self, colour: bool = True) -> Iterator[tuple[int, float, np.ndarray, Optional[np.ndarray]]]:
+        """(frame number, media time s, gray image, BGR image) for every usable frame, in order: the gray image
+        exactly as frames() gives it (what the core sees), the BGR one for drawing (None unless `colour`)."""
+        return self._folder_frames(colour) if self.kind == "folder" else self._video_frames(colour)
 
     def read_all(self, max_frames: Optional[int] = None) -> list[np.ndarray]:
         out = []
@@ -125,15 +140,15 @@ class Recording:
         self.decoded += 1
         return True
 
-    def _folder_frames(self) -> Iterator[tuple[int, float, np.ndarray]]:
+    def _folder_frames(self, colour: bool):
         for i, name in enumerate(self._names):
             img, why = read_image(name)
             if img is None:
                 self.skipped.append(f"{name.name}: {why}")
             elif self._usable(name.name, img):
-                yield i, i / self.fps, img
+                yield i, i / self.fps, img, read_image(name, cv2.IMREAD_COLOR)[0] if colour else None
 
-    def _video_frames(self) -> Iterator[tuple[int, float, np.ndarray]]:
+    def _video_frames(self, colour: bool):
         cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
         i, failed = 0, 0  # frame number of the next read; failed reads in a row before it
         try:
@@ -152,7 +167,7 @@ class Recording:
                     failed = 0
                 gray = bgr if bgr.ndim == 2 else cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
                 if self._usable(f"frame {i}", gray):
-                    yield i, i / self.fps, gray
+                    yield i, i / self.fps, gray, bgr if colour and bgr.ndim == 3 else None
                 i += 1
         finally:
             cap.release()

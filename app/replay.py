@@ -120,7 +120,7 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
             raise ReplayError(str(exc)) from None
         sup = Stack(cfg, session)
         bar = stack.enter_context(_progress(n_frames, label, progress))
-        for index, t_s, gray, truth in frames:
+        for index, t_s, gray, truth, colour in frames:
             r = pipe.process(gray, t_s)
             decision = sup.step(r, r.t_s, pipe)
             summary.add(r)
@@ -129,7 +129,7 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
             if writer:
                 writer.write(r, decision.level)
             if video:
-                video.write(annotate(gray, r, truth, decision.level))
+                video.write(annotate(gray if colour is None else colour, r, truth, decision))
             if on_result:
                 on_result(r, decision, truth)
             if bar is not None:
@@ -147,11 +147,13 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
 def replay_recording(source: str, config_path: Optional[str] = None, fps: Optional[float] = None,
                      out_video: Optional[str] = None, tracks_path: Optional[str] = None,
                      can_in: Optional[str] = None, can_out: Optional[str] = None,
-                     on_result: Optional[Callable] = None, progress: bool = True) -> ReplaySummary:
+                     on_result: Optional[Callable] = None, progress: bool = True,
+                     overrides: Optional[dict] = None) -> ReplaySummary:
+    """`overrides`: configuration values applied over the file's (same shape, e.g. {"self_calibration": {...}})."""
     summary = ReplaySummary(source)
     rec = _recording(source, fps)
     summary.skipped = rec.skipped  # the reader lists what it could not use, as it goes
-    cfg = configuration.load(config_path)
+    cfg = configuration.load(config_path, overrides)
     size = rec.size
     problem = configuration.frame_size_problem(*size)
     if problem:
@@ -159,7 +161,8 @@ def replay_recording(source: str, config_path: Optional[str] = None, fps: Option
     if (cfg["camera"]["width"], cfg["camera"]["height"]) != size:
         # a camera calibrated for another size: same field of view, intrinsics scaled to the recording
         cfg["camera"] = configuration.scaled_camera(cfg["camera"], *size)
-    out = _run(((i, t, g, None) for i, t, g in rec.frames()), cfg, summary, rec.expected, Path(source).name,
+    frames = ((i, t, g, None, bgr) for i, t, g, bgr in rec.colour_frames(colour=out_video is not None))
+    out = _run(frames, cfg, summary, rec.expected, Path(source).name,
                out_video, rec.fps, tracks_path, can_in, can_out, on_result, progress)
     summary.decoded = rec.account()
     return out
@@ -194,7 +197,7 @@ def replay_scenario(source: str, config_path: Optional[str] = None, out_video: O
             can_in = str(Path(tmp) / "ego_speed.log")
             write_ego_speed_log(Path(can_in), world.ego, float(world.times_s[-1]))
             cfg["vehicle"].update(speed_dbc=str(SIM_DBC), speed_message="EGO_SPEED", speed_signals="SPEED_MPS")
-        frames = ((f.index, f.t_s, f.image, f.truth) for f in render(scenario))
+        frames = ((f.index, f.t_s, f.image, f.truth, None) for f in render(scenario))
         return _run(frames, cfg, summary, n, scenario.name, out_video, scenario.fps, tracks_path, can_in, can_out,
                     on_result, progress)
 

@@ -75,3 +75,38 @@ def test_clear_errors(tmp_path, chessboards):
     assert r.returncode == 1 and "at least 3 are needed" in r.stderr
     r = headway("calibrate", chessboards[0], "--board", "nine", "--out", str(tmp_path / "c.yaml"))
     assert r.returncode == 1 and "COLSxROWS" in r.stderr
+
+
+def test_from_video_writes_the_mounting_it_found_into_the_configuration(tmp_path):
+    """A real lane clip (1.jpg .. 20.jpg, 20 fps) and a configuration with TuSimple's intrinsics and height only:
+    the pitch found is the 10-13 deg of that downward-looking camera (measured 11.66 +- 0.11 deg on 0313-1/60), and
+    the configuration written keeps the intrinsics and holds the pitch, yaw and height printed."""
+    from app.eval.lane_clips import write_camera_config
+
+    clip = data_path("tusimple", "lane_clips") / "clips" / "0313-1" / "60"
+    cfg = write_camera_config(str(tmp_path / "camera.yaml"))
+    out = tmp_path / "calibrated.yaml"
+    r = headway("calibrate", "--from-video", str(clip), "--fps", "20", "--config", cfg, "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "20 frames" in r.stdout
+    pitch = float(r.stdout.split("pitch")[1].split("+-")[0])
+    sigma = float(r.stdout.split("pitch")[1].split("+-")[1].split("deg")[0])
+    assert 10.0 <= pitch <= 13.0 and 0 < sigma <= 0.2, r.stdout
+    cam = yaml.safe_load(out.read_text())["camera"]
+    assert cam["pitch_deg"] == pytest.approx(pitch, abs=0.01) and cam["fx"] == pytest.approx(714.1526)
+    assert {"yaw_deg", "height_m"} <= set(cam)
+    assert headway("config", "check", str(out)).returncode == 0
+
+
+def test_from_video_without_lanes_says_so(tmp_path):
+    clip = tmp_path / "blank"
+    clip.mkdir()
+    for i in range(1, 6):
+        cv2.imwrite(str(clip / f"{i}.png"), np.full((360, 640), 90, np.uint8))
+    r = headway("calibrate", "--from-video", str(clip), "--fps", "20", "--out", str(tmp_path / "c.yaml"))
+    assert r.returncode == 1 and "nothing to calibrate from" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "c.yaml").exists()
+    r = headway("calibrate", "--from-video", str(clip), "--out", str(tmp_path / "c.yaml"))
+    assert r.returncode == 1 and "--fps" in r.stderr
+    r = headway("calibrate", "--out", str(tmp_path / "c.yaml"))
+    assert r.returncode == 1 and "--from-video" in r.stderr

@@ -107,3 +107,26 @@ def test_evaluation_reads_recordings_through_the_same_reader(tmp_path, monkeypat
     video = write_video(tmp_path / "v.mp4", n=6, fps=25.0)
     frames, fps = road_motion.read_video(video, max_frames=4)
     assert len(frames) == 4 and fps == 25.0 and calls[-1] == str(video)
+
+
+def tusimple_named_folder(tmp_path, n=20):
+    """Frames named as TuSimple's clips (1.jpg .. 20.jpg), frame i a flat image of gray 10 i."""
+    d = tmp_path / "clip"
+    d.mkdir()
+    for i in range(1, n + 1):
+        cv2.imwrite(str(d / f"{i}.jpg"), np.full((48, 64), 10 * i, np.uint8))
+    return d
+
+
+def test_a_folder_named_1_to_20_plays_in_numeric_order(tmp_path):
+    """By plain name 10.jpg .. 19.jpg would play between 1.jpg and 2.jpg: the drive would jump back in time."""
+    d = tusimple_named_folder(tmp_path)
+    assert [p.name for p in recording.folder_images(d)] == [f"{i}.jpg" for i in range(1, 21)]
+    levels = [int(round(float(g.mean()))) for _i, _t, g in open_recording(d, 20).frames()]
+    assert levels == [10 * i for i in range(1, 21)]
+
+
+def test_natural_order_compares_digit_runs_as_numbers():
+    names = ["img10b.png", "img2.png", "img10a.png", "img1.png", "01.jpg", "1.jpg", "a.jpg", "10.jpg", "9.jpg"]
+    assert sorted(names, key=recording.natural_key) == ["01.jpg", "1.jpg", "9.jpg", "10.jpg", "a.jpg", "img1.png",
+                                                        "img2.png", "img10a.png", "img10b.png"]

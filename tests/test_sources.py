@@ -57,6 +57,14 @@ def test_image_folder_sorted_names_given_fps(tmp_path):
     assert [r.t_s for r in results] == pytest.approx([0.0, 0.05, 0.10])
 
 
+def test_image_folder_named_like_tusimple_clips_plays_in_numeric_order(tmp_path):
+    """1.jpg .. 20.jpg: the C++ folder source plays 2.jpg second, not 10.jpg (natural_name_less)."""
+    for i in range(1, 21):
+        cv2.imwrite(str(tmp_path / f"{i}.jpg"), np.full((480, 640), 10 * i, np.uint8))
+    results, _ = play({"kind": "folder", "path": str(tmp_path), "fps": 20.0})
+    assert [int(round(r.image_mean)) for r in results] == [10 * i for i in range(1, 21)]
+
+
 def test_folder_of_mixed_sizes_skips_and_counts_the_odd_frames(tmp_path):
     for i in range(5):
         shape = (240, 320) if i == 2 else (480, 640)

@@ -1,5 +1,10 @@
 """Lanes on TuSimple's 20-frame clips: each clip through the whole pipeline, scored on its frame 20.
 
+Two ways: ``evaluate`` feeds the frames to a Pipeline with TuSimple's lane camera (pitch given);
+``evaluate_replay`` replays each clip folder as ``headway replay CLIP --fps 20 --config F`` does (the frames in
+the folder's natural order, the configuration's own camera and preset), e.g. with only what TuSimple's
+calibration.txt holds (``write_camera_config``: intrinsics, 1.80 m height, the hood line; no pitch).
+
 The folder holds ``label.json`` (TuSimple's format, one JSON object per line; ``raw_file`` is frame 20
 of a clip, relative to the folder) and the clips' frames ``1.jpg`` .. ``20.jpg`` beside it. Every clip
 starts from a fresh pipeline (no lane history) and runs its 20 frames at 20 fps through
@@ -17,7 +22,7 @@ import cv2
 
 from app import config as configuration
 from app.core import Pipeline
-from app.eval.tusimple_boxes import TUSIMPLE_LANE_PITCH_DEG, tusimple_config
+from app.eval.tusimple_boxes import TUSIMPLE_CAMERA, TUSIMPLE_LANE_PITCH_DEG, tusimple_config
 from app.eval.tusimple_lanes import evaluate_lanes, segments_to_tusimple, write_predictions
 
 FPS = 20.0           # TuSimple clips: 20 frames in one second
@@ -84,4 +89,53 @@ def evaluate(clips_dir: str, config_path: Optional[str] = None, preset: str = "t
         write_predictions(predictions_out, labels, preds, run_ms)
     m = evaluate_lanes(preds, label_file, image_width=width)
     return {"clips": len(labels), "accuracy": m["accuracy"], "fp": m["fp"], "fn": m["fn"],
+            "per_image": m["per_image"]}
+
+
+def write_camera_config(path: str, pitch_deg: Optional[float] = None, from_scratch: bool = False) -> str:
+    """A configuration file with TuSimple's camera as calibration.txt gives it (intrinsics, 1.80 m height) and the
+    bonnet's 8 % hood line; the pitch only if given; self_calibration.from_scratch if asked. Returns `path`."""
+    import yaml
+
+    cam = {k: v for k, v in TUSIMPLE_CAMERA.items() if k != "pitch_deg"}
+    cam["hood_frac"] = 0.08
+    if pitch_deg is not None:
+        cam["pitch_deg"] = pitch_deg
+    cfg: dict = {"camera": cam}
+    if from_scratch:
+        cfg["self_calibration"] = {"from_scratch": True}
+    Path(path).write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path
+
+
+def clip_folders(clips_dir: str) -> list[tuple[dict, Path]]:
+    """(label, folder of the clip's frames) for every labelled clip of `clips_dir`."""
+    root = Path(clips_dir)
+    label_file = root / "label.json"
+    if not label_file.exists():
+        raise FileNotFoundError(f"{label_file}: not found (expected TuSimple's label.json in the clips folder)")
+    return [(lab, (root / lab["raw_file"]).parent) for lab in load_labels(label_file)]
+
+
+def evaluate_replay(clips_dir: str, config_path: Optional[str] = None, on_frame: Optional[Callable] = None) -> dict:
+    """TuSimple accuracy / FP / FN of the last frame of every clip replayed as `headway replay CLIP --fps 20`.
+
+    on_frame(label, result) is called for every frame of every clip (the calibration's course)."""
+    from app.replay import replay_recording
+
+    preds: dict[str, list] = {}
+    last: dict = {}
+    width = None
+    clips = clip_folders(clips_dir)
+    for lab, folder in clips:
+        def keep(r, _decision, _truth, lab=lab):
+            last["r"] = r
+            if on_frame:
+                on_frame(lab, r)
+
+        replay_recording(str(folder), config_path=config_path, fps=FPS, on_result=keep, progress=False)
+        width = last["r"].width
+        preds[lab["raw_file"]] = segments_to_tusimple(last["r"].lanes, lab["h_samples"], width)
+    m = evaluate_lanes(preds, Path(clips_dir) / "label.json", image_width=width)
+    return {"clips": len(clips), "accuracy": m["accuracy"], "fp": m["fp"], "fn": m["fn"],
             "per_image": m["per_image"]}

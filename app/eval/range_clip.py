@@ -11,11 +11,12 @@ from app import config as configuration
 from app.core import Pipeline
 from app.eval.matching import match
 from app.eval.tusimple_boxes import tusimple_config
+from app.recording import folder_images
 
 
 def evaluate(clip_dir: str, config_path: Optional[str] = None, preset: str = "thesis", fps: float = 20.0) -> dict:
     root = Path(clip_dir)
-    frames = sorted((root / "imgs").glob("*.jpg"))
+    frames = folder_images(root / "imgs")
     ann = json.loads((root / "annotation.json").read_text())
     cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}}))
     with Pipeline(configuration.core_sections(cfg)) as pipe:

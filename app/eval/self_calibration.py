@@ -1,6 +1,6 @@
-"""Self-calibration measured: convergence on the synthetic suite from a wrong camera, stability on the
-real TuSimple lane clips, and range on TuSimple train_clip1 from the default mounting against the
-calibrated one.
+"""Self-calibration measured: convergence on the synthetic suite from a wrong camera, calibration from scratch on
+the real TuSimple lane clips (intrinsics and height only, against the pitch given), and range on TuSimple
+train_clip1 from the default mounting against the calibrated one.
 
     python -m app.eval.self_calibration [--data ../shared/data] [--parts synthetic,clips,range] [--scenario NAME]...
 """
@@ -145,36 +145,45 @@ def synthetic(scenario: str = "calibration_drive", offsets: Optional[dict] = Non
     return synthetic_runs(scenario, [{"offsets": offsets, "enabled": enabled}], preset, max_range_m)[0]
 
 
-def lane_clips(data: str) -> dict:
-    """Each real lane clip run from the first frame with TuSimple's camera: the estimate at the last frame
-    and its spread (std) over the clip's second half; then mean and spread over the clips."""
-    root = Path(data) / "tusimple" / "lane_clips" / "clips"
-    dirs = sorted(p for p in root.glob("*/*") if p.is_dir())
-    per = []
-    for d in dirs:
-        frames = sorted(d.glob("*.jpg"), key=lambda p: int(p.stem))
-        cfg = tusimple_config(configuration.load(None), TUSIMPLE_LANE_PITCH_DEG)
-        est, state = [], None
-        with Pipeline(configuration.core_sections(cfg)) as pipe:
-            for i, p in enumerate(frames):
-                r = pipe.process(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), i / 20.0)
-                est.append((r.calibration["pitch_deg"], r.calibration["yaw_deg"], r.calibration["height_m"],
-                            r.calibration["updates"]))
-                state = r.calibration["state"]
-        e = np.array(est)
-        half = e[len(e) // 2:]
-        per.append({"clip": str(d.relative_to(root)), "pitch_deg": round(float(e[-1, 0]), 3),
-                    "yaw_deg": round(float(e[-1, 1]), 3), "height_m": round(float(e[-1, 2]), 3),
-                    "updates": int(e[-1, 3]), "state": state,
-                    "within_clip_std": {"pitch_deg": round(float(half[:, 0].std()), 3),
-                                        "yaw_deg": round(float(half[:, 1].std()), 3),
-                                        "height_m": round(float(half[:, 2].std()), 4)}})
-    out = {"clips": per, "configured": {"pitch_deg": TUSIMPLE_LANE_PITCH_DEG, "yaw_deg": 0.0,
-                                        "height_m": TUSIMPLE_CAMERA["height_m"]}}
-    for k in ("pitch_deg", "yaw_deg", "height_m"):
-        v = np.array([c[k] for c in per])
-        out[k] = {"mean": round(float(v.mean()), 3), "std_over_clips": round(float(v.std()), 3),
-                  "mean_within_clip_std": round(float(np.mean([c["within_clip_std"][k] for c in per])), 4)}
+def lane_clips(data: str, within_deg: float = 0.3) -> dict:
+    """The 12 real lane clips replayed as `headway replay CLIP --fps 20 --config F` does, twice, F with
+    self_calibration.from_scratch: with only what TuSimple's calibration.txt holds (intrinsics, 1.80 m height) and
+    the hood line ("from_scratch"), and with the pitch given as well ("pitch_given"). Per run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's
+    estimate at the last frame and, from scratch, the first frame from which pitch and yaw stay within `within_deg`
+    of the last frame's estimate with the pitch given (None: not within at the end)."""
+    import tempfile
+
+    from app.eval import lane_clips as clips_eval
+
+    clips = str(Path(data) / "tusimple" / "lane_clips")
+    out: dict = {}
+    course: dict = {}
+    with tempfile.TemporaryDirectory(prefix="headway-calib-") as tmp:
+        for run, pitch in (("from_scratch", None), ("pitch_given", TUSIMPLE_LANE_PITCH_DEG)):
+            cfg = clips_eval.write_camera_config(str(Path(tmp) / f"{run}.yaml"), pitch, from_scratch=True)
+            per: dict = {}
+            m = clips_eval.evaluate_replay(clips, cfg, on_frame=lambda lab, r, per=per: per.setdefault(
+                "/".join(lab["raw_file"].split("/")[1:3]), []).append(r.calibration))
+            course[run] = per
+            out[run] = {k: m[k] for k in ("clips", "accuracy", "fp", "fn")}
+            out[run]["per_clip"] = {"/".join(x["raw_file"].split("/")[1:3]): {k: x[k] for k in ("accuracy", "fp", "fn")}
+                                    for x in m["per_image"]}
+    per_clip = []
+    for clip, scratch in course["from_scratch"].items():
+        given = course["pitch_given"][clip][-1]
+        near = [abs(c["pitch_deg"] - given["pitch_deg"]) <= within_deg and abs(c["yaw_deg"] - given["yaw_deg"])
+                <= within_deg for c in scratch]
+        first = next((i for i in range(len(near)) if all(near[i:])), None)
+        last = scratch[-1]
+        per_clip.append({"clip": clip, "frames": len(scratch), "within_from_frame": first,
+                         "from_scratch": {k: round(last[k], 3) for k in ("pitch_deg", "yaw_deg", "height_m",
+                                                                           "pitch_sigma_deg", "yaw_sigma_deg")}
+                         | {"state": last["state"], "updates": last["updates"]},
+                         "pitch_given": {k: round(given[k], 3) for k in ("pitch_deg", "yaw_deg", "height_m")}
+                         | {"state": given["state"]},
+                         "pitch_diff_deg": round(last["pitch_deg"] - given["pitch_deg"], 3),
+                         "yaw_diff_deg": round(last["yaw_deg"] - given["yaw_deg"], 3)})
+    out["clips"] = per_clip
     return out
 
 

@@ -33,6 +33,32 @@ static bool cut_short(const std::vector<uchar> &data, const std::string &path) {
     return false;
 }
 
+bool natural_name_less(const std::string &a, const std::string &b) {
+    auto digit = [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; };
+    size_t i = 0, j = 0;
+    while (i < a.size() && j < b.size()) {
+        if (digit(a[i]) && digit(b[j])) {
+            size_t ie = i, je = j;
+            while (ie < a.size() && digit(a[ie])) ++ie;
+            while (je < b.size() && digit(b[je])) ++je;
+            size_t iz = i, jz = j;  // leading zeros do not change the number
+            while (iz + 1 < ie && a[iz] == '0') ++iz;
+            while (jz + 1 < je && b[jz] == '0') ++jz;
+            if (ie - iz != je - jz) return ie - iz < je - jz;  // fewer digits: a smaller number
+            const int c = a.compare(iz, ie - iz, b, jz, je - jz);
+            if (c != 0) return c < 0;
+            i = ie;
+            j = je;
+        } else {
+            if (a[i] != b[j]) return static_cast<unsigned char>(a[i]) < static_cast<unsigned char>(b[j]);
+            ++i;
+            ++j;
+        }
+    }
+    if (i < a.size() || j < b.size()) return j < b.size();  // a prefix of the other comes first
+    return a < b;
+}
+
 ImageFolderSource::ImageFolderSource(const std::string &path, double fps, SourceSize size)
     : path_(path), fps_(fps), size_(size) {
     std::error_code ec;
@@ -40,7 +66,9 @@ ImageFolderSource::ImageFolderSource(const std::string &path, double fps, Source
     if (!(fps > 0)) throw SourceError("image folder " + path + ": fps must be positive (give --fps)");
     for (const auto &e : fs::directory_iterator(path, ec))
         if (e.is_regular_file() && is_image_file_name(e.path().string())) files_.push_back(e.path().string());
-    std::sort(files_.begin(), files_.end());
+    std::sort(files_.begin(), files_.end(), [](const std::string &x, const std::string &y) {
+        return natural_name_less(fs::path(x).filename().string(), fs::path(y).filename().string());
+    });
     if (files_.empty())
         throw SourceError("image folder " + path + ": contains no images (.png .jpg .bmp .pgm .tif)");
 }

@@ -7,9 +7,14 @@
 
 namespace hw {
 
+// Natural order of file names: runs of digits compare as numbers, so 2.jpg comes before 10.jpg (TuSimple's clips
+// are 1.jpg .. 20.jpg; by plain name 10.jpg would play after 1.jpg). Names equal as numbers (01.jpg, 1.jpg) fall
+// back to plain order. The same order as app/recording.py's natural_key for the Python readers.
+bool natural_name_less(const std::string &a, const std::string &b);
+
 class ImageFolderSource final : public FrameSource {
 public:
-    // Lists the images (sorted by name); throws SourceError for a missing or empty folder.
+    // Lists the images in natural order (natural_name_less); throws SourceError for a missing or empty folder.
     ImageFolderSource(const std::string &path, double fps, SourceSize size);
     ReadStatus read(Frame &out) override;
     std::string describe() const override { return "image folder " + path_; }

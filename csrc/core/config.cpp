@@ -123,6 +123,9 @@ Config Config::from_json(const std::string &text) {
     if (c.road.lane_width_m < c.road.min_lane_width_m || c.road.lane_width_m > c.road.max_lane_width_m)
         throw ConfigError("road.lane_width_m: must lie within [road.min_lane_width_m, road.max_lane_width_m], or "
                           "lead selection disbelieves every lane of the nominal width");
+    if (c.self_calibration.pitch_min_deg >= c.self_calibration.pitch_max_deg)
+        throw ConfigError("self_calibration.pitch_min_deg: must be below self_calibration.pitch_max_deg (the pitch "
+                          "range searched, e.g. -5 to 20 deg)");
     share_road(c);
     c.kalman.height = c.phd.height = c.vehicle_height;  // one section for both trackers that keep a box height
     composition_of(c.pipeline);  // the parts exist and fit together

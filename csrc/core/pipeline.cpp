@@ -4,6 +4,7 @@
 #include "core/parallax_stage.hpp"
 #include "detect/shadow.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -22,7 +23,22 @@ std::vector<DetectedBox> boxes_of(const std::vector<Hypothesis> &hyps) {
 Pipeline::Pipeline(const Config &cfg)
     : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), parts_(make_parts(cfg)), calib_(cfg.self_calibration, cfg.camera),
       horizon_(cfg.horizon, cfg.camera),
-      kinematics_(cfg.kinematics, cfg.camera), lead_(cfg.lead, cfg.camera) {}
+      kinematics_(cfg.kinematics, cfg.camera), lead_(cfg.lead, cfg.camera) {
+    set_lane_search();
+}
+
+void Pipeline::set_lane_search() {
+    if (!cfg_.self_calibration.enabled || !cfg_.self_calibration.from_scratch) return;
+    CameraParams cam = calib_.camera();
+    const double tol = cfg_.lanes.assembly.horizon_tolerance_deg;
+    const auto [centre, half_width] = calib_.search_window();
+    if (calib_.searching() && half_width > tol) {
+        cam.pitch_deg = centre;
+        lanes_.set_search_window(cam, half_width);
+    } else {
+        lanes_.set_search_window(cam, tol);
+    }
+}
 
 void Pipeline::check_frame(const cv::Mat &gray) const {
     if (gray.type() != CV_8UC1) throw std::invalid_argument("frame must be 8-bit gray (CV_8UC1)");
@@ -67,7 +83,10 @@ FrameOutput Pipeline::process(const Frame &frame) {
             motion = &parts_.road->update(frame.gray, frame.t_s, out.lanes, ego, last_tracks_, out.times);
             out.road = motion->motion;
         }
-        const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera, ego, motion};
+        // from scratch, the camera as self-calibration has it (the previous frame's estimate): the mounting found
+        // places the detectors' road prior too
+        const CameraParams cam = cfg_.self_calibration.from_scratch ? calib_.camera() : cfg_.camera;
+        const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cam, ego, motion};
         parts_.detectors.last.clear();
         parts_.tracker->step(ctx, parts_.detectors, out.tracks, out.times, out.full_detection);
         if (out.full_detection) out.detections = boxes_of(parts_.detectors.last);
@@ -82,7 +101,12 @@ FrameOutput Pipeline::process(const Frame &frame) {
     prev_t_s_ = frame.t_s;
     {
         Stopwatch sw;
-        calib_.update(out.lanes, ego.speed_mps, ego.yaw_rate_rps, frame.t_s, out.road);
+        // The curve gate takes the road motion's yaw rate only once pitch and yaw have converged: fitted around a
+        // mounting still being found (a yaw degrees off), it reads part of the travel as a turn and would shut the
+        // gate for the yaw's first measurements (on 6 of the 12 real lane clips, no yaw measurement in 20 frames).
+        const bool bus_yaw_rate = std::isfinite(ego_yaw_rate_rps_);
+        calib_.update(out.lanes, ego.speed_mps, bus_yaw_rate || !calib_.searching() ? ego.yaw_rate_rps : NAN, frame.t_s,
+                      out.road);
         const CalibrationEstimate e = calib_.estimate();
         if (e.active) {
             const CameraParams cam = calib_.camera();
@@ -90,6 +114,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
             kinematics_.set_camera(cam);
             lead_.set_camera(cam);
             if (parts_.road) parts_.road->set_camera(cam);
+            set_lane_search();
         }
         out.calib_active = e.active;
         out.calib_pitch_deg = float(e.pitch_deg);
@@ -185,6 +210,7 @@ void Pipeline::reset() {
     last_tracks_.clear();
     image_stats_.reset();
     calib_.reset();
+    set_lane_search();
     horizon_.set_camera(cfg_.camera);
     horizon_.reset();
     kinematics_.set_camera(cfg_.camera);

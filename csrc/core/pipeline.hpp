@@ -40,6 +40,9 @@ public:
 
 private:
     void check_frame(const cv::Mat &gray) const;
+    // Where the lanes search the vanishing point: from scratch, self-calibration's search range while it searches,
+    // its estimate +- lanes.horizon_tolerance_deg once converged; otherwise the configured camera's window.
+    void set_lane_search();
 
     Config cfg_;
     LaneTracker lanes_;

@@ -3,16 +3,32 @@
 #include "geometry/road_motion_fit.hpp"
 
 #include <algorithm>
+#include <deque>
 
 namespace hw {
 
 namespace {
 constexpr double kDeg = M_PI / 180.0;
+bool at_bound(double x, double lo, double hi) { return x <= lo + 1e-9 || x >= hi - 1e-9; }
+// least-squares slope of (t, y) samples (at least two distinct times)
+double slope(const std::deque<std::pair<double, double>> &s) {
+    double mt = 0, my = 0;
+    for (const auto &p : s) { mt += p.first; my += p.second; }
+    mt /= double(s.size());
+    my /= double(s.size());
+    double stt = 0, sty = 0;
+    for (const auto &p : s) { stt += (p.first - mt) * (p.first - mt); sty += (p.first - mt) * (p.second - my); }
+    return stt > 0 ? sty / stt : 0.0;
+}
 }
 
 void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("enabled", enabled, "estimate the camera's pitch, yaw and height from the lanes while driving; "
                               "false = the camera section is used as configured");
+    m.add("from_scratch", from_scratch,
+          "pitch and yaw not known: found from the lanes over pitch_min_deg..pitch_max_deg and +-yaw_max_abs_deg (the "
+          "lanes search there too), the configured values a starting point only, the limits around the converged "
+          "estimate (headway calibrate --from-video sets it)");
     m.add("prior_sigma_deg", prior_sigma_deg, 0.01, 30.0,
           "deg; 1-sigma trust in the configured pitch and yaw (the prior); a surveyed mounting can say 0.2");
     m.add("prior_sigma_height", prior_sigma_height, 0.001, 1.0,
@@ -24,11 +40,24 @@ void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("angle_drift_deg_s", angle_drift_deg_s, 0.0, 10.0,
           "deg/sqrt(s); random walk of the true angles (load, tyre pressure); bounds how long the estimate remembers");
     m.add("height_drift_s", height_drift_s, 0.0, 1.0, "relative/sqrt(s); random walk of the true height");
+    m.add("pitch_min_deg", pitch_min_deg, -30.0, 30.0,
+          "deg; from_scratch: lowest pitch searched (the lanes' vanishing point too) until pitch and yaw converge");
+    m.add("pitch_max_deg", pitch_max_deg, -30.0, 30.0,
+          "deg; from_scratch: highest pitch searched (looking down) until pitch and yaw converge");
+    m.add("yaw_max_abs_deg", yaw_max_abs_deg, 0.0, 30.0, "deg; from_scratch: the yaw is searched within +- this");
     m.add("max_pitch_dev_deg", max_pitch_dev_deg, 0.0, 20.0,
-          "deg; the pitch estimate stays within the configured pitch +- this (a wrong marking cannot drag it further)");
-    m.add("max_yaw_dev_deg", max_yaw_dev_deg, 0.0, 20.0, "deg; the yaw estimate stays within the configured yaw +- this");
+          "deg; the pitch estimate stays within the configured pitch +- this (from_scratch: within its converged "
+          "value +- this, once converged); a wrong marking cannot drag it further");
+    m.add("max_yaw_dev_deg", max_yaw_dev_deg, 0.0, 20.0,
+          "deg; the yaw estimate stays within the configured yaw +- this (from_scratch: its converged value's)");
     m.add("max_height_dev", max_height_dev, 0.0, 0.9,
           "relative; the height estimate stays within the configured height * (1 +- this)");
+    m.add("lateral_rate_window_s", lateral_rate_window_s, 0.05, 10.0,
+          "s; from_scratch: the lateral rate is the offset's least-squares slope over this long (measured from half of "
+          "it on); otherwise frame to frame");
+    m.add("search_sigmas", search_sigmas, 1.0, 20.0,
+          "sigma; from_scratch, until converged the lanes search the vanishing point within the pitch estimate +- this many of "
+          "its sigmas (within the search range; at least lanes.horizon_tolerance_deg)");
     m.add("max_lateral_rate_mps", max_lateral_rate_mps, 0.0, 5.0,
           "m/s; faster lateral motion within the lane is a lane change (~1 m/s), when the car is turned against "
           "the lane: no measurement");
@@ -87,6 +116,12 @@ double yaw_rate_of_road_motion(const cv::Matx33d &H, const CameraParams &cam, do
 }
 
 bool SelfCalibration::Scalar::update(double z, double r, double gate_sigma, int reacquire, double prior_var) {
+    if (diffuse) {  // the estimate starts at the first measurement, whatever the configured value
+        x = z;
+        var = r;
+        diffuse = false;
+        return true;
+    }
     const double s = var + r;  // innovation variance
     const double innov = z - x;
     if (innov * innov > gate_sigma * gate_sigma * s) {
@@ -109,10 +144,22 @@ SelfCalibration::SelfCalibration(const SelfCalibrationParams &p, const CameraPar
 }
 
 void SelfCalibration::reset() {
+    anchored_ = false;
+    anchor_pitch_ = anchor_yaw_ = NAN;
     pitch_ = {cfg_.pitch_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
     yaw_ = {cfg_.yaw_deg, p_.prior_sigma_deg * p_.prior_sigma_deg};
+    // From scratch the configured pitch and yaw say nothing: their uncertainty is the search range's (the lanes search
+    // all of it) and the first measurement is the estimate, so a pitch given or not gives the same estimate from then
+    // on.
+    pitch_.diffuse = yaw_.diffuse = p_.from_scratch;
+    if (p_.from_scratch) {
+        pitch_.var = std::pow(p_.pitch_max_deg - p_.pitch_min_deg, 2);
+        yaw_.var = std::pow(2.0 * p_.yaw_max_abs_deg, 2);
+    }
+    clamp_angles();  // a configured value outside the search range starts at its end
     height_ = {1.0, p_.prior_sigma_height * p_.prior_sigma_height};
     last_t_ = last_offset_m_ = last_curve_t_ = yaw_rate_smooth_ = NAN;
+    offsets_.clear();
     updates_ = 0;
 }
 
@@ -142,7 +189,10 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     if (turning) last_curve_t_ = t_s;
     const bool straight = !(std::isfinite(last_curve_t_) && t_s - last_curve_t_ <= p_.curve_hold_s);
 
-    const bool measured = lanes.valid && lanes.ego_left.observed && lanes.ego_right.observed &&
+    // from scratch a believed model only (paint along both ego boundaries, lanes.evidence_min): on an unmarked road
+    // the lane stage assembles "lanes" from vehicle sides, and the first measurement is the estimate
+    const bool measured = lanes.valid && (lanes.certain || !p_.from_scratch) && lanes.ego_left.observed &&
+                          lanes.ego_right.observed &&
                           std::isfinite(lanes.vanishing_point.x) && std::isfinite(lanes.vanishing_point.y);
     if (!measured) {
         last_offset_m_ = NAN;
@@ -157,10 +207,21 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     // lateral offset of the lane centre from the image axis, in metres at row v1 (scale W / w1)
     const double centre = 0.5 * (lanes.ego_left.x_at(float(v1)) + lanes.ego_right.x_at(float(v1)));
     const double offset_m = (centre - cfg_.cx) * p_.road.lane_width_m / w1;
-    const bool steady_lane = std::isfinite(last_offset_m_) && dt > 0 &&
-                             std::abs(offset_m - last_offset_m_) / dt <= p_.max_lateral_rate_mps;
+    // The lateral rate. From scratch: the least-squares slope of the offset over the last lateral_rate_window_s (one
+    // frame's offset jitters by a few cm with the marking edges: frame to frame at 20 fps that reads 1-2 m/s, and on
+    // the real lane clips it let 0-2 frames of 20 through). Otherwise frame to frame, as the synthetic suite was
+    // measured with.
+    offsets_.emplace_back(t_s, offset_m);
+    while (offsets_.front().first < t_s - p_.lateral_rate_window_s) offsets_.pop_front();
+    const bool steady_lane =
+        p_.from_scratch ? offsets_.size() >= 3 && t_s - offsets_.front().first >= 0.5 * p_.lateral_rate_window_s &&
+                              std::abs(slope(offsets_)) <= p_.max_lateral_rate_mps
+                        : std::isfinite(last_offset_m_) && dt > 0 &&
+                              std::abs(offset_m - last_offset_m_) / dt <= p_.max_lateral_rate_mps;
     last_offset_m_ = offset_m;
-    if (!steady_lane || !straight) return;
+    // From scratch the pitch and height are measured in every such frame (below); otherwise only in a steady lane on
+    // a straight road, as the yaw.
+    if (!p_.from_scratch && (!steady_lane || !straight)) return;
 
     const double pitch = std::atan((cfg_.cy - vh) / cfg_.fy) / kDeg;
     const double yaw = std::atan((cfg_.cx - uvp) / cfg_.fx) / kDeg;
@@ -169,8 +230,31 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
     const double r_ang = p_.angle_noise_deg * p_.angle_noise_deg;
     const double prior_ang = p_.prior_sigma_deg * p_.prior_sigma_deg;
     const int n = p_.reacquire_after;
+    // The pitch (vanishing row) and the height (lane width against the row): a lane change turns the car against the
+    // lane and a curve bends the boundaries sideways, which moves the vanishing column (the yaw), not its row.
     bool used = pitch_.update(pitch, r_ang, p_.gate_sigma, n, prior_ang);
-    used |= yaw_.update(yaw, r_ang, p_.gate_sigma, n, prior_ang);
+    used |= height_.update(h / cfg_.height_m, p_.height_noise * p_.height_noise, p_.gate_sigma, n,
+                           p_.prior_sigma_height * p_.prior_sigma_height);
+    if (steady_lane && straight) used |= yaw_update(yaw, assumed, road, settled, speed_mps, dt);
+    clamp_angles();
+    height_.x = std::clamp(height_.x, 1.0 - p_.max_height_dev, 1.0 + p_.max_height_dev);
+    updates_ += used ? 1 : 0;
+    const double conv = p_.converged_sigma_deg * p_.converged_sigma_deg;
+    if (!anchored_ && pitch_.var <= conv && yaw_.var <= conv) {  // converged: the guard is centred here for good
+        anchored_ = true;
+        anchor_pitch_ = pitch_.x;
+        anchor_yaw_ = yaw_.x;
+    }
+}
+
+// The yaw from the lanes and the road's motion, and the road motion's pitch and height: only on a straight road
+// in a steady lane.
+bool SelfCalibration::yaw_update(double yaw, const CameraParams &assumed, const RoadMotion &road,
+                                 bool settled, double speed_mps, double dt) {
+    const double r_ang = p_.angle_noise_deg * p_.angle_noise_deg;
+    const double prior_ang = p_.prior_sigma_deg * p_.prior_sigma_deg;
+    const int n = p_.reacquire_after;
+    bool used = yaw_.update(yaw, r_ang, p_.gate_sigma, n, prior_ang);
     if (p_.road_motion && road.state == RoadMotion::State::kAccepted) {
         const cv::Vec3d t = road_motion_translation(road.H, assumed);  // m, level axes of the assumed mounting
         if (t[2] > 0.2 && std::isfinite(t[0])) {
@@ -193,12 +277,30 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
             used |= height_.update(h_motion / cfg_.height_m, p_.motion_height_noise * p_.motion_height_noise,
                                    p_.gate_sigma, n, p_.prior_sigma_height * p_.prior_sigma_height);
     }
-    used |= height_.update(h / cfg_.height_m, p_.height_noise * p_.height_noise, p_.gate_sigma, n,
-                           p_.prior_sigma_height * p_.prior_sigma_height);
-    pitch_.x = std::clamp(pitch_.x, cfg_.pitch_deg - p_.max_pitch_dev_deg, cfg_.pitch_deg + p_.max_pitch_dev_deg);
-    yaw_.x = std::clamp(yaw_.x, cfg_.yaw_deg - p_.max_yaw_dev_deg, cfg_.yaw_deg + p_.max_yaw_dev_deg);
-    height_.x = std::clamp(height_.x, 1.0 - p_.max_height_dev, 1.0 + p_.max_height_dev);
-    updates_ += used ? 1 : 0;
+    return used;
+}
+
+void SelfCalibration::clamp_angles() {
+    if (!p_.from_scratch) {
+        pitch_.x = std::clamp(pitch_.x, cfg_.pitch_deg - p_.max_pitch_dev_deg, cfg_.pitch_deg + p_.max_pitch_dev_deg);
+        yaw_.x = std::clamp(yaw_.x, cfg_.yaw_deg - p_.max_yaw_dev_deg, cfg_.yaw_deg + p_.max_yaw_dev_deg);
+        return;
+    }
+    double plo = p_.pitch_min_deg, phi = p_.pitch_max_deg, ylo = -p_.yaw_max_abs_deg, yhi = p_.yaw_max_abs_deg;
+    if (anchored_) {
+        plo = std::max(plo, anchor_pitch_ - p_.max_pitch_dev_deg);
+        phi = std::min(phi, anchor_pitch_ + p_.max_pitch_dev_deg);
+        ylo = std::max(ylo, anchor_yaw_ - p_.max_yaw_dev_deg);
+        yhi = std::min(yhi, anchor_yaw_ + p_.max_yaw_dev_deg);
+    }
+    pitch_.x = std::clamp(pitch_.x, plo, std::max(plo, phi));
+    yaw_.x = std::clamp(yaw_.x, ylo, std::max(ylo, yhi));
+}
+
+std::pair<double, double> SelfCalibration::search_window() const {
+    const double s = p_.search_sigmas * std::sqrt(pitch_.var);
+    const double lo = std::max(p_.pitch_min_deg, pitch_.x - s), hi = std::min(p_.pitch_max_deg, pitch_.x + s);
+    return {0.5 * (lo + hi), 0.5 * std::max(0.0, hi - lo)};
 }
 
 CameraParams SelfCalibration::camera() const {
@@ -223,8 +325,13 @@ CalibrationEstimate SelfCalibration::estimate() const {
     e.updates = updates_;
     if (!p_.enabled) {
         e.state = CalibrationState::kOff;
-    } else if (std::abs(pitch_.x - cfg_.pitch_deg) >= p_.max_pitch_dev_deg ||
-               std::abs(yaw_.x - cfg_.yaw_deg) >= p_.max_yaw_dev_deg || std::abs(height_.x - 1.0) >= p_.max_height_dev) {
+    } else if ((p_.from_scratch ? at_bound(pitch_.x, p_.pitch_min_deg, p_.pitch_max_deg) ||
+                                      at_bound(yaw_.x, -p_.yaw_max_abs_deg, p_.yaw_max_abs_deg) ||
+                                      (anchored_ && (std::abs(pitch_.x - anchor_pitch_) >= p_.max_pitch_dev_deg - 1e-9 ||
+                                                     std::abs(yaw_.x - anchor_yaw_) >= p_.max_yaw_dev_deg - 1e-9))
+                                    : std::abs(pitch_.x - cfg_.pitch_deg) >= p_.max_pitch_dev_deg ||
+                                      std::abs(yaw_.x - cfg_.yaw_deg) >= p_.max_yaw_dev_deg) ||
+               std::abs(height_.x - 1.0) >= p_.max_height_dev) {
         e.state = CalibrationState::kAtLimit;  // clamped there by update()
     } else if (e.pitch_sigma_deg <= p_.converged_sigma_deg && e.yaw_sigma_deg <= p_.converged_sigma_deg &&
                std::sqrt(height_.var) <= p_.converged_sigma_height) {

@@ -49,9 +49,16 @@
 //     out in a row are no outliers but an estimate that went wrong (the lane tracker's first frames
 //     from a wrong camera, an estimate stuck at a limit): its variance goes back to the prior's and
 //     the next measurement is taken with the prior's gain,
-// and the estimate is clamped to the configured value +- the limits. Off (enabled: false), the
-// configured camera is used unchanged. The state (CalibrationState) says which of off, learning,
-// converged (every 1-sigma within converged_sigma_*) or held at a limit the estimate is.
+// and the estimate is clamped to the configured value +- the limits. From scratch (from_scratch: true) the configured
+// pitch and yaw are a starting value only: until pitch and yaw have converged (both 1-sigma within
+// converged_sigma_deg) the estimate is searched over a wide range (pitch_min_deg .. pitch_max_deg, +-
+// yaw_max_abs_deg), the first measurement from a believed lane model (paint along both ego lines) is the estimate,
+// and the lane stage searches the vanishing point over that range too (LaneTracker::set_search_window,
+// search_window()); so a camera given only its intrinsics and height converges. From then on the converged angles
+// +- max_pitch_dev_deg / max_yaw_dev_deg guard the estimate (a wrong marking cannot drag it further). The height
+// stays within the configured height +- max_height_dev. Off (enabled: false), the configured camera is used
+// unchanged. The state (CalibrationState) says which of off, learning, converged (every 1-sigma within
+// converged_sigma_*) or held at a limit the estimate is.
 #pragma once
 
 #include "base/params.hpp"
@@ -60,22 +67,31 @@
 #include "geometry/road_params.hpp"
 
 #include <cmath>
+#include <deque>
+#include <utility>
 
 namespace hw {
 
 struct SelfCalibrationParams {
     bool enabled = true;               // estimate pitch, yaw and height while driving
-    double prior_sigma_deg = 2.0;      // 1-sigma trust in the configured pitch and yaw
+    bool from_scratch = false;         // pitch and yaw unknown: searched over the ranges below, the lanes too
+    double prior_sigma_deg = 2.0;      // 1-sigma trust in the configured pitch and yaw (from_scratch: none)
     double prior_sigma_height = 0.15;  // 1-sigma trust in the configured height, relative
     double angle_noise_deg = 0.5;      // 1-sigma of one frame's vanishing-point angle
     double height_noise = 0.06;        // 1-sigma of one frame's lane-width height, relative
     double angle_drift_deg_s = 0.01;   // random walk of the true angles (load, tyre pressure)
     double height_drift_s = 0.001;     // random walk of the true height, relative per sqrt(s)
-    double max_pitch_dev_deg = 3.0;    // the estimate stays within the configured pitch +- this
-    double max_yaw_dev_deg = 3.0;      // the estimate stays within the configured yaw +- this
+    double pitch_min_deg = -5.0;       // from_scratch: the pitch is searched over [pitch_min_deg, pitch_max_deg]
+    double pitch_max_deg = 20.0;
+    double yaw_max_abs_deg = 10.0;     // from_scratch: the yaw likewise over +- this
+    double max_pitch_dev_deg = 3.0;    // the pitch estimate stays within the configured pitch +- this (from_scratch:
+                                       // within its converged value +- this, once converged)
+    double max_yaw_dev_deg = 3.0;      // the yaw likewise
     double max_height_dev = 0.25;      // the estimate stays within the configured height * (1 +- this)
     RoadParams road;                   // section "road": lane_width_m, the ego-lane width assumed for the height
-    double max_lateral_rate_mps = 0.3; // faster lateral motion in the lane is a lane change: no update
+    double max_lateral_rate_mps = 0.3; // faster lateral motion in the lane is a lane change: no yaw update
+    double lateral_rate_window_s = 0.5; // from_scratch: the lateral rate is the offset's slope over this long
+    double search_sigmas = 3.0;        // until converged the lanes search the pitch estimate +- this many sigmas
     double max_yaw_rate_rps = 0.02;    // faster turning is a curve: no update (also without a known speed)
     double max_curvature_1pm = 1e-4;   // |yaw rate| / speed above this is a curve: no update (radius < 10 km)
     double curve_hold_s = 1.0;         // ... nor this long after it (the lane fits look ~15 m ahead)
@@ -111,8 +127,9 @@ enum class CalibrationState {
     kLearning = 1,   // on, an uncertainty above the converged_sigma_* thresholds (at the start, or after a
                      // long time without lane measurements, or after a re-acquisition widened it)
     kConverged = 2,  // on, every uncertainty within the converged_sigma_* thresholds
-    kAtLimit = 3     // on, an estimate held at its configured bound (max_*_dev): the mounting is farther
-                     // off than the limits allow, or the measurements are wrong; either way worth a look
+    kAtLimit = 3     // on, an estimate held at a bound: the search range's end, the guard around the converged
+                     // angles (max_*_dev_deg) or the height's (max_height_dev): the mounting moved or is outside
+                     // the range, or the measurements are wrong; either way worth a look
 };
 
 // One frame's view of the calibration, with 1-sigma uncertainties.
@@ -134,12 +151,20 @@ public:
     // The configured camera with the estimated pitch, yaw and height.
     CameraParams camera() const;
     CalibrationEstimate estimate() const;
+    // From scratch, until pitch and yaw have converged once: the whole range they may take (pitch_min_deg ..
+    // pitch_max_deg, +- yaw_max_abs_deg); then their converged values +- max_*_dev_deg guard the estimate.
+    bool searching() const { return p_.from_scratch && !anchored_; }
+    // The pitches where the lanes' vanishing point may lie while searching: the estimate +- search_sigmas of its
+    // sigma, within the search range, as (centre, half-width) in deg. At the start, the whole range whatever the
+    // configured pitch: a pitch given or not, the lanes search the same window until the first measurement.
+    std::pair<double, double> search_window() const;
     void reset();
 
 private:
     struct Scalar {  // 1-D Kalman filter on a random walk
         double x = 0, var = 0;
         int rejected = 0;  // measurements gated out in a row
+        bool diffuse = false;  // from scratch, no measurement yet: the first measurement is the estimate
         void predict(double q) { var += q; }
         // Kalman update with the innovation gate; after `reacquire` rejections in a row, var = max(var, prior_var)
         bool update(double z, double r, double gate_sigma, int reacquire, double prior_var);
@@ -148,9 +173,15 @@ private:
     CameraParams cfg_;
     Scalar pitch_, yaw_, height_;  // deg, deg, relative to the configured height (1 = as configured)
     double last_t_ = NAN, last_offset_m_ = NAN;
+    std::deque<std::pair<double, double>> offsets_;  // (t s, lateral offset m) over the last lateral_rate_window_s
     double last_curve_t_ = NAN;  // time of the last frame on a curve
     double yaw_rate_smooth_ = NAN;  // rad/s, the yaw rate low-passed over yaw_rate_smoothing_s
     int updates_ = 0;
+    bool anchored_ = false;                   // pitch and yaw have converged once
+    double anchor_pitch_ = NAN, anchor_yaw_ = NAN;  // deg, their values then: the centre of the guard
+    void clamp_angles();
+    bool yaw_update(double yaw, const CameraParams &assumed, const RoadMotion &road, bool settled,
+                    double speed_mps, double dt);
 };
 
 } // namespace hw

@@ -7,12 +7,21 @@ namespace hw {
 
 LaneTracker::LaneTracker(const LaneParams &p, const CameraParams &cam) : p_(p), cam_(cam) {
     prior_ = camera_horizon(cam_, p_.assembly.horizon_tolerance_deg);
+    set_rows();
+    reset();
+}
+
+void LaneTracker::set_search_window(const CameraParams &cam, double tol_deg) {
+    prior_ = camera_horizon(cam, tol_deg);
+    if (tracks_.empty()) set_rows();  // no track holds its columns at the old rows
+}
+
+void LaneTracker::set_rows() {
     yb_ = float(cam_.height - 1);
     // Second row a third of the way from the bottom to the horizon: inside the scanned band, far
     // enough from the bottom that the two rows pin the slope down.
     yr_ = yb_ - (yb_ - std::clamp(prior_.row, 0.f, yb_)) / 3.f;
     if (yb_ - yr_ < 2.f) yr_ = yb_ - 2.f;
-    reset();
 }
 
 void LaneTracker::reset() {

@@ -111,6 +111,11 @@ public:
     // output of the previous frame (the confirmed ones hide the road; reject_in_vehicles), may be empty.
     void update(const cv::Mat &gray, LaneModel &out, const std::vector<TrackState> &vehicles = {});
     void reset();
+    // Where the vanishing point is searched: the horizon of `cam` (pitch, yaw) +- tol_deg. Self-calibration sets
+    // it every frame: the whole range the pitch may still take while it searches, its estimate +- the lanes'
+    // horizon_tolerance_deg once it has converged. The constructor's window: the configured camera's. Without
+    // tracks (after reset()) the rows the tracks keep their columns at follow the window's horizon.
+    void set_search_window(const CameraParams &cam, double tol_deg);
 
 private:
     // Constant-velocity Kalman filter of a boundary's column on one row (px, px per frame).
@@ -130,6 +135,7 @@ private:
     ImageLine line_of(const Track &t) const;
     void set_line(Track &t, const ImageLine &l) const;
     HorizonPrior search_prior() const;
+    void set_rows();  // yb_, yr_ from the search window's horizon
     void associate(const LaneMeasurement &m, const HorizonPrior &hp);
     std::vector<LaneCandidate> candidates() const;
     void carry_ego_width(std::vector<LaneCandidate> &cands, LaneAssignment &a, cv::Point2f vp);
