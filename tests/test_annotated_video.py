@@ -21,9 +21,12 @@ def read_video(path) -> list[np.ndarray]:
 
 
 def bar_pixels(img: np.ndarray, colour: tuple[int, int, int]) -> int:
-    """Pixels of the heads-up bar within 60 levels of `colour` (BGR) on every channel."""
+    """The largest connected patch of the heads-up bar within 60 levels of `colour` (BGR) on every channel, in
+    pixels: a filled banner, not the letters of a text drawn in that colour (the calibration state's)."""
     bar = img[:annotate.bar_height(img.shape[0])].astype(int)
-    return int(np.all(np.abs(bar - np.array(colour)) < 60, axis=2).sum())
+    mask = np.all(np.abs(bar - np.array(colour)) < 60, axis=2).astype(np.uint8)
+    n, _labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    return int(stats[1:, cv2.CC_STAT_AREA].max()) if n > 1 else 0
 
 
 def test_the_banner_turns_red_while_the_fcw_warns(tmp_path):
