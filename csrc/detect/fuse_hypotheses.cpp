@@ -34,6 +34,16 @@ std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, co
     std::vector<Hypothesis> out;
     std::vector<char> taken(cues.size(), 0);
     for (const Hypothesis *c : primary) {
+        // Two learned parts on one vehicle: the stronger one's box, the agreement bonus (each part has suppressed
+        // its own overlapping detections already).
+        Hypothesis *same = nullptr;
+        for (size_t k = 0; k < out.size() && !same; ++k)
+            if (std::strcmp(out[k].source, c->source) != 0 && box_iou(out[k].box, c->box) >= float(p.match_iou))
+                same = &out[k];
+        if (same) {
+            same->score = std::min(1.f, same->score + bonus);
+            continue;
+        }
         Hypothesis v = *c;
         const int j = best_match(c->box, cues, taken, float(p.match_iou));
         if (j >= 0) {

@@ -9,6 +9,8 @@
 //     whole-vehicle boxes, as the annotations draw them), with its bottom edge moved onto a matched shadow edge
 //     when shadow_bottom is set; the score min(1, max(c, t) + agree_bonus).
 //   - A learned hypothesis no cue confirms keeps its score c.
+//   - Two learned parts' hypotheses on one vehicle (IoU >= match_iou) are one: the stronger one, with the
+//     agreement bonus.
 //   - A cue no learned hypothesis explains keeps cue_weight * t (the shadow detector alone reaches about 0.7
 //     precision on real images, the learned detector more); cues of two parts on one vehicle (IoU >= match_iou)
 //     are one vehicle, the first part's box with the agreement bonus.
