@@ -256,11 +256,13 @@ SHIPPED_SMALL_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_v
 # The verifier of a tracked pipeline: session 3's CNN, on which the trackers were tuned (cascade.tracked_verifier;
 # docs/cascade.md, sessions 5-6: session 5's network, better on single images, made the cascade presets warn).
 SHIPPED_TRACKED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier_tracked.onnx"
+# The learned first stage (detector part proposals), trained by `headway train proposals` (docs/proposals.md).
+SHIPPED_PROPOSALS = Path(__file__).resolve().parent / "models" / "vehicle_proposals.onnx"
 
 
 def core_sections(cfg: dict) -> dict:
-    """The part of a validated configuration that the C++ core takes (cascade.model, verifier and tracked_verifier
-    empty: the shipped ones)."""
+    """The part of a validated configuration that the C++ core takes (cascade.model, verifier and tracked_verifier,
+    proposals.model and verifier empty: the shipped ones)."""
     core = {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
     if "cascade" in core and not core["cascade"].get("model"):
         core["cascade"]["model"] = str(SHIPPED_CASCADE)
@@ -268,6 +270,9 @@ def core_sections(cfg: dict) -> dict:
         core["cascade"]["verifier"] = str(SHIPPED_VERIFIER)
     if "cascade" in core and not core["cascade"].get("tracked_verifier"):
         core["cascade"]["tracked_verifier"] = str(SHIPPED_TRACKED_VERIFIER)
+    for key, shipped in (("model", SHIPPED_PROPOSALS), ("verifier", SHIPPED_VERIFIER)):
+        if "proposals" in core and not core["proposals"].get(key):
+            core["proposals"][key] = str(shipped)
     return core
 
 

@@ -28,7 +28,7 @@ def test_the_registries_are_in_the_configuration_schema():
     pipe = core_schema()["pipeline"]
     assert set(pipe["preset"]["choices"].split("|")) == {"thesis", "parallax", "parallax_kalman", "shadow_particles", "phd",
                                                                "cascade", "fused", "cascade_shadow_phd", "none"}
-    assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax", "cascade"}
+    assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax", "cascade", "proposals"}
     assert {"kalman", "particles", "none"} <= set(pipe["tracker"]["choices"].split("|"))
 
 

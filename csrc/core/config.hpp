@@ -4,6 +4,7 @@
 #include "base/params.hpp"
 #include "core/parts.hpp"
 #include "detect/cascade_detector.hpp"
+#include "detect/detector_proposals.hpp"
 #include "detect/detector_parallax.hpp"
 #include "detect/fuse_detections.hpp"
 #include "detect/merge_hypotheses.hpp"
@@ -94,6 +95,7 @@ struct Config {
     ParallaxSection parallax;         //   aligned-difference detector and its road band
     ParticleParams particles;         //   joint particle filter
     CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
+    ProposalsParams proposals;        // detector part proposals: the learned first stage (docs/proposals.md)
     FuseParams fuse;                  // fused stage: cascade + shadow detections merged
     MergeParams merge;                // several detector parts: hypotheses merged, verified once
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
