@@ -92,7 +92,7 @@ def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, conf
     first (loading the cascade and the verifier).
     `detectors`: instead of `detector`, this composition of detector parts (pipeline {detectors, tracker: kalman})
     through the core's stage "detect", every detection written (e.g. ["proposals"]: "proposals" = the network,
-    its decoding and road checks, "proposals_verifier" = the verifier's look at its candidates)."""
+    its decoding and road checks, "prop_verifier" = the verifier's look at its candidates)."""
     from app.detect_images import (DEFAULT_DETECTOR, OPERATING_POINT, STAGES, detector_config, image_entry,
                                    image_pipeline, read_usable)
 

@@ -8,7 +8,7 @@ lowest score (0.01 apart) whose precision reaches the asked one there; `--at` re
 threshold chosen so.
 
     python -m app.eval.detector_points --detectors proposals --images DIR [--every 10 --from 9] [--set KEY=VALUE ...]
-        [--choose 0.87 | --at 0.42] [--json FILE]
+        [--limit N] [--choose 0.87 | --at 0.42] [--json FILE]
 """
 from __future__ import annotations
 
@@ -29,14 +29,15 @@ THRESHOLDS = [i / 100 for i in range(100)]
 
 def composition_config(detectors: list[str], sets: Optional[list[str]] = None) -> dict:
     """The default configuration with pipeline {detectors, tracker: kalman} and each `section.key=value` of `sets`
-    (value read as YAML)."""
+    (value read as YAML, a string key's as it is: "off" stays "off")."""
     over: dict = {"pipeline": {"detectors": detectors, "tracker": "kalman"}}
     for s in sets or []:
         key, sep, value = s.partition("=")
         section, dot, name = key.partition(".")
         if not sep or not dot:
             raise ValueError(f"--set {s!r}: give SECTION.KEY=VALUE, e.g. proposals.verifier=off")
-        over.setdefault(section, {})[name] = yaml.safe_load(value)
+        typed = configuration.schema().get(section, {}).get(name, {}).get("type") != "str"
+        over.setdefault(section, {})[name] = yaml.safe_load(value) if typed else value
     return configuration.load(None, over)
 
 
@@ -85,6 +86,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     p.add_argument("--images", required=True, help="folder with annotation.json (TuSimple format)")
     p.add_argument("--every", type=int, default=1, help="only images k with k %% EVERY == FROM (default: all)")
     p.add_argument("--from", dest="start", type=int, default=0)
+    p.add_argument("--limit", type=int, default=0, help="only the first N images chosen (0 = all)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     p.add_argument("--choose", type=float, help="report the lowest score reaching this precision (held-out images)")
     p.add_argument("--at", type=float, help="report recall and precision at this score threshold")
@@ -95,7 +97,7 @@ def main(argv: Optional[list[str]] = None) -> int:
               file=sys.stderr)
         return 2
     entries = load_entries(a.images)
-    entries = [e for k, e in enumerate(entries) if k % a.every == a.start]
+    entries = [e for k, e in enumerate(entries) if k % a.every == a.start][:a.limit or None]
     cfg = composition_config([d.strip() for d in a.detectors.split(",") if d.strip()], a.set)
     r = summary(entries, scored_images(a.images, entries, cfg), a.at)
     if a.choose is not None:

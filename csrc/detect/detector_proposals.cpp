@@ -21,6 +21,13 @@ ProposalsParams checked(const ProposalsParams &p) {
     return p;
 }
 
+// A hypothesis of this part: its score is also its appearance (a learned score), the peak's heat its strength.
+Hypothesis proposal(const cv::Rect2f &box, float score, float heat) {
+    Hypothesis h = hypothesis_of(box, score, heat, "proposals");
+    h.appearance = score;
+    return h;
+}
+
 } // namespace
 
 ProposalsDetector::ProposalsDetector(const ProposalsParams &p) : p_(checked(p)), net_(p_.model, "proposals.model") {
@@ -57,9 +64,7 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
         const double ratio = box.width / std::max(1e-3f, expected_vehicle_width(yb, gray.size(), ctx.lanes, ctx.camera, prior));
         const bool cut = box.x <= 0.5f || box.br().x >= image.width - 0.5f;
         if (ratio > p_.max_width_ratio || (!cut && ratio < p_.min_width_ratio)) continue;
-        Hypothesis h = hypothesis_of(box, pk.heat, pk.heat, "proposals");
-        h.appearance = pk.heat;
-        cand.push_back(h);
+        cand.push_back(proposal(box, pk.heat, pk.heat));
         if (int(cand.size()) >= p_.top_k) break;
     }
     times.add("proposals", sw.ms());
@@ -67,11 +72,20 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
         Stopwatch sv;
         std::vector<cv::Rect2f> boxes;
         for (const Hypothesis &h : cand) boxes.push_back(h.box);
-        const std::vector<float> p =
-            verifier_->probabilities(gray, boxes, std::vector<int>(boxes.size(), p_.verifier_windows),
-                                     ctx.camera.horizon_row(), hc);  // the horizon the cascade hands it
-        for (size_t k = 0; k < cand.size(); ++k) cand[k].score = cand[k].appearance = p[k];
-        times.add("proposals_verifier", sv.ms());
+        const std::vector<int> n(boxes.size(), p_.verifier_windows);
+        const double yc = ctx.camera.horizon_row();  // the horizon the cascade hands the verifier
+        std::vector<float> p = p_.refine_boxes ? verifier_->judge(gray, boxes, n, yc, hc)
+                                               : verifier_->probabilities(gray, boxes, n, yc, hc);
+        for (int look = 1; p_.refine_boxes && look < p_.refine_looks; ++look) {
+            for (auto &b : boxes) b &= image;
+            const std::vector<float> again = verifier_->judge(gray, boxes, n, yc, hc);
+            for (size_t k = 0; k < p.size(); ++k) p[k] = std::min(p[k], again[k]);
+        }
+        for (size_t k = 0; k < cand.size(); ++k) {
+            const cv::Rect2f moved = boxes[k] & image;  // the box output's, in the image (unmoved without one)
+            cand[k] = proposal(moved.width >= 2.f && moved.height >= 2.f ? moved : cand[k].box, p[k], cand[k].strength);
+        }
+        times.add("prop_verifier", sv.ms());
     }
     // most confident first; a candidate overlapping a kept one at nms_iou is a second look at the same vehicle
     std::stable_sort(cand.begin(), cand.end(), [](const Hypothesis &a, const Hypothesis &b) { return a.score > b.score; });

@@ -6,11 +6,12 @@
 // [min_vehicle_height_m, max_vehicle_height_m], and its width against the vehicle width expected at its bottom row
 // (road_prior.hpp: lane model, else the camera) within [min_width_ratio, max_width_ratio] (a box cut by the image's
 // left or right border is not held to the lower bound). The CNN verifier (vehicle_verifier_cnn.hpp, the cascade's)
-// then judges the top_k strongest candidates in one batch; a candidate overlapping a more confident one at IoU >=
-// nms_iou is dropped.
+// then judges the top_k strongest candidates in one batch, and with refine_boxes its box output moves each onto the
+// vehicle; a candidate overlapping a more confident one at IoU >= nms_iou is dropped.
 // Each output: box cut to the image, foot = bottom centre, score = the verifier's probability (the peak's heat without
 // a verifier), appearance = that same learned score, strength = the peak's heat, source "proposals".
-// Stage times: "proposals" (resize, network, decoding, geometry) and "proposals_verifier".
+// Stage times: "proposals" (resize, network, decoding, geometry) and "prop_verifier" (the ABI keeps 15 characters of a
+// stage name).
 #pragma once
 
 #include "base/params.hpp"
@@ -34,6 +35,8 @@ struct ProposalsParams {
     int top_k = 24;                 // strongest candidates verified (and output)
     int verifier_windows = 8;       // the window count handed to the verifier's log(1 + n) feature
     bool verify_mirrored = true;    // the verifier also judges each believed crop's mirror image (mean of the two)
+    bool refine_boxes = true;       // a verifier with a box output moves each candidate's box onto the vehicle
+    int refine_looks = 4;           // looks of the verifier at each candidate, each moving it again (min of the p)
     double min_vehicle_height_m = 0.7, max_vehicle_height_m = 5.0;
     double min_width_ratio = 0.35, max_width_ratio = 3.0;
     double nms_iou = 0.5;
@@ -56,6 +59,12 @@ struct ProposalsParams {
         m.add("verify_mirrored", verify_mirrored,
               "true = the verifier also judges the mirror image of each crop it gives at least 0.5 and averages the two "
               "(as cascade.verify_mirrored)");
+        m.add("refine_boxes", refine_boxes,
+              "true = a verifier with a box output (the shipped one) moves each candidate's box onto the vehicle as that "
+              "output says (as cascade.refine_boxes), before the suppression; false = the network's own boxes");
+        m.add("refine_looks", refine_looks, 1, 5,
+              "looks; with refine_boxes the verifier judges each candidate again where its last look moved it, this many "
+              "times in all, and the candidate keeps the lowest of its probabilities (as cascade.rejudge_refined)");
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.1, 5.0,
               "m; a candidate whose box implies a lower vehicle on a flat road is dropped");
         m.add("max_vehicle_height_m", max_vehicle_height_m, 0.5, 20.0,
