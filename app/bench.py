@@ -81,29 +81,20 @@ def image_paths(sources: Sequence[str], limit: Optional[int] = None) -> list[str
     return paths[:limit] if limit else paths
 
 
-def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, config_path: Optional[str] = None,
-                    limit: Optional[int] = 100, repeats: int = 1, detectors: Optional[list[str]] = None) -> dict:
+def run_image_bench(sources: Sequence[str], preset: Optional[str] = None, config_path: Optional[str] = None,
+                    limit: Optional[int] = 100, repeats: int = 1) -> dict:
     """`headway detect`'s work on each image, timed part by part: "read" (the file read, checked whole, decoded
     and its size checked: detect_images.read_usable), the core's stages of the
-    detector's single-image stage (lanes; for the cascade, "cascade" = the scan, grouping and suppression and
+    preset's detection stage (lanes; for the cascade, "cascade" = the scan, grouping and suppression and
     "verifier" = its network's looks; "verify" = the shadow hypotheses and their vertical edges), "core" (the
     core's whole stage) and "total" (read, the stage and the output entry: what one more image costs
     `headway detect`, its start-up not counted). Each image size's pipeline detects its first image once untimed
-    first (loading the cascade and the verifier).
-    `detectors`: instead of `detector`, this composition of detector parts (pipeline {detectors, tracker: kalman})
-    through the core's stage "detect", every detection written (e.g. ["proposals"]: "proposals" = the network,
-    its decoding and road checks, "prop_verifier" = the verifier's look at its candidates)."""
-    from app.detect_images import (DEFAULT_DETECTOR, OPERATING_POINT, STAGES, detector_config, image_entry,
-                                   image_pipeline, read_usable)
+    first (loading the cascade and the verifier)."""
+    from app.detect_images import detector_config, image_entry, image_pipeline, operating_point, read_usable
 
-    detector = detector or DEFAULT_DETECTOR
     paths = image_paths(sources, limit)
-
-    base = detector_config(config_path, detector)
-    stage, min_score = STAGES[detector], OPERATING_POINT[detector]
-    if detectors:
-        base = configuration.load(config_path, {"pipeline": {"detectors": list(detectors), "tracker": "kalman"}})
-        detector, stage, min_score = ",".join(detectors), "detect", 0.0
+    base = detector_config(config_path, preset)
+    min_score = operating_point(base)
     pipes: dict[tuple[int, int], Pipeline] = {}
     times: dict[str, list[float]] = {}
     skipped: list[str] = []
@@ -120,11 +111,11 @@ def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, conf
                 size = (gray.shape[1], gray.shape[0])
                 if size not in pipes:  # a new size: its pipeline, warmed up (the models loaded) untimed
                     pipes[size] = image_pipeline(base, *size)
-                    pipes[size].run_stage(stage, gray)
+                    pipes[size].run_stage("detect", gray)
                     t0 = time.perf_counter()
                     gray, _ = read_usable(path)
                     t_read = time.perf_counter()
-                r = pipes[size].run_stage(stage, gray)
+                r = pipes[size].run_stage("detect", gray)
                 image_entry(path, r, min_score)
                 t1 = time.perf_counter()
                 for name, ms in [("read", 1000.0 * (t_read - t0)), *r.stages.items(), ("core", r.total_ms),
@@ -135,16 +126,14 @@ def run_image_bench(sources: Sequence[str], detector: Optional[str] = None, conf
             p.close()
     if "total" not in times:
         raise BenchError("--images: none of the images can be used: " + "; ".join(skipped[:5]))
-    return {"detector": detector, "images": len(times["total"]), "skipped": skipped,
-            "run": f"detectors [{detector}] through the stage detect, every detection written" if detectors else "",
+    return {"preset": base["pipeline"]["preset"], "images": len(times["total"]), "skipped": skipped,
             "frame_sizes": sorted(f"{w}x{h}" for w, h in pipes),
             "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
             "stages": {"image": {name: _stats(v) for name, v in times.items()}}}
 
 
 def format_image_table(report: dict) -> str:
-    what = report.get("run") or f"`headway detect --detector {report['detector']}`"
-    lines = [f"headway bench --images: {what}, per image, "
+    lines = [f"headway bench --images: `headway detect --preset {report['preset']}`, per image, "
              f"{report['images']} images of {', '.join(report['frame_sizes'])} ({report['machine']})", "",
              "| part | n | median ms | p99 ms |", "| --- | ---: | ---: | ---: |"]
     for name, s in report["stages"]["image"].items():
@@ -255,8 +244,7 @@ def main(args) -> int:
         return 0
     if args.images:
         with pinned_to_one_core() as core:
-            report = run_image_bench(args.images, args.detector, args.config, args.limit or None, args.repeats,
-                                     [d.strip() for d in args.detectors.split(",")] if args.detectors else None)
+            report = run_image_bench(args.images, args.preset, args.config, args.limit or None, args.repeats)
         report["machine"] += f", pinned to core {core}" if core is not None else ", not pinned to a core"
         print(json.dumps(report, indent=2) if args.json else format_image_table(report))
         return 0

@@ -67,7 +67,7 @@ def phd_cost(features: int, cap: int, scenarios=SCENARIOS, max_n: int = 9) -> di
     by_n: dict[int, list[tuple[float, float]]] = {}
     for name in scenarios:
         sc = _scenario(name)
-        cfg = {"pipeline": {"preset": "phd"}, "camera": scenario_camera(sc).to_dict(),
+        cfg = {"pipeline": {"preset": "thesis", "tracker": "phd"}, "camera": scenario_camera(sc).to_dict(),
                "phd_features": {"max_per_vehicle": features}, "gmphd": {"max_components": cap}}
         with Pipeline(cfg) as p:
             for f in render(sc):

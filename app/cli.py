@@ -211,11 +211,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("images", nargs="+", help="image files")
     s.add_argument("--out", required=True, help="output JSON file")
     s.add_argument("--config", help="configuration YAML")
-    s.add_argument("--detector", choices=["thesis", "cascade", "fused"],
-                   help="fused: the trained Haar cascade and shadows + vertical edges, merged (default); cascade: "
-                        "the cascade alone; thesis: shadows + vertical edges alone")
+    s.add_argument("--preset", choices=("default", "paper004", "thesis"),
+                   help="the preset whose detection stage runs (default: the configuration's, `default`)")
     s.add_argument("--min-score", type=float, default=None,
-                   help="write only detections scoring at least this (0-1); default: the detector's operating point "
+                   help="write only detections scoring at least this (0-1); default: the preset's operating point "
                         "(precision 0.85 on held-out training images: docs/cascade.md; thesis: every detection); 0 "
                         "writes every detection")
 
@@ -239,7 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("bench", help="per-stage median and p99 ms per frame")
     s.add_argument("--scenario", default="dense_traffic", help="scenario whose frames are timed")
-    s.add_argument("--preset", help="pipeline preset (default: the configuration's)")
+    s.add_argument("--preset", help="pipeline preset (default: the configuration's); with --images, the preset whose "
+                                    "detection stage is timed, as `headway detect --preset`")
     s.add_argument("--width", type=int, default=640)
     s.add_argument("--height", type=int, default=480)
     s.add_argument("--repeats", type=int, default=3, help="passes over the scenario (with --images: over the images)")
@@ -251,20 +251,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--images", nargs="+", metavar="PATH",
                    help="time `headway detect` instead, per image and part (reading and decoding, lanes, the cascade's "
                         "scan, its verifier, the shadows), on these image files or folders of images")
-    s.add_argument("--detector", choices=["thesis", "cascade", "fused"],
-                   help="with --images: the detector timed (default fused, as headway detect)")
-    s.add_argument("--detectors", metavar="PART[,PART]",
-                   help="with --images: time this composition of detector parts instead of --detector (e.g. proposals "
-                        "or proposals,cascade; tracker kalman), every detection written")
     s.add_argument("--limit", type=int, default=100, help="with --images: the first this many images (0 = all)")
 
     s = sub.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
-    s.add_argument("--pipeline", default="fused",
-                   help="preset (named composition of detector and tracker parts) to evaluate: thesis, parallax, "
-                        "parallax_kalman, shadow_particles, phd, cascade, fused, cascade_shadow_phd (default fused, "
-                        "the configuration's default); several separated by commas (e.g. thesis,parallax,cascade,fused) "
-                        "are evaluated one after another, each into OUT/PRESET/, and set side by side in OUT/compare.md")
-    s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range,fcw,road_motion,real_fcw "
+    s.add_argument("--pipeline", default="default",
+                   help="preset to evaluate: default, thesis, parallax, paper004 (default: default); several separated "
+                        "by commas (e.g. default,thesis,parallax,paper004) are evaluated one after another, each into "
+                        "OUT/PRESET/, and set side by side in OUT/compare.md")
+    s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range,fcw,road_motion,real_fcw,cost "
                                          "(default all)")
     s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")

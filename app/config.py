@@ -17,7 +17,7 @@ from typing import Any, Optional, Union
 import yaml
 
 from app.can.config_schema import CAN_SCHEMA
-from app.core import core_moved_keys, core_presets, core_schema
+from app.core import core_moved_keys, core_presets, core_removed_presets, core_schema
 from app.fcw import FCW_SCHEMA
 from app.recording import FPS_MAX, FPS_MIN
 from app.safe_yaml import YamlLimitError, load_yaml, short, short_name
@@ -93,10 +93,9 @@ def _source_path(cfg: dict) -> Optional[str]:
 CROSS_FIELD_RULES = (_fcw_order, _mcu_timing, _source_path)
 
 
-# Headway's default composition (docs/RESULTS.md, "Which is the default": fused since session 21). The core's own
-# default, for a pipeline made through the C ABI without a preset, is thesis: it needs no model file, and the shipped
-# models' paths are filled in here (core_sections).
-DEFAULT_PRESET = "fused"
+# Headway's default composition. The core's own default, for a pipeline made through the C ABI without a preset,
+# is thesis: it needs no model file, and the shipped models' paths are filled in here (core_sections).
+DEFAULT_PRESET = "default"
 
 
 def schema() -> dict[str, dict[str, dict]]:
@@ -199,6 +198,9 @@ def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[s
         if not isinstance(values, dict):
             raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
         for key, value in values.items():
+            if sec == "pipeline" and key == "preset" and isinstance(value, str) and value in core_removed_presets():
+                raise ConfigFileError(f"{origin}: pipeline.preset: preset '{value}' was removed; use "
+                                      f"{core_removed_presets()[value]}")
             moved_to = _moved_keys().get(f"{sec}.{key}")
             if moved_to:
                 raise ConfigFileError(f"{origin}: {sec}.{key}: moved to {moved_to} (one definition for every stage); "
@@ -249,27 +251,18 @@ SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.
 # split (docs/cascade.md); the HOG network stays shipped as the alternative (cascade.verifier: its path).
 SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.onnx"
 SHIPPED_HOG_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml.gz"
-# Session 5's CNN (8/16/32 channels), the single-image verifier until session 11: ~16 ms less per 1280x720 image; not
-# trained on the groups past the image's border, 0.095 less recall at precision 0.85 on held-out training images
-# since the border scan (cascade.verifier: its path; docs/cascade.md, sessions 11-12).
-SHIPPED_SMALL_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier_small.onnx"
-# The verifier of a tracked pipeline: session 3's CNN, on which the trackers were tuned (cascade.tracked_verifier;
-# docs/cascade.md, sessions 5-6: session 5's network, better on single images, made the cascade presets warn).
-SHIPPED_TRACKED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier_tracked.onnx"
 # The learned first stage (detector part proposals), trained by `headway train proposals` (docs/proposals.md).
 SHIPPED_PROPOSALS = Path(__file__).resolve().parent / "models" / "vehicle_proposals.onnx"
 
 
 def core_sections(cfg: dict) -> dict:
-    """The part of a validated configuration that the C++ core takes (cascade.model, verifier and tracked_verifier,
-    proposals.model and verifier empty: the shipped ones)."""
+    """The part of a validated configuration that the C++ core takes (cascade.model and verifier, proposals.model
+    and verifier empty: the shipped ones)."""
     core = {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
     if "cascade" in core and not core["cascade"].get("model"):
         core["cascade"]["model"] = str(SHIPPED_CASCADE)
     if "cascade" in core and not core["cascade"].get("verifier"):
         core["cascade"]["verifier"] = str(SHIPPED_VERIFIER)
-    if "cascade" in core and not core["cascade"].get("tracked_verifier"):
-        core["cascade"]["tracked_verifier"] = str(SHIPPED_TRACKED_VERIFIER)
     for key, shipped in (("model", SHIPPED_PROPOSALS), ("verifier", SHIPPED_VERIFIER)):
         if "proposals" in core and not core["proposals"].get(key):
             core["proposals"][key] = str(shipped)

@@ -156,6 +156,9 @@ class FrameResult:
     # the lane model is believed (both ego boundaries have paint along the road, lanes.evidence_min): the road
     # prior and the lead selection use only such a model
     lanes_certain: bool = False
+    # the detection stage's vehicles when it ran this frame (full_detection), strongest first: (left, top, right,
+    # bottom, score); what the tracker was given, and what `headway detect` writes for one image
+    detections: list[tuple[float, float, float, float, float]] = field(default_factory=list)
 
     @property
     def lead_id(self) -> Optional[int]:
@@ -203,6 +206,8 @@ def _result(r: Any) -> FrameResult:
         events=[name for bit, name in EVENTS.items() if r.events & bit],
         full_detection=bool(r.full_detection),
         tracks=tracks,
+        detections=[(float(d.left), float(d.top), float(d.right), float(d.bottom), float(d.confidence))
+                    for d in (r.detections[i] for i in range(r.n_detections))],
         lanes=lanes,
         vanishing_point=vp,
         lane_width_m=_opt(r.lane_width_m),
@@ -255,6 +260,7 @@ def core_schema() -> dict:
     described = _config_json(ffi.NULL)
     described.pop("moved_keys")
     described.pop("presets")
+    described.pop("removed_presets")
     return described
 
 
@@ -262,6 +268,11 @@ def core_presets() -> dict[str, dict]:
     """The named compositions: {name: {"detectors": [...], "tracker": str, "keys": {section: {key: value}}}};
     "keys" are the preset's own defaults, which a configuration's own values override."""
     return _config_json(ffi.NULL)["presets"]
+
+
+def core_removed_presets() -> dict[str, str]:
+    """The presets that were removed: {name: what replaces it}."""
+    return _config_json(ffi.NULL)["removed_presets"]
 
 
 def core_moved_keys() -> dict[str, str]:

@@ -1,13 +1,13 @@
 """`headway detect`: single-image vehicle detection, one JSON entry per image.
 
-Output: [{"file_name", "bbox": [{"left","top","right","bottom","score"}]}]. Each image is detected
-alone (by default the "detect" stage: lanes, shadow hypotheses, vertical-edge verification; with
-detector "cascade" the trained Haar cascade, with "fused" both merged), with the camera fitted to the
-image's size. An image that cannot be used (unreadable, truncated, too small) is left out of the output
-and listed with the reason; the others are written.
+Output: [{"file_name", "bbox": [{"left","top","right","bottom","score"}]}]. Each image goes alone through the
+pipeline's detection stage (the configuration's preset, default `default`: the learned detector with the shadow
+detector's cues; Pipeline.run_stage("detect"), the stage a tracked pipeline asks for its detections), with the
+camera fitted to the image's size. An image that cannot be used (unreadable, truncated, too small) is left out of
+the output and listed with the reason; the others are written.
 
-Only detections scoring at least the detector's operating point are written (OPERATING_POINT, or
---min-score; 0 writes every detection, for a score curve of one's own).
+Only detections scoring at least the preset's operating point are written (OPERATING_POINT, or --min-score; 0
+writes every detection, for a score curve of one's own).
 """
 from __future__ import annotations
 
@@ -25,27 +25,25 @@ class DetectError(RuntimeError):
     pass
 
 
-STAGES = {"thesis": "detect", "cascade": "cascade", "fused": "fused"}  # --detector -> the core's single-image stage
-DEFAULT_DETECTOR = "fused"  # issue 12: single images get the cascade and the shadows merged
-
-# The score a detection must reach to be written, per detector: the lowest threshold (0.01 apart) at which
-# precision (boxes >= 40 px, IoU >= 0.5) reached 0.85, issue 12's bar, on 800 training images the verifier never
-# saw (TuSimple 0602, 0612, ... and 0606, 0616, ...; docs/cascade.md, "The operating point of `headway detect`"),
-# not on the validation split; chosen again in session 12 for the verifier trained (8 epochs) on the groups that
-# reach past the image's border (its 4-epoch run: 0.89 / 0.87; session 11's network: 0.80 / 0.79), and the same
-# again in session 13 for that recipe with a share of the plain others an epoch (fused 0.796 / 0.850 there). The thesis
-# detector reaches no such precision at any score: it keeps every detection, as before.
-OPERATING_POINT = {"thesis": 0.0, "cascade": 0.77, "fused": 0.79}
+# The score a detection must reach to be written, per preset: the lowest threshold (0.01 apart) at which precision
+# (boxes >= 40 px, IoU >= 0.5) reaches 0.85 on 800 training images the verifier never saw (TuSimple 0602, 0612, ...
+# and 0606, 0616, ...; docs/cascade.md, "The operating point of `headway detect`"), not on the validation split. The
+# thesis detector reaches no such precision at any score: every detection is written; so for a composition of
+# one's own (pipeline.detectors).
+OPERATING_POINT = {"default": 0.79, "paper004": 0.77}
 
 
-# --detector thesis is the thesis detector alone, whatever composition the configuration's preset names (the
-# default preset, fused, would otherwise give the core's "detect" stage the cascade too)
-DETECTOR_CONFIG = {"thesis": {"pipeline": {"preset": "thesis", "detectors": ["shadow"]}}}
+def operating_point(cfg: dict) -> float:
+    """The score `headway detect` writes from with this configuration (its preset's, unless its detectors are
+    the configuration's own)."""
+    if cfg["pipeline"].get("detectors"):
+        return 0.0
+    return OPERATING_POINT.get(cfg["pipeline"]["preset"], 0.0)
 
 
-def detector_config(config_path: Optional[str], detector: str) -> dict:
-    """The configuration `detector` runs with: the file's (or the defaults), with what the detector fixes."""
-    return configuration.load(config_path, DETECTOR_CONFIG.get(detector))
+def detector_config(config_path: Optional[str], preset: Optional[str] = None) -> dict:
+    """The configuration a detection runs with: the file's (or the defaults), with `preset` when given."""
+    return configuration.load(config_path, {"pipeline": {"preset": preset}} if preset else None)
 
 
 def read_usable(path: str) -> tuple:
@@ -67,24 +65,22 @@ def image_pipeline(base: dict, width: int, height: int) -> Pipeline:
 def image_entry(path: str, result, min_score: float) -> dict:
     """The output's entry of one image: its detections scoring at least `min_score`."""
     return {"file_name": Path(path).name, "bbox": [
-        {"left": round(t.box[0], 1), "top": round(t.box[1], 1), "right": round(t.box[2], 1),
-         "bottom": round(t.box[3], 1), "score": round(t.confidence, 4)}
-        for t in result.tracks if t.confidence >= min_score]}
+        {"left": round(l, 1), "top": round(t, 1), "right": round(r, 1), "bottom": round(b, 1), "score": round(s, 4)}
+        for l, t, r, b, s in result.detections if s >= min_score]}
 
 
 def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False,
-                  bad: Optional[list[str]] = None, detector: str = DEFAULT_DETECTOR,
+                  bad: Optional[list[str]] = None, preset: Optional[str] = None,
                   min_score: Optional[float] = None) -> list[dict]:
-    """One entry per usable image, with the detections scoring at least `min_score` (None: the detector's
+    """One entry per usable image, with the detections scoring at least `min_score` (None: the preset's
     OPERATING_POINT). Images that cannot be used go to ``bad`` ("path: why") when it is given; without it
     the first one raises DetectError."""
-    stage = STAGES[detector]
+    base = detector_config(config_path, preset)
     if min_score is None:
-        min_score = OPERATING_POINT[detector]
+        min_score = operating_point(base)
     if not 0.0 <= min_score <= 1.0:
         raise DetectError(f"--min-score {min_score}: scores lie in [0, 1]; give a value in that range "
                           f"(0 writes every detection)")
-    base = detector_config(config_path, detector)
     pipes: dict[tuple[int, int], Pipeline] = {}
     out = []
     try:
@@ -98,7 +94,7 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # one pipeline per image size, camera scaled to it
                 pipes[size] = image_pipeline(base, *size)
-            out.append(image_entry(path, pipes[size].run_stage(stage, gray), min_score))
+            out.append(image_entry(path, pipes[size].run_stage("detect", gray), min_score))
     finally:
         for p in pipes.values():
             p.close()
@@ -107,8 +103,7 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
 
 def main(args) -> int:
     bad: list[str] = []
-    result = detect_images(args.images, args.config, bad=bad, detector=args.detector or DEFAULT_DETECTOR,
-                           min_score=args.min_score)
+    result = detect_images(args.images, args.config, bad=bad, preset=args.preset, min_score=args.min_score)
     if not result and bad:
         raise DetectError(bad[0] if len(bad) == 1 else f"none of the {len(bad)} images can be used: " + "; ".join(bad[:5]))
     Path(args.out).write_text(json.dumps(result, indent=1))

@@ -19,6 +19,13 @@ def data_path(*parts: str) -> Path:
     return p
 
 
+def cascade_alone(**sections) -> dict:
+    """Configuration values whose detection stage (Pipeline.run_stage / stage_boxes "detect") is the trained cascade
+    with its verifier alone: pipeline.detectors [cascade] (tracked by kalman), with the other `sections` given (a
+    `pipeline` among them adds to those keys)."""
+    return {**sections, "pipeline": {"detectors": ["cascade"], "tracker": "kalman", **sections.get("pipeline", {})}}
+
+
 def tme08_sequence(preset: str) -> tuple[list, float, dict]:
     """TME's tme08 (50 real motorway frames; skipped when absent): the frames, their rate, and the configuration
     values `headway eval` runs it with (camera pitch and yaw fitted to the lanes, the hood line, the preset)."""

@@ -1,7 +1,8 @@
 """The shipped vehicle cascade (app/models/vehicle_cascade.xml, trained by `headway train cascade`,
-recipe in docs/cascade.md) run by the core's "cascade" stage: it loads in OpenCV, scans only where a
-vehicle can stand, and is measured on the real TuSimple validation images (0001-0600) by the project's
-one scoring code (app/eval/tusimple_boxes.py: IoU >= 0.5, boxes >= 40 px)."""
+recipe in docs/cascade.md) as the detection stage alone (pipeline.detectors [cascade]: Pipeline.run_stage
+"detect", preset paper004's detection): it loads in OpenCV, scans only where a vehicle can stand, and is measured
+on the real TuSimple validation images (0001-0600) by the project's one scoring code (app/eval/tusimple_boxes.py:
+IoU >= 0.5, boxes >= 40 px)."""
 from __future__ import annotations
 
 import json
@@ -12,14 +13,12 @@ import pytest
 
 from app import config as configuration
 from app.core import Pipeline
-from tests.conftest import data_path
+from tests.conftest import cascade_alone, data_path
 
-# Measured on the 600 validation images with the shipped models and defaults (docs/cascade.md: the CNN
-# verifier, every group verified, nms_iou 0.3): every detection kept, boxes >= 40 px: recall 0.690, precision 0.073;
-# the verifier's score reaches precision 0.806 at recall 0.504 (score >= 0.95; with max_groups 96: 0.810 at 0.501;
-# the HOG verifier of session 2: 0.787 at 0.436 at best). Session 5's verifier with the box output: every detection
-# kept 0.813 / 0.114, precision 0.861 at recall 0.675 (score >= 0.95). Floors that catch a regression; the issue's
-# bar is tested separately.
+# Floors on the 600 validation images with the shipped models and defaults (docs/cascade.md: the CNN verifier with
+# its box output, every group verified, nms_iou 0.3), boxes >= 40 px: every detection kept (measured: recall 0.886,
+# precision 0.122), and the best curve point at score >= 0.95. They catch a regression; the bar of recall at
+# precision 0.80 is tested separately (measured: 0.827 at precision 0.816, score >= 0.5).
 CASCADE_FLOOR_40 = {"recall": 0.65, "precision": 0.06}
 CASCADE_FLOOR_HIGH = {"recall": 0.48, "precision": 0.80}   # the best curve point at score >= 0.95
 
@@ -30,14 +29,14 @@ def test_shipped_cascade_loads_in_opencv():
     assert tuple(cc.getOriginalWindowSize()) == (30, 20)
 
 
-def test_cascade_stage_reports_boxes_with_scores_below_the_horizon_only():
+def test_the_cascade_reports_boxes_with_scores_below_the_horizon_only():
     """On a textured frame without lanes, every box the cascade reports stands below the camera's
     horizon with a confidence in [0, 1]: the scan covers only rows where a vehicle can stand."""
-    cfg = configuration.load(None)
+    cfg = configuration.load(None, cascade_alone())
     rng = np.random.default_rng(0)
     gray = cv2.GaussianBlur(rng.normal(110, 30, (480, 640)).clip(0, 255).astype(np.uint8), (0, 0), 1.0)
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        r = pipe.run_stage("cascade", gray)
+        r = pipe.run_stage("detect", gray)
         horizon = r.horizon_row
         for t in r.tracks:
             assert 0.0 <= t.confidence <= 1.0
@@ -49,8 +48,9 @@ def test_cascade_stage_reports_boxes_with_scores_below_the_horizon_only():
 def cascade_scores():
     from app.eval.tusimple_boxes import evaluate
 
-    r = evaluate(str(data_path("tusimple", "supp")), preset="cascade")
-    print("TuSimple supp, cascade:", json.dumps(r["bands"], indent=1), json.dumps(r["best_at_precision_0.8"]))
+    r = evaluate(str(data_path("tusimple", "supp")), preset="paper004")
+    print("TuSimple supp, paper004 (the cascade alone):", json.dumps(r["bands"], indent=1),
+          json.dumps(r["best_at_precision_0.8"]))
     return r
 
 
@@ -68,10 +68,9 @@ def test_cascade_score_curve_floor(cascade_scores):
                for c in high)
 
 
-def test_cascade_meets_the_issue_bar(cascade_scores):
-    """Issue 12's bar for the cascade alone: recall >= 0.60 at precision >= 0.80 (boxes >= 40 px). Reached since
-    session 5's verifier with the box output (docs/cascade.md): 0.675 at precision 0.861 (score >= 0.95); with
-    session 6's second look at the moved boxes (cascade.rejudge_refined) 0.690 at 0.845 (score >= 0.9)."""
+def test_cascade_alone_reaches_recall_0_60_at_precision_0_80(cascade_scores):
+    """The bar for the cascade alone: recall >= 0.60 at precision >= 0.80 (boxes >= 40 px), reached by the verifier's
+    box output with the second look at the moved boxes (cascade.rejudge_refined; docs/cascade.md)."""
     best = cascade_scores["best_at_precision_0.8"]
     assert best is not None and best["recall"] >= 0.60
 
@@ -86,15 +85,16 @@ def test_core_confidence_is_the_verifier_probability_the_trainer_computes():
     entry = json.loads((supp / "annotation.json").read_text())[0]
     gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
     model = Mlp.load(str(configuration.SHIPPED_HOG_VERIFIER))
-    cfg = tusimple_config(configuration.load(None, {"cascade": {"verifier": str(configuration.SHIPPED_HOG_VERIFIER)}}))
+    cfg = tusimple_config(configuration.load(None, cascade_alone(
+        cascade={"verifier": str(configuration.SHIPPED_HOG_VERIFIER)})))
     cfg["cascade"]["nms_iou"] = 1.0  # every group, in the same order with and without the verifier
-    off = tusimple_config(configuration.load(None, {"cascade": {"verifier": "off", "nms_iou": 1.0}}))
+    off = tusimple_config(configuration.load(None, cascade_alone(cascade={"verifier": "off", "nms_iou": 1.0})))
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
-        r = pipe.run_stage("cascade", gray)
+        r = pipe.run_stage("detect", gray)
         tracks = r.tracks
         # the same groups without the verifier: confidence n / (n + neighbors_half) gives their window counts
         half = off["cascade"]["neighbors_half"]
-        n = [round(half * t.confidence / (1 - t.confidence)) for t in plain.run_stage("cascade", gray).tracks]
+        n = [round(half * t.confidence / (1 - t.confidence)) for t in plain.run_stage("detect", gray).tracks]
     assert tracks and len(n) == len(tracks)
     boxes = [t.box for t in tracks]
     x = np.c_[box_features(hog(), gray, boxes), geometry_features(boxes, n, r.horizon_row, cfg["camera"]["height_m"])]
@@ -102,9 +102,10 @@ def test_core_confidence_is_the_verifier_probability_the_trainer_computes():
     assert np.abs(p - np.array([t.confidence for t in tracks])).max() < 0.02
 
 
-def _cascade_tracks(cfg: dict, images: list, stage: str = "cascade") -> list:
+def _cascade_tracks(cfg: dict, images: list) -> list:
+    """Each image's detections (left, top, right, bottom, score) by the detection stage of `cfg`'s composition."""
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        return [[(*t.box, t.confidence) for t in pipe.run_stage(stage, g).tracks] for g in images]
+        return [[(*t.box, t.confidence) for t in pipe.run_stage("detect", g).tracks] for g in images]
 
 
 # every raw group kept and scored by its window count: any window found or missed changes the output
@@ -125,7 +126,7 @@ def test_own_scanner_reports_what_opencv_reports_on_rendered_frames(lanes):
     for over in (EVERY_GROUP, {}):
         cfgs = []
         for opencv in (True, False):
-            cfg = configuration.load(None, {"cascade": {**over, "opencv_scan": opencv, "scan_lanes": lanes}})
+            cfg = configuration.load(None, cascade_alone(cascade={**over, "opencv_scan": opencv, "scan_lanes": lanes}))
             cfg["camera"].update(scenario_camera(sc).to_dict())
             cfgs.append(cfg)
         ref, own = (_cascade_tracks(c, frames) for c in cfgs)
@@ -139,24 +140,24 @@ def test_own_scanner_reports_what_opencv_reports_on_real_images():
     supp = data_path("tusimple", "supp")
     entries = json.loads((supp / "annotation.json").read_text())[:12]
     images = [cv2.imread(str(supp / e["file_name"]), cv2.IMREAD_GRAYSCALE) for e in entries]
-    ref, own = (_cascade_tracks(tusimple_config(configuration.load(None, {"cascade": {**EVERY_GROUP, "opencv_scan": o}})),
-                                images) for o in (True, False))
+    ref, own = (_cascade_tracks(tusimple_config(configuration.load(
+        None, cascade_alone(cascade={**EVERY_GROUP, "opencv_scan": o}))), images) for o in (True, False))
     assert sum(map(len, ref)) > 30 * len(images)
     assert own == ref
 
 
 def test_scan_lanes_other_than_0_4_8_are_refused():
-    cfg = configuration.load(None, {"cascade": {"scan_lanes": 5}})
+    cfg = configuration.load(None, cascade_alone(cascade={"scan_lanes": 5}))
     with pytest.raises(Exception, match="scan_lanes"):
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))
+            pipe.run_stage("detect", np.zeros((480, 640), np.uint8))
 
 
 def test_opencv_scan_takes_only_opencvs_step():
-    cfg = configuration.load(None, {"cascade": {"opencv_scan": True, "step_px": 3}})
+    cfg = configuration.load(None, cascade_alone(cascade={"opencv_scan": True, "step_px": 3}))
     with pytest.raises(Exception, match="step_px"):
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            pipe.run_stage("cascade", np.zeros((480, 640), np.uint8))
+            pipe.run_stage("detect", np.zeros((480, 640), np.uint8))
 
 
 def test_max_groups_keeps_the_groups_of_the_strongest_windows():
@@ -169,7 +170,7 @@ def test_max_groups_keeps_the_groups_of_the_strongest_windows():
     frames = [f.image for f in list(render(sc))[:4]]
     out = {}
     for k in (0, 10):
-        cfg = configuration.load(None, {"cascade": {**EVERY_GROUP, "max_groups": k}})
+        cfg = configuration.load(None, cascade_alone(cascade={**EVERY_GROUP, "max_groups": k}))
         cfg["camera"].update(scenario_camera(sc).to_dict())
         out[k] = _cascade_tracks(cfg, frames)
     assert all(len(a) > 10 for a in out[0])
@@ -177,21 +178,23 @@ def test_max_groups_keeps_the_groups_of_the_strongest_windows():
 
 
 def test_stage_boxes_gives_every_group_past_the_abis_64_tracks():
-    """Pipeline.stage_boxes (hw_pipeline_stage_boxes, ABI 8) returns every detection of a single-image stage: on a
-    real 1280x720 image the cascade forms far more than the HW_MAX_TRACKS (64) groups run_stage() can report; the
-    first 64 are run_stage()'s, box for box, and the horizon row is run_stage()'s. The verifier is trained on them."""
+    """Pipeline.stage_boxes (hw_pipeline_stage_boxes) returns every detection of the detection stage: on a real
+    1280x720 image the cascade alone forms far more than the HW_MAX_TRACKS (64) groups run_stage() can report; the
+    first 64 are run_stage()'s tracks and detections, box for box, and the horizon row is run_stage()'s. The
+    verifier is trained on them."""
     from app._headway_core import lib
     from app.eval.tusimple_boxes import tusimple_config
 
     supp = data_path("tusimple", "supp")
     entry = json.loads((supp / "annotation.json").read_text())[0]
     gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
-    cfg = tusimple_config(configuration.load(None, {"cascade": EVERY_GROUP}))
+    cfg = tusimple_config(configuration.load(None, cascade_alone(cascade=EVERY_GROUP)))
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        r = pipe.run_stage("cascade", gray)
-        boxes, horizon = pipe.stage_boxes("cascade", gray)
-    assert len(r.tracks) == lib.HW_MAX_TRACKS < len(boxes)
+        r = pipe.run_stage("detect", gray)
+        boxes, horizon = pipe.stage_boxes("detect", gray)
+    assert len(r.tracks) == len(r.detections) == lib.HW_MAX_TRACKS < len(boxes)
     assert np.allclose(boxes[:lib.HW_MAX_TRACKS], [(*t.box, t.confidence) for t in r.tracks])
+    assert np.allclose(boxes[:lib.HW_MAX_TRACKS], r.detections)
     assert horizon == pytest.approx(r.horizon_row)
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         with pytest.raises(ValueError, match="stage"):
@@ -225,10 +228,10 @@ def test_a_vehicle_cut_by_the_border_is_found_by_windows_reaching_past_it(side):
         visible = (left + s, top, float(width), bottom)
     best = {}
     for frac in (0.0, 0.5):
-        cfg = configuration.load(None, {"cascade": {**EVERY_GROUP, "border_frac": frac}})
+        cfg = configuration.load(None, cascade_alone(cascade={**EVERY_GROUP, "border_frac": frac}))
         cfg["camera"].update(scenario_camera(sc).to_dict())
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            boxes, _ = pipe.stage_boxes("cascade", gray)
+            boxes, _ = pipe.stage_boxes("detect", gray)
         assert len(boxes) and boxes[:, 0].min() >= 0 and boxes[:, 2].max() <= width
         best[frac] = float(iou_matrix([visible], [tuple(b[:4]) for b in boxes]).max())
     assert best[0.5] >= 0.6 > 0.5 > best[0.0], best
@@ -236,17 +239,16 @@ def test_a_vehicle_cut_by_the_border_is_found_by_windows_reaching_past_it(side):
 
 def test_every_box_reported_on_a_real_image_lies_inside_it():
     """The verifier's box output moves boxes, a near vehicle's past the image's border; TuSimple's boxes, and any
-    user's, end at the border, so every reported box is cut to the image (before the suppression compares them):
-    on the validation split that cut alone raised the fused detector's best recall at precision 0.85 by ~0.01 on
-    the held-out training images (docs/cascade.md, session 12)."""
+    user's, end at the border, so every reported box is cut to the image (before the suppression compares them), by
+    the cascade alone and by the default preset's detection (the cascade fused with the shadow detector's cues)."""
     from app.eval.tusimple_boxes import tusimple_config
 
     supp = data_path("tusimple", "supp")
     entries = json.loads((supp / "annotation.json").read_text())[:40]
     images = [cv2.imread(str(supp / e["file_name"]), cv2.IMREAD_GRAYSCALE) for e in entries]
-    cfg = tusimple_config(configuration.load(None, {"cascade": {"nms_iou": 1.0}}))
-    for stage in ("cascade", "fused"):
-        boxes = np.array([b for det in _cascade_tracks(cfg, images, stage) for b in det])
+    for values in (cascade_alone(), {"pipeline": {"preset": "default"}}):
+        cfg = tusimple_config(configuration.load(None, {**values, "cascade": {"nms_iou": 1.0}}))
+        boxes = np.array([b for det in _cascade_tracks(cfg, images) for b in det])
         assert len(boxes) > 40 * 20
         assert boxes[:, 0].min() >= 0 and boxes[:, 1].min() >= 0
         assert boxes[:, 2].max() <= 1280 and boxes[:, 3].max() <= 720
@@ -269,15 +271,15 @@ def test_the_stage_on_two_threads_finds_what_one_thread_finds():
     for over in (EVERY_GROUP, {}):
         runs = []
         for threads in (1, 2):
-            cfg = configuration.load(None, {"cascade": over | {"threads": threads}})
+            cfg = configuration.load(None, cascade_alone(cascade=over | {"threads": threads}))
             cfg["camera"].update(scenario_camera(sc).to_dict())
             runs.append(_cascade_tracks(cfg, frames))
         assert sum(len(r) for r in runs[0]) > 20 and runs[0] == runs[1]
 
 
-def test_fused_tracks_the_same_on_two_threads_with_the_cores_idle_between_frames():
+def test_the_default_preset_tracks_the_same_on_two_threads_with_the_cores_idle_between_frames():
     """In the live loop the cores idle between camera frames, and the stage's workers sleep then (its own threads,
-    csrc/base/worker_pool.hpp, kept off the caller's core before each call). Tracked `fused` over dense_traffic with
+    csrc/base/worker_pool.hpp, kept off the caller's core before each call). The default preset over dense_traffic with
     30 ms of idle time after each frame, on two threads, must give the tracks one thread gives back to back: the same
     ids and boxes frame by frame (the workers wake, are placed and join or stay out without changing any result)."""
     import os
@@ -292,7 +294,7 @@ def test_fused_tracks_the_same_on_two_threads_with_the_cores_idle_between_frames
     frames = list(render(sc))[:30]
     runs = []
     for threads, idle_s in ((1, 0.0), (2, 0.03)):
-        cfg = configuration.load(None, {"pipeline": {"preset": "fused"}, "cascade": {"threads": threads}})
+        cfg = configuration.load(None, {"pipeline": {"preset": "default"}, "cascade": {"threads": threads}})
         cfg["camera"].update(scenario_camera(sc).to_dict())
         out = []
         with Pipeline(configuration.core_sections(cfg)) as pipe:
@@ -318,16 +320,16 @@ def test_a_process_forked_after_the_workers_started_detects_alone_and_exits():
         pytest.skip("one core available: the stage starts no worker whatever cascade.threads says")
     sc = load_scenario("dense_traffic")
     frames = [f.image for f in list(render(sc))[:3]]
-    cfg = configuration.load(None, {"cascade": {"threads": 2}})
+    cfg = configuration.load(None, {"pipeline": {"preset": "default"}, "cascade": {"threads": 2}})
     cfg["camera"].update(scenario_camera(sc).to_dict())
     pipe = Pipeline(configuration.core_sections(cfg)).__enter__()
     try:
-        expected = [[(*t.box, t.confidence) for t in pipe.run_stage("fused", g).tracks] for g in frames]
+        expected = [pipe.run_stage("detect", g).detections for g in frames]
         pid = os.fork()
         if pid == 0:  # the child: the same answers on its one thread, then a clean close
             code = 1
             try:
-                got = [[(*t.box, t.confidence) for t in pipe.run_stage("fused", g).tracks] for g in frames]
+                got = [pipe.run_stage("detect", g).detections for g in frames]
                 pipe.__exit__(None, None, None)
                 code = 0 if got == expected else 2
             finally:

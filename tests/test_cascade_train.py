@@ -222,13 +222,14 @@ def test_positives_of_one_view_only(tmp_path):
 
 def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
     """Any window the trainer takes (`--window 24x24`, docs/cascade.md "Window size and aspect"): the core's cascade
-    stage reads the window from the XML, so a square model gives square boxes whose smallest height is the model's
-    own, and the core's scanner finds exactly the windows OpenCV's finds (every raw group kept, on rendered road
-    frames where the tiny model fires often)."""
+    (the detection stage with pipeline.detectors [cascade]) reads the window from the XML, so a square model gives
+    square boxes whose smallest height is the model's own, and the core's scanner finds exactly the windows OpenCV's
+    finds (every raw group kept, on rendered road frames where the tiny model fires often)."""
     from app import config as configuration
     from app.core import Pipeline
     from app.sim import load_scenario, render
     from app.sim.frames import scenario_camera
+    from tests.conftest import cascade_alone
 
     _, out, _ = tiny_square
     assert tuple(cv2.CascadeClassifier(str(out)).getOriginalWindowSize()) == (10, 10)
@@ -236,11 +237,11 @@ def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
     frames = [f.image for f in list(render(sc, frames=range(3)))]
     found = {}
     for opencv in (True, False):
-        cfg = configuration.load(None, {"cascade": {"model": str(out), "verifier": "off", "nms_iou": 1.0,
-                                                    "min_neighbors": 1, "opencv_scan": opencv}})
+        cfg = configuration.load(None, cascade_alone(cascade={"model": str(out), "verifier": "off", "nms_iou": 1.0,
+                                                              "min_neighbors": 1, "opencv_scan": opencv}))
         cfg["camera"].update(scenario_camera(sc).to_dict())
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            found[opencv] = [[(*t.box, t.confidence) for t in pipe.run_stage("cascade", g).tracks] for g in frames]
+            found[opencv] = [[(*t.box, t.confidence) for t in pipe.run_stage("detect", g).tracks] for g in frames]
     assert found[False] == found[True]
     boxes = np.array([b[:4] for f in found[False] for b in f])
     assert len(boxes) > 20

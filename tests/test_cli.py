@@ -105,31 +105,36 @@ def test_bench_reports_median_and_p99_per_stage():
 
 
 def test_image_bench_times_headway_detect_part_by_part(tmp_path):
-    """`bench --images` times what `headway detect` spends on each image: reading, the core's parts (the cascade's
-    scan and its verifier apart), the core's whole stage and the total; the parts add up within each."""
+    """`bench --images` times what `headway detect` spends on each image: reading, the core's parts of the preset's
+    detection stage (the default preset: the cascade's scan and its verifier apart, the shadow detector's hypotheses
+    and their verification, their fusion), the core's whole stage and the total; the parts add up within each.
+    --preset paper004 times the cascade alone."""
     images = data_path("tusimple", "supp", "images")
     r = headway("bench", "--images", str(images), "--limit", "3", "--repeats", "2", "--json")
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
-    assert rep["detector"] == "fused" and rep["images"] == 6 and rep["frame_sizes"] == ["1280x720"]
+    assert rep["preset"] == "default" and rep["images"] == 6 and rep["frame_sizes"] == ["1280x720"]
     parts = rep["stages"]["image"]
-    assert list(parts) == ["read", "lanes", "cascade", "verifier", "verify", "core", "total"]
+    detection = ["lanes", "cascade", "verifier", "hypotheses", "verify", "fuse"]
+    assert list(parts) == ["read", *detection, "core", "total"]
     assert all(s["n"] == 6 and s["p99_ms"] >= s["median_ms"] > 0 for s in parts.values())
     mean = {k: s["mean_ms"] for k, s in parts.items()}
-    assert mean["core"] >= mean["lanes"] + mean["cascade"] + mean["verifier"] + mean["verify"] - 1e-3
+    assert mean["core"] >= sum(mean[k] for k in detection) - 1e-3
     assert mean["total"] >= mean["read"] + mean["core"] - 1e-3
     # the network's looks are timed as the verifier's, not the scan's: without a verifier that part is empty
     (tmp_path / "off.yaml").write_text("cascade: {verifier: \"off\"}\n")
-    r = headway("bench", "--images", str(images), "--limit", "2", "--repeats", "1", "--config",
-                str(tmp_path / "off.yaml"), "--json")
+    r = headway("bench", "--images", str(images), "--limit", "2", "--repeats", "1", "--preset", "paper004",
+                "--config", str(tmp_path / "off.yaml"), "--json")
     assert r.returncode == 0, r.stderr
-    parts = json.loads(r.stdout)["stages"]["image"]
+    rep = json.loads(r.stdout)
+    parts = rep["stages"]["image"]
+    assert rep["preset"] == "paper004" and list(parts) == ["read", "lanes", "cascade", "verifier", "core", "total"]
     assert parts["verifier"]["p99_ms"] < 0.05 < parts["cascade"]["median_ms"]
 
 
 def test_latency_bench_runs_the_preset_asked_for():
-    """`bench --latency --preset P` measures P's real-time loop (it used to run the configuration's default
-    whatever --preset said) and says which preset it measured."""
+    """`bench --latency --preset P` measures P's real-time loop (not the configuration's default) and says which
+    preset it measured."""
     r = headway("bench", "--latency", "--seconds", "1", "--preset", "thesis", "--json")
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)

@@ -1,12 +1,16 @@
-"""Keys that moved to one shared definition (issue 11: the hood line in the camera section, lane and vehicle
-widths in the road section): an old key is refused with an error naming the new one, by the configuration
-loader and by the core alike; the one key reaches the stages that read it."""
+"""Keys that moved (to one shared definition: the hood line in the camera section, lane and vehicle widths in the
+road section; or renamed: fuse.cue_weight) and presets that were removed: an old key or preset is refused with an
+error naming what replaces it, by the configuration loader and by the core alike; the one key reaches the stages
+that read it. Keys and sections that were removed without a replacement are unknown keys."""
 from __future__ import annotations
 
+import re
+
 import pytest
+import yaml
 
 from app import config as configuration
-from app.core import ConfigError, Pipeline, core_moved_keys
+from app.core import ConfigError, Pipeline, core_moved_keys, core_removed_presets
 
 # Old key -> the key that replaced it.
 MOVED = {
@@ -24,6 +28,17 @@ MOVED = {
     "shadow.vehicle_width_m": "road.vehicle_width_m",
     "cascade.vehicle_width_m": "road.vehicle_width_m",
     "parallax.vehicle_width_m": "road.vehicle_width_m",
+    "fuse.thesis_weight": "fuse.cue_weight",
+}
+
+# Removed preset -> what to use instead (a preset, or the composition as configuration YAML).
+REMOVED_PRESETS = {
+    "fused": "preset default",
+    "cascade_shadow_phd": "preset default",
+    "cascade": "preset paper004",
+    "phd": "pipeline: {detectors: [shadow], tracker: phd}",
+    "parallax_kalman": "pipeline: {detectors: [parallax], tracker: kalman}",
+    "shadow_particles": "pipeline: {detectors: [shadow], tracker: particles}",
 }
 
 
@@ -54,6 +69,48 @@ def test_an_old_key_given_to_the_core_names_the_new_key(old, new):
     section, key = old.split(".")
     with pytest.raises(ConfigError, match=rf"{old}: moved to {new}"):
         Pipeline({section: {key: 0.1}})
+
+
+def test_the_core_lists_every_removed_preset_and_none_is_a_preset():
+    assert core_removed_presets() == REMOVED_PRESETS
+    assert set(configuration.presets()) == {"default", "thesis", "parallax", "paper004", "none"}
+
+
+@pytest.mark.parametrize("old, use", sorted(REMOVED_PRESETS.items()))
+def test_a_removed_preset_in_a_file_names_its_replacement(tmp_path, old, use):
+    path = tmp_path / "config.yaml"
+    path.write_text(f"pipeline:\n  preset: {old}\n")
+    with pytest.raises(configuration.ConfigFileError) as e:
+        configuration.load(path)
+    assert f"{path}: pipeline.preset: preset '{old}' was removed; use {use}" in str(e.value)
+
+
+@pytest.mark.parametrize("old, use", sorted(REMOVED_PRESETS.items()))
+def test_a_removed_preset_given_to_the_core_names_its_replacement(old, use):
+    with pytest.raises(ConfigError, match=re.escape(f"pipeline.preset: preset '{old}' was removed; use {use}")):
+        Pipeline({"pipeline": {"preset": old}})
+
+
+@pytest.mark.parametrize("use", sorted(set(REMOVED_PRESETS.values())))
+def test_each_named_replacement_is_a_configuration_that_loads(use):
+    values = ({"pipeline": {"preset": use.split()[1]}} if use.startswith("preset ") else yaml.safe_load(use))
+    with Pipeline(configuration.core_sections(configuration.load(None, values))) as p:
+        assert p.config["pipeline"]["preset"]
+
+
+@pytest.mark.parametrize("text, key", [
+    ("merge:\n  min_appearance: 0.9\n", "merge"),
+    ("cascade:\n  tracked_verifier: same\n", "cascade.tracked_verifier"),
+    ("cascade:\n  refine_tracked: true\n", "cascade.refine_tracked"),
+])
+def test_removed_keys_and_sections_are_unknown(tmp_path, text, key):
+    path = tmp_path / "config.yaml"
+    path.write_text(text)
+    with pytest.raises(configuration.ConfigFileError, match=re.escape(key)):
+        configuration.load(path)
+    section, _, name = key.partition(".")
+    with pytest.raises(ConfigError, match=re.escape(key)):
+        Pipeline({section: {name: "same"} if name else {}})
 
 
 def test_the_nominal_lane_width_must_be_a_believed_one():

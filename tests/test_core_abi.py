@@ -15,7 +15,7 @@ def gray(w=640, h=480, v=90):
 
 
 def test_abi_version_matches_header():
-    assert abi_version() == lib.HW_ABI_VERSION == 9
+    assert abi_version() == lib.HW_ABI_VERSION == 10
 
 
 def test_schema_documents_every_core_key():
@@ -44,6 +44,7 @@ def test_effective_config_echoes_what_was_given():
         ({"camera": {"focal": 700.0}}, "camera.focal"),
         ({"cameras": {}}, "cameras"),
         ({"pipeline": {"preset": "magic"}}, "pipeline.preset"),
+        ({"pipeline": {"preset": "fused"}}, "pipeline.preset"),
         ({"pipeline": {"queue_capacity": 2.5}}, "pipeline.queue_capacity"),
     ],
 )
@@ -84,10 +85,38 @@ def test_time_going_backwards_is_rejected():
         p.process(gray(), 0.5)  # after reset the clock may start again
 
 
-def test_run_stage_rejects_unknown_stage():
-    with Pipeline() as p:
-        with pytest.raises(InvalidArgument, match="unknown stage 'track'"):
-            p.run_stage("track", gray())
+@pytest.mark.parametrize("stage", ["track", "cascade", "fused"])
+def test_run_stage_rejects_unknown_stage(stage):
+    """The single-image stages are lanes, hypotheses and detect (the composition's detection stage); a detector
+    part is no stage of its own."""
+    with Pipeline({"pipeline": {"preset": "thesis"}}) as p:
+        with pytest.raises(InvalidArgument, match=f"unknown stage '{stage}': one of lanes, hypotheses, detect,"):
+            p.run_stage(stage, gray())
+        with pytest.raises(InvalidArgument, match=f"unknown stage '{stage}'"):
+            p.stage_boxes(stage, gray())
+
+
+@pytest.mark.parametrize("preset, match", [("none", "has none"), ("parallax", "two frames")])
+def test_detect_stage_needs_a_detector_that_works_on_one_image(preset, match):
+    with Pipeline({"pipeline": {"preset": preset}}) as p:
+        with pytest.raises(InvalidArgument, match=match):
+            p.run_stage("detect", gray())
+
+
+def test_run_stage_detect_reports_its_detections_as_tracks_and_detections():
+    """Stage "detect" fills FrameResult.detections, (left, top, right, bottom, score) per vehicle, strongest first,
+    and reports the same boxes and scores as its tracks; stage "lanes" runs no detection and reports none."""
+    from tests import thesis_scenes
+
+    image = thesis_scenes.frames("steady_following")[60].image
+    with Pipeline(thesis_scenes.config("steady_following")) as p:
+        r = p.run_stage("detect", image)
+        lanes_only = p.run_stage("lanes", image)
+    assert r.full_detection and len(r.detections) >= 2
+    assert all(len(d) == 5 and d[0] < d[2] and d[1] < d[3] and 0.0 <= d[4] <= 1.0 for d in r.detections)
+    assert [d[4] for d in r.detections] == sorted((d[4] for d in r.detections), reverse=True)
+    assert r.detections == [(*t.box, t.confidence) for t in r.tracks]
+    assert lanes_only.detections == []
 
 
 def test_push_source_round_trip_keeps_order_and_timestamps():

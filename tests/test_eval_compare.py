@@ -19,12 +19,12 @@ def _row(text: str, label: str) -> list[str]:
 
 def test_two_presets_are_set_side_by_side_with_their_own_reports_figures(tmp_path):
     out = tmp_path / "cmp"
-    r = headway("eval", "--pipeline", "thesis,fused", "--parts", "synthetic", "--scenarios",
+    r = headway("eval", "--pipeline", "thesis,default", "--parts", "synthetic", "--scenarios",
                 "steady_following,overpass_shadow", "--out", str(out))
     assert r.returncode == 0, r.stderr
     text = (out / "compare.md").read_text()
     assert text == r.stdout.split("\nreport: ")[0]  # what is printed is what is written
-    own = {p: json.loads((out / p / "report.json").read_text()) for p in ("thesis", "fused")}
+    own = {p: json.loads((out / p / "report.json").read_text()) for p in ("thesis", "default")}
     assert all(own[p]["preset"] == p and (out / p / "report.md").exists() for p in own)
     # the synthetic suite: each column is that preset's own overall figures, and each scenario's
     assert _row(text, "all scenarios: MOTA") == [f"{own[p]['synthetic']['overall']['mota']:.3f}" for p in own]
@@ -32,7 +32,7 @@ def test_two_presets_are_set_side_by_side_with_their_own_reports_figures(tmp_pat
         assert _row(text, f"{name}: MOTA / IDF1") == [
             f"{own[p]['synthetic']['per_scenario'][name]['mota']:.3f} / "
             f"{own[p]['synthetic']['per_scenario'][name]['idf1']:.3f}" for p in own]
-    assert json.loads((out / "compare.json").read_text())["presets"] == ["thesis", "fused"]
+    assert json.loads((out / "compare.json").read_text())["presets"] == ["thesis", "default"]
 
 
 def test_a_real_data_comparison_shows_the_score_curve_the_warnings_and_the_real_recordings(tmp_path):
@@ -53,7 +53,7 @@ def test_a_real_data_comparison_shows_the_score_curve_the_warnings_and_the_real_
                 "road_motion": {"skipped": {}, "tme08": {"visible_throughout": {
                     "dark car": {"frames": 50, "iou0.3": {"tracked_frames": vehicles_tracked, "id_switches": 1}}}}},
                 "real_fcw": [{"clip": "a.mp4", "warnings": warnings, "prewarnings": 0, "vehicles_confirmed": 3}]}
-    text = compare.markdown([report("thesis", 0.3, 40, 0), report("fused", 0.9, 48, 1)])
+    text = compare.markdown([report("thesis", 0.3, 40, 0), report("default", 0.9, 48, 1)])
     assert _row(text, "boxes >=40 px, every detection kept") == ["0.300 / 0.500", "0.900 / 0.500"]
     assert _row(text, ">= 0.90") == ["0.210 / 0.950", "0.810 / 0.950"]
     assert _row(text, "boxes >= 40 px, best at precision >= 0.8") == ["-", "-"]
@@ -67,7 +67,7 @@ def test_a_real_data_comparison_shows_the_score_curve_the_warnings_and_the_real_
 
 
 @pytest.mark.parametrize("arg, message", [("thesis,fussed", "unknown preset.*fussed.*choose from"),
-                                          ("fused,fused", "names a preset twice")])
+                                          ("default,default", "names a preset twice")])
 def test_a_bad_preset_list_is_named(tmp_path, arg, message):
     r = headway("eval", "--pipeline", arg, "--parts", "fcw", "--out", str(tmp_path / "x"))
     assert r.returncode != 0

@@ -26,22 +26,20 @@ def _boxes(results) -> list:
 
 def test_the_registries_are_in_the_configuration_schema():
     pipe = core_schema()["pipeline"]
-    assert set(pipe["preset"]["choices"].split("|")) == {"thesis", "parallax", "parallax_kalman", "shadow_particles", "phd",
-                                                               "cascade", "fused", "cascade_shadow_phd", "none"}
+    assert set(pipe["preset"]["choices"].split("|")) == {"default", "thesis", "parallax", "paper004", "none"}
     assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax", "cascade", "proposals"}
     assert {"kalman", "particles", "none"} <= set(pipe["tracker"]["choices"].split("|"))
 
 
-@pytest.mark.parametrize("preset,detectors,tracker", [("thesis", ["shadow"], "kalman"),
+@pytest.mark.parametrize("preset,detectors,tracker", [("default", ["cascade", "shadow"], "phd"),
+                                                       ("thesis", ["shadow"], "kalman"),
                                                        ("parallax", ["parallax"], "particles"),
-                                                       ("phd", ["shadow"], "phd"),
-                                                       ("cascade", ["cascade"], "phd"),
-                                                       ("fused", ["cascade", "shadow", "parallax"], "kalman")])
+                                                       ("paper004", ["cascade"], "phd")])
 def test_a_preset_is_its_composition(preset, detectors, tracker):
-    """A preset is its parts and the keys it sets (fused: the cascade's tracked slices)."""
+    """A preset is its parts and the keys it sets."""
     by_name = _run("steady_following", {"preset": preset}, 40)
     keys = configuration.presets()[preset]["keys"]
-    assert set(keys) <= {"cascade"}
+    assert set(keys) <= {"cascade", "phd", "fuse"}
     by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40,
                     keys.get("cascade"))
     assert _boxes(by_name) == _boxes(by_parts)
@@ -56,12 +54,13 @@ def _on(track, truth_box) -> bool:
     return l <= x <= r and abs(track.box[3] - b) <= 0.2 * (r - l)
 
 
-@pytest.mark.parametrize("preset", ["parallax_kalman", "shadow_particles"])
-def test_crossed_compositions_track_the_lead(preset):
+@pytest.mark.parametrize("detectors,tracker", [(["parallax"], "kalman"), (["shadow"], "particles")])
+def test_crossed_compositions_track_the_lead(detectors, tracker):
     """steady_following: a car 25-30 m ahead in the ego lane all along; both crossed compositions confirm
     a track standing on it within the first 60 frames (2 s) and keep one on it over the next second."""
     fr = frames("steady_following")
-    results = _run("steady_following", {"preset": preset}, 90)
+    preset = f"{detectors[0]}+{tracker}"
+    results = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 90)
     on_lead = []
     for f, r in zip(fr, results):
         lead = next(v for v in f.truth if v["id"] == 1)
@@ -75,7 +74,7 @@ def test_the_phd_tracker_takes_its_vehicles_from_both_detectors():
     parallax together it confirms a track standing on the steady_following lead within 2 s and keeps one on
     it over the next second, asking the detectors only every phd.detect_every_n = 3 frames."""
     fr = frames("steady_following")
-    results = _run("steady_following", {"preset": "phd", "detectors": ["shadow", "parallax"]}, 90)
+    results = _run("steady_following", {"preset": "none", "detectors": ["shadow", "parallax"], "tracker": "phd"}, 90)
     on_lead = []
     for f, r in zip(fr, results):
         lead = next(v for v in f.truth if v["id"] == 1)
@@ -87,7 +86,7 @@ def test_the_phd_tracker_takes_its_vehicles_from_both_detectors():
 
 
 def test_the_crossed_kalman_tracker_runs_the_parallax_detector_only_every_n_frames():
-    results = _run("steady_following", {"preset": "parallax_kalman"}, 30)
+    results = _run("steady_following", {"preset": "none", "detectors": ["parallax"], "tracker": "kalman"}, 30)
     ran = [r.full_detection for r in results]
     assert ran.count(True) <= 11  # at most every third frame (kalman.detect_every_n = 3)
     assert all(r.road_motion is None for r in results[:1])

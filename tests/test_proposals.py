@@ -149,16 +149,16 @@ def test_a_file_that_is_not_a_proposal_network_is_refused_by_name(tmp_path):
         _pipeline(configuration.SHIPPED_VERIFIER)
 
 
-def test_image_bench_times_the_network_and_its_verifier_apart():
-    """`headway bench --images DIR --detectors proposals` times the part's two stages, "proposals" (the network, its
-    decoding and road checks) and "prop_verifier", inside the core's whole stage."""
+def test_image_bench_times_the_network_and_its_verifier_apart(tmp_path):
+    """`headway bench --images DIR --config C` with C's pipeline {detectors: [proposals]} times the part's two stages,
+    "proposals" (the network, its decoding and road checks) and "prop_verifier", inside the core's whole stage."""
     from app.bench import run_image_bench
 
     images = data_path("tusimple", "supp", "images")
-    rep = run_image_bench([str(images)], limit=2, repeats=1, detectors=["proposals"])
+    (tmp_path / "p.yaml").write_text("pipeline: {detectors: [proposals], tracker: kalman}\n")
+    rep = run_image_bench([str(images)], config_path=str(tmp_path / "p.yaml"), limit=2, repeats=1)
     parts = rep["stages"]["image"]
     assert {"read", "proposals", "prop_verifier", "core", "total"} <= set(parts) and "cascade" not in parts
     mean = {k: s["mean_ms"] for k, s in parts.items()}
     assert mean["core"] >= mean["proposals"] + mean["prop_verifier"] - 1e-3
     assert mean["proposals"] > 0 and mean["prop_verifier"] > 0
-    assert rep["run"].startswith("detectors [proposals]")

@@ -17,6 +17,13 @@ def _rp(recall, precision) -> str:
     return f"{_f(recall)} / {_f(precision)}"
 
 
+def _rate(v: dict) -> str:
+    """A vehicle's range rate and its error against the truth, or a dash when not estimated."""
+    if v.get("range_rate_mps") is None:
+        return "-"
+    return f"{v['range_rate_mps']:+.2f} ({v['range_rate_mps'] - v['true_range_rate_mps']:+.2f})"
+
+
 def _table(first: str, presets: list[str], rows: list[tuple[str, list[str]]]) -> list[str]:
     out = ["| " + " | ".join([first] + [f"`{p}`" for p in presets]) + " |",
            "| --- |" + " ---: |" * len(presets)]
@@ -104,7 +111,8 @@ def markdown(reports: list[dict], folders: Optional[list[str]] = None) -> str:
         out += _table("set", presets, rows)
 
     if any(r.get("range") for r in reports):
-        out += ["### Range on TuSimple train_clip1 (range-sensor truth): estimated m (relative error)", ""]
+        out += ["### Range on TuSimple train_clip1 (range-sensor truth): estimated range m (relative error), range "
+                "rate m/s (error)", ""]
         n = max(len(r["range"]["vehicles"]) for r in reports if r.get("range"))
         rows = []
         for k in range(n):
@@ -113,10 +121,16 @@ def markdown(reports: list[dict], folders: Optional[list[str]] = None) -> str:
                 vs = (r.get("range") or {}).get("vehicles") or []
                 v = vs[k] if k < len(vs) else None
                 truth = truth if v is None else v["true_range_m"]
-                cells.append(dash if v is None else
-                             (f"{v['range_m']:.1f} ({v['rel_error']:+.1%})" if v["found"] else "not found"))
+                cells.append(dash if v is None else (
+                    f"{v['range_m']:.1f} ({v['rel_error']:+.1%}), {_rate(v)}" if v["found"] else "not found"))
             rows.append((f"vehicle at {truth:.1f} m", cells))
         out += _table("vehicle", presets, rows)
+
+    if any(r.get("cost") for r in reports):
+        out += ["### Cost per frame: `headway bench` on dense_traffic at 640x480, one pass, median / p99 ms", ""]
+        out += _table("frames", presets, [("all", [
+            dash if not r.get("cost") else f"{r['cost']['total']['median_ms']:.2f} / {r['cost']['total']['p99_ms']:.2f}"
+            for r in reports])])
 
     if any(r.get("fcw") for r in reports):
         out += ["### Forward-collision warning through the whole stack: margin over the required TTC, or the verdict", ""]

@@ -11,7 +11,7 @@ import cv2
 
 from app.annotate import annotate
 
-PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion", "real_fcw")
+PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion", "real_fcw", "cost")
 
 
 def _f(x, nd=3) -> str:
@@ -114,6 +114,12 @@ def markdown(report: dict) -> str:
 
         out += ["### False warnings on the real recordings (nothing dangerous happens in them)", "",
                 real_video_fcw.markdown(rv, report["preset"]), ""]
+    cost = report.get("cost")
+    if cost:
+        t = cost["total"]
+        out += ["### Cost per frame (`headway bench --scenario dense_traffic`, one pass)", "",
+                f"{cost['frames']} frames of {cost['frame_size']} on {cost['machine']}: median {t['median_ms']:.2f} ms, "
+                f"p99 {t['p99_ms']:.2f} ms per frame", ""]
     out += [f"(skipped {name}: {why})" for name, why in report.get("skipped", {}).items()]
     return "\n".join(out)
 
@@ -231,6 +237,13 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
             report["real_fcw"] = real_video_fcw.evaluate(str(data), preset, config_path)
         else:
             report["skipped"]["real_fcw"] = f"{data / 'udacity'} not found"
+    if "cost" in parts:
+        from app.bench import run_bench
+
+        say("ms per frame (dense_traffic, 640x480, this machine)")
+        bench = run_bench("dense_traffic", preset, 640, 480, repeats=1, config_path=config_path)
+        report["cost"] = {"frame_size": bench["frame_size"], "frames": bench["frames"], "machine": bench["machine"],
+                          "total": bench["stages"]["all"]["total"]}
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
     (out / "report.md").write_text(markdown(report) + "\n")
     return report

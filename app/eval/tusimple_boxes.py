@@ -15,7 +15,7 @@ import cv2
 
 from app import config as configuration
 from app.core import Pipeline
-from app.detect_images import OPERATING_POINT
+from app.detect_images import operating_point
 from app.eval.matching import match
 
 BANDS = ((0, 20), (20, 40), (40, 80), (80, 10_000))
@@ -111,26 +111,23 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
              on_image: Optional[Callable] = None) -> dict:
     root = Path(supp_dir)
     entries = load_entries(supp_dir, limit)
-    # "cascade" (the trained Haar cascade alone) and "fused" (cascade + shadows) are single-image stages,
-    # not tracking presets
-    stage = preset if preset in ("cascade", "fused") else "detect"
-    cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}} if stage == "detect" else None))
-    if stage == "detect":
-        named = cfg["pipeline"].get("detectors") or configuration.presets().get(preset, {}).get("detectors") or []
-        named = named.split(",") if isinstance(named, str) else named
-        if not [d for d in named if d.strip() and d.strip() != "parallax"]:
-            raise NoSingleImageDetector(
-                f"preset {preset}: its detectors ({', '.join(named) or 'none'}) need two frames (the parallax detector "
-                "compares a frame with the one before), so single images cannot be scored; its tracking is measured by "
-                "the other parts")
+    # the preset's detection stage on each image, as `headway detect` runs it
+    cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}}))
+    named = cfg["pipeline"].get("detectors") or configuration.presets().get(preset, {}).get("detectors") or []
+    named = named.split(",") if isinstance(named, str) else named
+    if not named or "parallax" in [d.strip() for d in named]:
+        raise NoSingleImageDetector(
+            f"preset {preset}: its detectors ({', '.join(named) or 'none'}) include one that needs two frames (the "
+            "parallax detector compares a frame with the one before), so single images cannot be scored; its tracking "
+            "is measured by the other parts")
     scored = []
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for e in entries:
             gray = cv2.imread(str(root / e["file_name"]), cv2.IMREAD_GRAYSCALE)
             if gray is None:
                 raise FileNotFoundError(f"{root / e['file_name']}: cannot be read")
-            r = pipe.run_stage(stage, gray)
-            scored.append([(*t.box, t.confidence) for t in r.tracks])
+            r = pipe.run_stage("detect", gray)
+            scored.append(list(r.detections))
             if on_image:
                 on_image(e, gray, r)
     # The bar is stated at one operating point; the detection scores also give the whole curve, so
@@ -139,7 +136,7 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
     curve = operating_curve(entries, scored, [i / 20 for i in range(19)] + [0.95, 0.96, 0.97, 0.98, 0.99])
     # what `headway detect` writes: only detections at the detector's operating point, chosen on held-out
     # training images (not here)
-    point = operating_curve(entries, scored, [OPERATING_POINT[stage if stage != "detect" else "thesis"]])[0]
+    point = operating_curve(entries, scored, [operating_point(cfg)])[0]
     return {"images": len(entries), "bands": band_counts(entries, [[d[:4] for d in det] for det in scored]),
             "curve_ge40": curve, "best_at_precision_0.8": recall_at_precision(curve, 0.8),
             "best_at_precision_0.85": recall_at_precision(curve, 0.85), "operating_point": point}

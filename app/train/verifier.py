@@ -1,7 +1,7 @@
 """A second learned stage for the cascade: a small neural network (one hidden layer) over HOG features of
 each detection, trained on the cascade's own detections in the training images (`headway train verifier`).
 
-Candidates are what the core's "cascade" stage reports on the training images (so the verifier sees
+Candidates are what the core's detection stage with the cascade alone reports on the training images (so the verifier sees
 the same boxes it will judge, the cascade's hard negatives among them): a candidate with IoU >= 0.5 with
 an annotated box is a vehicle, one with IoU < 0.3 with every box is not, the rest are left out; the
 annotated boxes themselves (at the cascade's aspect) are added, and every sample also mirrored. Each box
@@ -53,7 +53,7 @@ def geometry_features(boxes, neighbors, horizon_row: float, cam_height_m: float)
 
 
 def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: dict, progress=None):
-    """Per every `every`-th training image, the core's "cascade" stage detections (verifier off, groups of one
+    """Per every `every`-th training image, the core's detection stage with the cascade alone (verifier off, groups of one
     window kept), the core configured by `cfg` (a validated configuration: its camera must be the images'
     camera). Yields (image index k, gray image, boxes (n, 4) left, top, right, bottom, raw windows per box,
     label per box: 1 = vehicle (IoU >= 0.5 with an annotated box), -1 = other (IoU < 0.3 with every box),
@@ -61,6 +61,7 @@ def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: di
     from app import config as configuration
     from app.core import Pipeline
 
+    cfg["pipeline"].update(detectors=["cascade"], tracker="kalman")
     cfg["cascade"]["model"] = cascade_xml
     cfg["cascade"]["verifier"] = "off"
     cfg["cascade"]["min_neighbors"] = 1
@@ -68,7 +69,7 @@ def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: di
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for k, it in enumerate(load_folders(folders)[::every]):
             g = read_gray(it.path)
-            r, horizon = pipe.stage_boxes("cascade", g)   # every group (run_stage's tracks stop at HW_MAX_TRACKS)
+            r, horizon = pipe.stage_boxes("detect", g)   # every group (run_stage's tracks stop at HW_MAX_TRACKS)
             det = r[:, :4].astype(float)
             conf = r[:, 4].astype(float)
             n = np.rint(half * conf / np.maximum(1 - conf, 1e-6))   # confidence n / (n + half) without verifier

@@ -146,6 +146,12 @@ struct RoadMotionFrame {
 };
 
 // Everything one frame produced.
+// One vehicle of the detection stage: its box and score (0..1).
+struct DetectedBox {
+    cv::Rect2f box;
+    float score = 0.f;
+};
+
 struct FrameOutput {
     int64_t frame_number = 0;
     double t_capture_s = 0.0, t_done_s = 0.0;
@@ -153,6 +159,7 @@ struct FrameOutput {
     int events = 0;
     bool full_detection = false;
     std::vector<TrackState> tracks;
+    std::vector<DetectedBox> detections;  // the detection stage's vehicles when it ran this frame, strongest first
     LaneModel lanes;
     float horizon_row = kNaN;
     int lead_id = -1;

@@ -139,6 +139,11 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
         d.lane_index = t.lane_index;
         d.in_path = t.in_path;
     }
+    r->n_detections = int32_t(std::min<size_t>(o.detections.size(), HW_MAX_TRACKS));
+    for (int i = 0; i < r->n_detections; ++i) {
+        const auto &d = o.detections[size_t(i)];
+        r->detections[i] = hw_box{d.box.x, d.box.y, d.box.x + d.box.width, d.box.y + d.box.height, d.score};
+    }
     int n = 0;
     auto add_lane = [&](const hw::LaneBoundary &b, int position) {
         if (!b.valid || n >= HW_MAX_LANES) return;
@@ -258,6 +263,7 @@ int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *need
             j = hw::Config().describe();
             j["moved_keys"] = hw::Config::moved_keys();
             j["presets"] = hw::describe_presets();
+            j["removed_presets"] = hw::describe_removed_presets();
         }
         const std::string s = j.dump();
         *needed = int32_t(s.size() + 1);

@@ -28,7 +28,6 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("cascade", c.cascade);
     fn("proposals", c.proposals);
     fn("fuse", c.fuse);
-    fn("merge", c.merge);
     fn("phd", c.phd);
     fn("gmphd", c.phd.phd);
     fn("phd_features", c.phd.features);
@@ -57,6 +56,7 @@ constexpr MovedKey kMovedKeys[] = {
     {"shadow", "vehicle_width_m", "road.vehicle_width_m"},
     {"cascade", "vehicle_width_m", "road.vehicle_width_m"},
     {"parallax", "vehicle_width_m", "road.vehicle_width_m"},
+    {"fuse", "thesis_weight", "fuse.cue_weight"},
 };
 
 void reject_moved_keys(const json &root) {
@@ -74,6 +74,7 @@ void fill_preset_keys(json &root) {
     if (root.contains("pipeline") && root.at("pipeline").is_object() && root.at("pipeline").contains("preset") &&
         root.at("pipeline").at("preset").is_string())
         preset = root.at("pipeline").at("preset").get<std::string>();
+    check_not_removed(preset);
     const json own = preset_keys(preset);  // kept alive: items() refers to it
     for (const auto &[section, keys] : own.items()) {
         if (!root.contains(section)) root[section] = json::object();

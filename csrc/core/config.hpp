@@ -6,8 +6,7 @@
 #include "detect/cascade_detector.hpp"
 #include "detect/detector_proposals.hpp"
 #include "detect/detector_parallax.hpp"
-#include "detect/fuse_detections.hpp"
-#include "detect/merge_hypotheses.hpp"
+#include "detect/fuse_hypotheses.hpp"
 #include "detect/lane_features.hpp"
 #include "detect/verify.hpp"
 #include "fcw/lead_selection.hpp"
@@ -30,8 +29,8 @@ namespace hw {
 // How the pipeline runs, independent of the method.
 struct PipelineParams {
     std::string preset = "thesis";  // named composition of detector and tracker parts (core/parts.cpp); the core's own
-                                    // default needs no model file; Headway's configuration defaults to fused
-                                    // (app/config.py, DEFAULT_PRESET)
+                                    // default needs no model file; Headway's configuration defaults to "default"
+                                    // (app/config.py, DEFAULT_PRESET), whose model paths Python fills in
     std::vector<std::string> detectors;  // detector parts replacing the preset's (empty: the preset's)
     std::string tracker;            // tracker part replacing the preset's (empty: the preset's)
     int queue_capacity = 8;         // results held for the caller before the oldest is dropped
@@ -43,25 +42,12 @@ struct PipelineParams {
 
     void bind(ParamMap &m) {
         m.add("preset", preset, preset_choices(),
-              "named composition of detector and tracker parts: thesis (detector shadow: shadow hypotheses + vertical "
-              "edges; tracker kalman: Kalman box tracker with ROI search), parallax (detector parallax: road homography "
-              "+ aligned difference; tracker particles: joint particle filter, paper 000), phd (detector shadow; tracker "
-              "phd: feature points by a GM-PHD filter and a UKF per vehicle, paper 004), cascade (detector cascade: the "
-              "trained Haar cascade; tracker phd: paper 004), fused (detectors cascade, shadow and parallax, their "
-              "hypotheses merged and verified once; tracker kalman), cascade_shadow_phd (detectors cascade and shadow, "
-              "merged and verified once, a cascade-only vehicle kept at verifier probability >= 0.9 within two lanes of "
-              "the ego lane; tracker phd), the "
-              "crossed parallax_kalman and shadow_particles, none (lanes only). A preset may also set other keys "
-              "(`headway config doc`, Presets); a key the configuration sets itself wins. Headway's default is fused: "
-              "it measures as thesis on the synthetic suite (MOTA / IDF1 0.934 / 0.967) and as well or better on the FCW "
-              "cases and the real recordings, where it alone tracks the far car ahead on solidWhiteRight.mp4; thesis costs about a tenth at p99 (~1.3 "
-              "against ~10-12 ms a frame at 640x480 on one core; capture to CAN 3-5 against 11-18 ms with the cascade stage "
-              "on both cores; docs/RESULTS.md, \"Which is the default\"). A pipeline made through the "
-              "C ABI without a preset runs thesis, which needs no model file");
+              "named composition of detector and tracker parts: default (learned detector with shadow cues, phd tracker), "
+              "thesis, parallax, paper004 (the seed papers' methods), none (lanes only); docs/ARCHITECTURE.md, Presets");
         m.add("detectors", detectors, detector_choices(),
               "detector parts that replace the preset's: a list, or names separated by commas, e.g. [shadow, parallax]; "
               "empty: the preset's. A part that needs the road's motion (parallax) makes the road-motion stage run; "
-              "two or more parts have their hypotheses merged and verified once (section merge)");
+              "two or more parts have their hypotheses fused, learned detections first (section fuse)");
         m.add("tracker", tracker, tracker_choices(),
               "tracker part that replaces the preset's (kalman, particles, phd, none); empty: the preset's");
         m.add("queue_capacity", queue_capacity, 1, 1024,
@@ -96,8 +82,7 @@ struct Config {
     ParticleParams particles;         //   joint particle filter
     CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
     ProposalsParams proposals;        // detector part proposals: the learned first stage (docs/proposals.md)
-    FuseParams fuse;                  // fused stage: cascade + shadow detections merged
-    MergeParams merge;                // several detector parts: hypotheses merged, verified once
+    FuseParams fuse;                  // several detector parts: their hypotheses fused into one list
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
     VehicleHeightParams vehicle_height;  // a tracked vehicle's height (trucks); handed to kalman and phd by from_json
 

@@ -4,7 +4,6 @@
 #include "detect/detector_cascade.hpp"
 #include "detect/detector_parallax.hpp"
 #include "detect/detector_proposals.hpp"
-#include "detect/merge_hypotheses.hpp"
 #include "detect/detector_shadow.hpp"
 #include "track/tracker_kalman.hpp"
 #include "track/tracker_particles.hpp"
@@ -47,25 +46,30 @@ struct Preset {
     nlohmann::json keys = nlohmann::json::object();
 };
 
-// The named compositions.
+// The named compositions: Headway's own (default) and the three seed papers' methods as they describe them.
+// Other compositions are made with pipeline.detectors / pipeline.tracker.
 const std::map<std::string, Preset> &presets() {
     static const std::map<std::string, Preset> r{
-        {"thesis", {{{"shadow"}, "kalman"}}},
-        {"parallax", {{{"parallax"}, "particles"}}},
-        {"parallax_kalman", {{{"parallax"}, "kalman"}}},
-        {"shadow_particles", {{{"shadow"}, "particles"}}},
-        {"phd", {{{"shadow"}, "phd"}}},
-        {"cascade", {{{"cascade"}, "phd"}}},
-        // Tracked, the cascade scans a car's sizes beyond 35 m on every full detection (the far vehicles only it
-        // finds) and the nearer sizes in 4 turns (the shadows and parallax find those on every detection too): the
-        // same tracks on the real clips, a p99 per frame ~28 % lower (docs/RESULTS.md, "Which is the default").
-        {"fused", {{{"cascade", "shadow", "parallax"}, "kalman"}, {{"cascade", {{"tracked_slices", 4}, {"tracked_far_m", 35.0}}}}}},
-        // The cascade's and the shadow detector's hypotheses merged, tracked by phd: a vehicle only the cascade
-        // found is kept when its verifier probability is >= 0.9 and it stands within two lanes of the ego lane
-        // (docs/RESULTS.md, "Preset `cascade_shadow_phd`").
-        {"cascade_shadow_phd",
-         {{{"cascade", "shadow"}, "phd"}, {{"merge", {{"min_appearance", 0.9}, {"appearance_lanes", 2}}}}}},
-        {"none", {{{}, ""}}},
+        // The learned detector (the cascade's proposals judged by the CNN verifier) as the primary source, the
+        // shadow detector's verified bottom edges as a cue (detect/fuse_hypotheses.hpp); tracked by phd.
+        {"default", {{{"cascade", "shadow"}, "phd"}}},
+        {"thesis", {{{"shadow"}, "kalman"}}},      // shadows + vertical edges + Kalman
+        {"parallax", {{{"parallax"}, "particles"}}},  // road homography + aligned difference + particle filter (paper 000)
+        {"paper004", {{{"cascade"}, "phd"}}},      // Haar cascade + GM-PHD features + UKF (paper 004)
+        {"none", {{{}, ""}}},                      // lanes only
+    };
+    return r;
+}
+
+// Presets that no longer exist, and what replaces each: a configuration naming one gets an error saying so.
+const std::map<std::string, std::string> &removed_presets() {
+    static const std::map<std::string, std::string> r{
+        {"fused", "preset default"},
+        {"cascade_shadow_phd", "preset default"},
+        {"cascade", "preset paper004"},
+        {"phd", "pipeline: {detectors: [shadow], tracker: phd}"},
+        {"parallax_kalman", "pipeline: {detectors: [parallax], tracker: kalman}"},
+        {"shadow_particles", "pipeline: {detectors: [shadow], tracker: particles}"},
     };
     return r;
 }
@@ -96,6 +100,7 @@ const char *preset_choices() {
 
 Composition composition_of(const PipelineParams &p) {
     const auto preset = presets().find(p.preset);
+    check_not_removed(p.preset);
     if (preset == presets().end())
         throw ConfigError("pipeline.preset: unknown preset '" + p.preset + "' (one of " + preset_choices() + ")");
     Composition c = preset->second.parts;
@@ -118,6 +123,18 @@ Composition composition_of(const PipelineParams &p) {
     return c;
 }
 
+void check_not_removed(const std::string &preset) {
+    const auto removed = removed_presets().find(preset);
+    if (removed != removed_presets().end())
+        throw ConfigError("pipeline.preset: preset '" + preset + "' was removed; use " + removed->second);
+}
+
+nlohmann::json describe_removed_presets() {
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto &[name, use] : removed_presets()) out[name] = use;
+    return out;
+}
+
 nlohmann::json preset_keys(const std::string &preset) {
     const auto it = presets().find(preset);
     return it == presets().end() ? nlohmann::json::object() : it->second.keys;
@@ -138,9 +155,7 @@ Parts make_parts(const Config &cfg) {
         parts.detectors.parts.push_back(detectors().at(d)(cfg));
         road = road || parts.detectors.parts.back()->needs_road_motion();
     }
-    // Several detectors: their hypotheses are merged and verified once (detect/merge_hypotheses.hpp).
-    if (comp.detectors.size() > 1)
-        parts.detectors.merge = std::make_shared<HypothesisMerge>(cfg.merge, cfg.verify, cfg.shadow.road);
+    parts.detectors.fuse = cfg.fuse;  // two or more detectors: fused (detect/fuse_hypotheses.hpp)
     if (!comp.tracker.empty()) parts.tracker = trackers().at(comp.tracker)(cfg);
     if (road) parts.road = std::make_unique<RoadMotionStage>(cfg.road_features, cfg.homography, cfg.parallax, cfg.camera);
     return parts;

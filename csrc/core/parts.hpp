@@ -36,6 +36,11 @@ struct Composition {
 };
 Composition composition_of(const PipelineParams &p);
 
+// A preset that was removed: throws ConfigError naming what replaces it (nothing for any other name).
+void check_not_removed(const std::string &preset);
+// {removed preset: what replaces it}, for the Python side's validation.
+nlohmann::json describe_removed_presets();
+
 // The keys a preset sets, {section: {key: value}}: defaults for that preset that a configuration still
 // overrides key by key (Config::from_json fills them in where the configuration has none). Empty for a
 // preset that sets none, or an unknown name (composition_of reports that).

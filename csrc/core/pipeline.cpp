@@ -2,13 +2,22 @@
 
 #include "base/stopwatch.hpp"
 #include "core/parallax_stage.hpp"
-#include "detect/fuse_detections.hpp"
-#include "detect/merge_hypotheses.hpp"
 #include "detect/shadow.hpp"
 
+#include <cmath>
 #include <stdexcept>
 
 namespace hw {
+
+namespace {
+
+std::vector<DetectedBox> boxes_of(const std::vector<Hypothesis> &hyps) {
+    std::vector<DetectedBox> out;
+    for (const auto &h : hyps) out.push_back({h.box, h.score});
+    return out;
+}
+
+} // namespace
 
 Pipeline::Pipeline(const Config &cfg)
     : cfg_(cfg), lanes_(cfg.lanes, cfg.camera), parts_(make_parts(cfg)), calib_(cfg.self_calibration, cfg.camera),
@@ -44,7 +53,11 @@ FrameOutput Pipeline::process(const Frame &frame) {
     out.image_change = stats.change;
     {
         Stopwatch sw;
+        const bool first = !std::isfinite(prev_t_s_);
         lanes_.update(frame.gray, out.lanes, last_tracks_);
+        // Nothing tracked yet: the first frame is a single image, and gets the single image's lane model, so that
+        // its detections are exactly what `headway detect` finds in it (run_stage "detect").
+        if (first) out.lanes = detect_lanes(frame.gray, cfg_.lanes, cfg_.camera);
         out.times.add("lanes", sw.ms());
     }
     if (parts_.tracker) {
@@ -55,7 +68,9 @@ FrameOutput Pipeline::process(const Frame &frame) {
             out.road = motion->motion;
         }
         const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cfg_.camera, ego, motion};
+        parts_.detectors.last.clear();
         parts_.tracker->step(ctx, parts_.detectors, out.tracks, out.times, out.full_detection);
+        if (out.full_detection) out.detections = boxes_of(parts_.detectors.last);
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
         last_tracks_ = out.tracks;
     }
@@ -111,9 +126,8 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
     FrameOutput out;
     out.width = gray.cols;
     out.height = gray.rows;
-    if (stage != "lanes" && stage != "hypotheses" && stage != "detect" && stage != "cascade" && stage != "fused")
-        throw std::invalid_argument("unknown stage '" + stage +
-                                    "': one of lanes, hypotheses, detect, cascade, fused, homography, parallax");
+    if (stage != "lanes" && stage != "hypotheses" && stage != "detect")
+        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, homography, parallax");
     {
         Stopwatch sw;
         out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
@@ -130,54 +144,24 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
         }
         out.times.add("hypotheses", sw.ms());
     } else if (stage == "detect") {
-        // The composition's single-image detectors (those that need no road motion): each alone, or, in a
-        // composition of several detectors, their hypotheses merged and verified once.
+        // The pipeline's detection stage on one image: the composition's detectors (those that work on one
+        // image), fused as in a tracked pipeline (DetectorSet, detect/fuse_hypotheses.hpp).
+        for (const auto &d : parts_.detectors.parts)
+            if (d->needs_road_motion())
+                throw std::invalid_argument("stage 'detect' runs on one image, and detector parts that need the road's "
+                                            "motion (parallax) need two frames: stage 'parallax'");
+        if (parts_.detectors.parts.empty())
+            throw std::invalid_argument("stage 'detect' runs the detectors of pipeline.detectors, and this composition "
+                                        "has none");
         std::vector<Hypothesis> hyps;
         const RoadContext ctx{gray, 0.0, out.lanes, cfg_.camera, nullptr, true};
-        const auto &merge = parts_.detectors.merge;
-        int ran = 0;
-        for (auto &d : parts_.detectors.parts) {
-            if (d->needs_road_motion()) continue;
-            ran += (merge ? d->unverified(ctx, hyps, out.times) : d->detect(ctx, hyps, out.times)) ? 1 : 0;
-        }
-        if (merge) {
-            Stopwatch sw;
-            hyps = merge->merge_and_verify(ctx, hyps);
-            out.times.add("merge", sw.ms());
-        }
-        if (ran == 0)
-            throw std::invalid_argument("stage 'detect' runs the detectors of pipeline.detectors that work on one image, "
-                                        "and this composition has none (the parallax detector needs two frames: stage "
-                                        "'parallax')");
+        parts_.detectors.detect(ctx, hyps, out.times);
+        out.detections = boxes_of(hyps);
         for (const auto &h : hyps) {
             TrackState t;
             t.box = h.box;
             t.confidence = h.score;
             out.tracks.push_back(t);
-        }
-    } else if (stage == "cascade" || stage == "fused") {
-        // The trained Haar cascade (detect/cascade_detector.hpp), alone or merged with the verified shadow
-        // detections (detect/fuse_detections.hpp). Loaded on first use: most compositions never need it.
-        if (!cascade_) {  // its loading counted as the scan's: the first image pays it
-            Stopwatch sw;
-            cascade_ = std::make_unique<CascadeDetector>(cfg_.cascade);
-            out.times.add("cascade", sw.ms());
-        }
-        const auto cdets = cascade_->detect(gray, out.lanes, cfg_.camera, true, 0, 1, &out.times);
-        auto add = [&](const cv::Rect2f &box, float confidence) {
-            TrackState t;
-            t.box = box;
-            t.confidence = confidence;
-            out.tracks.push_back(t);
-        };
-        if (stage == "cascade") {
-            for (const auto &d : cdets) add(d.box, d.confidence);
-        } else {
-            Stopwatch sv;
-            const auto hyps = shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow);
-            const auto dets = verify_hypotheses(gray, hyps, out.lanes, cfg_.camera, cfg_.verify);
-            out.times.add("verify", sv.ms());
-            for (const auto &d : fuse_detections(cdets, dets, cfg_.fuse)) add(d.box, d.score);
         }
     }
     if (stage != "lanes") {

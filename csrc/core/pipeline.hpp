@@ -45,7 +45,6 @@ private:
     LaneTracker lanes_;
     Parts parts_;                          // detectors, tracker (null: lanes only), road-motion stage
     std::vector<TrackState> last_tracks_;  // the tracker's output of the previous frame (road-motion stage; lanes: vehicles hide the road)
-    std::unique_ptr<CascadeDetector> cascade_;  // the "cascade" and "fused" stages, loaded on first use
     ImageStatsMeter image_stats_;
     SelfCalibration calib_;
     HorizonTracker horizon_;

@@ -32,10 +32,6 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
     pool_ = std::make_unique<WorkerPool>(p_.threads);
     if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
     if (verifier_) verifier_->set_pool(pool_.get());
-    tracked_same_ = p_.tracked_verifier == "same";
-    if (!tracked_same_ && !p_.tracked_verifier.empty() && p_.tracked_verifier != "off")
-        tracked_ = make_vehicle_verifier(p_.tracked_verifier, false, 0.0, p_.verifier_dnn);
-    if (tracked_) tracked_->set_pool(pool_.get());
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
 }
@@ -55,7 +51,7 @@ struct Raw {
 } // namespace
 
 std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const LaneModel &lanes,
-                                                      const CameraParams &cam, bool single_image, int slice,
+                                                      const CameraParams &cam, int slice,
                                                       int slices, StageTimes *times) const {
     CV_Assert(slices >= 1 && slice >= 0 && slice < slices);
     Stopwatch whole;
@@ -235,7 +231,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         out.push_back(d);
         if (p_.max_groups > 0 && int(out.size()) >= p_.max_groups) break;  // the seeds come strongest first
     }
-    const VehicleVerifier *verifier = single_image || tracked_same_ ? verifier_.get() : tracked_.get();
+    const VehicleVerifier *verifier = verifier_.get();
     if (verifier) {  // every group of the frame at once (the CNN verifier runs them as one batch)
         Stopwatch sv;
         std::vector<cv::Rect2f> boxes;
@@ -247,9 +243,8 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
             boxes.push_back(out[i].box);
             ns.push_back(out[i].neighbors);
         }
-        // The box output places every box (its probability and the suppression go by where it is placed); the
-        // box reported is the placed one on single images, the group's own mean box for a tracker unless
-        // refine_tracked (cascade_detector.hpp, refine_tracked).
+        // The box output places every box: its probability, the suppression and the box reported go by where it
+        // is placed.
         const bool refine = p_.refine_boxes && verifier->has_box_output();
         std::vector<float> p = refine ? verifier->judge(gray, boxes, ns, cam.horizon_row(), hc)
                                       : verifier->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
@@ -283,11 +278,10 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                 }
             }
         }
-        const bool report_placed = single_image || p_.refine_tracked;
         for (size_t k = 0; k < judged.size(); ++k) {
             out[judged[k]].confidence = p[k];
             out[judged[k]].placed = boxes[k];  // moved by the box output when the verifier has one and `refine`
-            if (report_placed) out[judged[k]].box = boxes[k];
+            out[judged[k]].box = boxes[k];
         }
         verifier_ms = sv.ms();
     }

@@ -41,7 +41,6 @@ namespace hw {
 struct CascadeParams {
     std::string model;                  // path of the cascade XML; "" = the shipped model (filled in by Python)
     std::string verifier;               // path of the verifier model; "" = the shipped one (Python), "off" = none
-    std::string tracked_verifier;       // the one for a tracked pipeline; "" = shipped (Python), "same", "off"
     RoadPriorParams road;               // scan area (keys in this section)
     double min_vehicle_height_m = 1.0;  // m; lowest vehicle box (a low car, partly hidden)
     double max_vehicle_height_m = 4.5;  // m; highest vehicle box (a truck)
@@ -60,7 +59,6 @@ struct CascadeParams {
     int verify_min_neighbors = 0;       // groups of fewer raw windows skip the verifier (confidence from n)
     int max_groups = 0;                 // only the groups with the strongest seed windows are kept (0 = all)
     bool refine_boxes = true;           // a verifier with a box output moves each box before the suppression
-    bool refine_tracked = false;        // a tracker gets the moved boxes too (else each group's own mean box)
     bool rejudge_refined = true;        // a moved box is judged again where it now stands (min of the two)
     double rejudge_min_p = 0.5;         // only boxes the first look gives at least this are judged again
     double rejudge_move = 0.5;          // the second look moves the box again by this share of its offsets
@@ -79,20 +77,9 @@ struct CascadeParams {
               "path of the verifier judging every cascade detection: *.onnx = a small CNN on the box's crop, read by "
               "cv::dnn and run by its own forward pass (verifier_dnn; `headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
               "through a one-hidden-layer network; empty = the "
-              "model shipped with Headway (app/models/vehicle_verifier.onnx, a CNN of 16/32/64 channels trained in "
-              "session 13 on the groups of the scan past the image's border; app/models/vehicle_verifier_small.onnx is "
-              "session 5's of 8/16/32, ~16 ms less per 1280x720 image and 0.095 less recall at precision 0.85 on "
-              "held-out training images (0.03-0.04 on the validation split before the border scan); the HOG one is "
-              "app/models/vehicle_verifier.yml.gz; recipes in docs/cascade.md); off = "
-              "the cascade's neighbour count alone as confidence, which measured worse on the TuSimple validation split. "
-              "In a tracked pipeline tracked_verifier judges instead");
-        m.add("tracked_verifier", tracked_verifier, nullptr,
-              "path of the verifier in a tracked pipeline (the presets that track with the cascade), as for verifier; "
-              "\"same\" = verifier; off = none; empty = app/models/vehicle_verifier_tracked.onnx, session 3's CNN "
-              "(docs/cascade.md), on which the trackers' births and the range filters were tuned: with session 5's "
-              "network (the shipped verifier, better on single images) the cascade preset warned on 1 or 2 of the 6 "
-              "real recordings however its boxes were given to the tracker, or confirmed 12 vehicles on tme08 where "
-              "its test allows 10 (docs/cascade.md, sessions 5-6)");
+              "model shipped with Headway (app/models/vehicle_verifier.onnx, a CNN of 16/32/64 channels; recipe in "
+              "docs/cascade.md); off = the cascade's neighbour count alone as confidence. The same verifier judges "
+              "single images and a tracked pipeline's detections");
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
               "m; lowest vehicle box on a flat road; with the camera height it bounds how far below the "
@@ -120,7 +107,7 @@ struct CascadeParams {
               "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
               "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
         m.add("verifier_dnn", verifier_dnn,
-              "true = the CNN verifiers (verifier, tracked_verifier) are run by cv::dnn, the reference, instead of their "
+              "true = the CNN verifier is run by cv::dnn, the reference, instead of their "
               "own forward pass (detect/verifier_net.hpp: the trainer's architecture in AVX2 loops with Winograd "
               "convolutions, plain loops without AVX2, compared with cv::dnn when the file is loaded; answers within 1e-5 "
               "on real crops). Measured side by side with cv::dnn (docs/PERFORMANCE.md, session 14): the fused bench's "
@@ -146,18 +133,11 @@ struct CascadeParams {
         m.add("refine_boxes", refine_boxes,
               "true = a verifier with a box output (a CNN trained with one, docs/cascade.md) moves each group's box onto "
               "the vehicle before the suppression, so that two groups on one vehicle merge and a group beside it becomes "
-              "a well placed box (reported on single images: `headway detect`, the evaluation's TuSimple images; in a "
-              "tracked pipeline see refine_tracked); false = the group's mean box as it is (verifiers "
+              "a well placed box (reported on single images and to a tracker alike); false = the group's mean box as it is (verifiers "
               "without a box output never move it). TuSimple validation, boxes >= "
               "40 px, with the shipped verifier and rejudge_refined: recall 0.690 at precision 0.845; without it no "
               "score reaches precision 0.8 (the network leaves IoU 0.3-0.5 boxes out of its classification, so "
               "misplaced groups score high until moved)");
-        m.add("refine_tracked", refine_tracked,
-              "with a tracked_verifier that has a box output: true = a tracker gets the moved boxes; false (default) = "
-              "the detections are judged and suppressed where the box output places them (as on single images), but "
-              "each reports its group's own mean box. Neither kept the real-video bar with session 5's network "
-              "(tracked_verifier: same; docs/cascade.md, sessions 5-6: the moved boxes made the cascade preset warn on "
-              "project_video_cut.mp4 and solidWhiteRight.mp4, the placed ones on solidWhiteRight.mp4)");
         m.add("rejudge_refined", rejudge_refined,
               "true = a moved box (refine_boxes) is judged again on its new crop and keeps the lower of the two "
               "probabilities: the box output was trained only on boxes near a vehicle, so where the first judgement "
@@ -180,8 +160,7 @@ struct CascadeParams {
               "averages the two answers (probability and box offsets): a vehicle from behind is nearly symmetric and "
               "the network was trained on crops mirrored at random. Held-out training images (docs/cascade.md, session "
               "10), best recall at precision 0.85 with rejudge_move 0.5: fused 0.664 against 0.655 without, cascade "
-              "0.669 against 0.654. A HOG verifier judges the crop as it is. Applies to `verifier`, and to a tracked "
-              "pipeline only with tracked_verifier: same");
+              "0.669 against 0.654. A HOG verifier judges the crop as it is");
         m.add("mirror_min_p", mirror_min_p, 0.0, 1.0,
               "probability; with verify_mirrored only the crops the plain look gives at least this are judged "
               "mirrored too: a box below it keeps its plain answer, whose mean with its mirror's could not reach "
@@ -236,14 +215,12 @@ public:
     explicit CascadeDetector(const CascadeParams &p);
     ~CascadeDetector();
     // Vehicles in a gray image; the camera is scaled to the image size.
-    // `single_image`: one image alone (no tracker follows), where the moved boxes (refine_boxes) are reported; in
-    // a tracked pipeline only with refine_tracked (else each detection keeps its group's mean box).
     // `slice` of `slices`: only that block of the window sizes is scanned (contiguous sizes of about equal cost,
     // smallest first; tracked_slices), with the far sizes (tracked_far_m) every time; 0 of 1 = every size.
     // `times`: where the call's time goes, as two stages: "cascade" (the scan, grouping and suppression) and
     // "verifier" (the verifier's looks at the groups), so that a bench shows which of the two a budget needs.
     std::vector<CascadeDetection> detect(const cv::Mat &gray, const LaneModel &lanes, const CameraParams &cam,
-                                         bool single_image = true, int slice = 0, int slices = 1,
+                                         int slice = 0, int slices = 1,
                                          StageTimes *times = nullptr) const;
 
 private:
@@ -253,8 +230,6 @@ private:
     std::unique_ptr<cv::CascadeClassifier> cc_;  // only with opencv_scan
     std::unique_ptr<WorkerPool> pool_;           // the scan's sizes and the verifier's crops (threads)
     std::unique_ptr<VehicleVerifier> verifier_;  // null: verifier "off"
-    std::unique_ptr<VehicleVerifier> tracked_;   // null: tracked_verifier "off", or "same" (then verifier_)
-    bool tracked_same_ = false;
     cv::Size win_;
 };
 

@@ -59,28 +59,10 @@ public:
     // A full detection over the road area. Appends to `out`, adds the wall time of its sub-stages to
     // `times`; returns false when it could not run this frame (e.g. no road motion yet).
     virtual bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) = 0;
-    // The hypotheses before the part's own verification, for a composition of several detectors whose
-    // hypotheses are merged and verified once (detect/merge_hypotheses.hpp); by default those of detect().
-    virtual bool unverified(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
-        return detect(ctx, out, times);
-    }
     // Called once per frame after the tracker, whether or not detect() ran (parts with memory of past
     // frames keep it here).
     virtual void end_frame(const RoadContext &) {}
     virtual void reset() {}
-};
-
-class HypothesisMerge;  // detect/merge_hypotheses.hpp
-
-// The composition's detectors, asked together.
-struct DetectorSet {
-    std::vector<std::unique_ptr<Detector>> parts;
-    // Set for a composition of two or more detectors: their unverified hypotheses are merged (one per
-    // vehicle) and verified once. Null: every part's own hypotheses.
-    std::shared_ptr<const HypothesisMerge> merge;
-    // The vehicles: merged and verified once (merge set), else every part's hypotheses in the order of
-    // pipeline.detectors; false if no part could run. Defined in detect/merge_hypotheses.cpp.
-    bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times);
 };
 
 } // namespace hw

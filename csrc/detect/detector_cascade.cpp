@@ -6,7 +6,7 @@ bool CascadeDetectorPart::detect(const RoadContext &ctx, std::vector<Hypothesis>
     const int slices = ctx.single_image ? 1 : slices_;
     const int slice = slices > 1 ? next_slice_ : 0;
     if (slices > 1) next_slice_ = (next_slice_ + 1) % slices;
-    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera, ctx.single_image, slice, slices, &times)) {
+    for (const CascadeDetection &d : cascade_.detect(ctx.gray, ctx.lanes, ctx.camera, slice, slices, &times)) {
         Hypothesis h = hypothesis_of(d.box, d.confidence, d.stage_sum, "cascade");
         h.appearance = d.confidence;
         out.push_back(h);

@@ -17,15 +17,4 @@ bool ShadowDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &out
     return true;
 }
 
-bool ShadowDetector::unverified(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
-    Stopwatch sh;
-    for (const ShadowHypothesis &s : shadow_hypotheses(ctx.gray, ctx.lanes, ctx.camera, shadow_)) {
-        Hypothesis h = hypothesis_of(s.box, s.strength, s.strength, "shadow");
-        h.road_gray = s.road_gray;
-        out.push_back(h);
-    }
-    times.add("hypotheses", sh.ms());
-    return true;
-}
-
 } // namespace hw

@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 9
+#define HW_ABI_VERSION 10
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -114,6 +114,12 @@ typedef struct {
     float ms;
 } hw_stage_time;
 
+/* One detection: a box of the detection stage (hw_frame_result.detections, hw_pipeline_stage_boxes). */
+typedef struct {
+    float left, top, right, bottom; /* px */
+    float confidence;               /* 0..1 */
+} hw_box;
+
 typedef struct {
     int64_t frame_number;  /* 0-based number of the frame from its source */
     double t_capture_s;    /* capture timestamp (monotonic clock for live sources, media time otherwise) */
@@ -123,6 +129,10 @@ typedef struct {
     int32_t full_detection;/* 1 if the detector ran on the whole road area this frame */
     int32_t n_tracks;
     hw_track tracks[HW_MAX_TRACKS];
+    /* the detection stage's vehicles when it ran this frame (full_detection), strongest first: what the
+     * tracker was given; the same list hw_pipeline_run_stage "detect" gives for one image */
+    int32_t n_detections;
+    hw_box detections[HW_MAX_TRACKS];
     int32_t n_lanes;
     hw_lane lanes[HW_MAX_LANES];
     float vanishing_x, vanishing_y; /* NaN if no lane model yet */
@@ -202,11 +212,6 @@ int hw_pipeline_process(hw_pipeline *p, const uint8_t *gray, int32_t width, int3
  * verification: the detector's boxes with their scores as confidence). */
 int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
                           int32_t height, int32_t stride, hw_frame_result *out);
-/* One detection of a single-image stage (hw_pipeline_stage_boxes). */
-typedef struct {
-    float left, top, right, bottom; /* px */
-    float confidence;               /* 0..1 */
-} hw_box;
 /* Offline, for training (ABI 8): the same stages as hw_pipeline_run_stage, but every detection the stage
  * gives, without the HW_MAX_TRACKS cap of hw_frame_result (the cascade stage with cascade.nms_iou 1 gives
  * ~150 groups on a 1280x720 image). Copies at most cap of them into out (NULL allowed when cap is 0) and

@@ -8,7 +8,7 @@
 #pragma once
 
 #include "base/types.hpp"
-#include "detect/detector.hpp"
+#include "detect/fuse_hypotheses.hpp"
 #include "geometry/camera.hpp"
 
 #include <vector>

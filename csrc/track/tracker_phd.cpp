@@ -48,15 +48,14 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("anchor_gain", anchor_gain, 0.0, 1.0,
           "share of a matched detection's box (width, contact point) taken into the vehicle's box and its "
           "features' offsets: the detector keeps the feature cloud's scale from drifting");
-    m.add("match_iou", match_iou, 0.0, 1.0, "IoU of a detection with a vehicle's box above which it is that vehicle");
+    association.bind(m);
     m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
           "IoU above which two vehicles are the same; the one with fewer detections goes");
     m.add("confirm_hits", confirm_hits, 1, 100, "detections (the first included) before a vehicle is confirmed");
     m.add("birth_min_appearance", birth_min_appearance, 0.0, 1.0,
-          "learned appearance score (the cascade verifier's probability) under which a detection starts no vehicle "
-          "but may still re-anchor a tracked one; detections without one (shadow, parallax) are not affected; "
-          "0.9 kept the seven real test vehicles and removed the cascade preset's false warnings but one "
-          "(docs/RESULTS.md); 0 = every detection may start one");
+          "score under which a learned detection (the cascade verifier's probability, raised where a shadow edge "
+          "confirms it) starts no vehicle but may still re-anchor a tracked one; detections of other parts are not "
+          "affected; 0 = every detection may start one");
     m.add("max_detection_misses", max_detection_misses, 1, 1000,
           "detector runs in a row that may miss a confirmed vehicle before it is deleted (a tentative one: 1); "
           "at detect_every_n 3 the features alone carry a vehicle for 15 frames");
@@ -288,15 +287,20 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double 
 }
 
 void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon) {
+    // Each vehicle's box as its features carried it to this frame (the motion model), against every detection.
+    cv::Mat_<float> iou(int(vehicles_.size()), int(dets.size()));
+    std::vector<float> scores;
+    for (const Hypothesis &d : dets) scores.push_back(d.score);
+    for (size_t i = 0; i < vehicles_.size(); ++i) {
+        const cv::Rect2f vb = vehicles_[i].box();
+        for (size_t j = 0; j < dets.size(); ++j)
+            iou(int(i), int(j)) = box_iou(vb, vehicles_[i].height.compared_box(dets[j], vb, p_.height));
+    }
+    const std::vector<int> pair = associate(iou, scores, p_.association);
     std::vector<bool> used(dets.size(), false);
-    for (Vehicle &v : vehicles_) {
-        const cv::Rect2f vb = v.box();
-        int best = -1;
-        float best_iou = float(p_.match_iou);
-        for (size_t i = 0; i < dets.size(); ++i) {
-            const float o = box_iou(vb, v.height.compared_box(dets[i], vb, p_.height));
-            if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
-        }
+    for (size_t k = 0; k < vehicles_.size(); ++k) {
+        Vehicle &v = vehicles_[k];
+        const int best = pair[k];
         if (best < 0) {
             v.detection_misses++;
             v.confidence *= 0.8f;
@@ -319,7 +323,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         v.confidence = 0.7f * v.confidence + 0.3f * d.score;
     }
     for (size_t i = 0; i < dets.size(); ++i) {
-        if (used[i]) continue;
+        if (used[i] || dets[i].score < p_.association.high_score) continue;  // a weak detection starts nothing
         const cv::Rect2f &b = dets[i].box;
         const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
         bool explained = false;
@@ -327,9 +331,11 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
             const cv::Rect2f vb = v.box();
             explained = explained || box_iou(vb, b) >= 0.2f || vb.contains(foot);
         }
-        // A box the learned appearance model doubts may follow a vehicle but not found one: the cascade's
-        // low-scoring groups are mostly not vehicles (docs/cascade.md), and each would become a track.
-        const bool doubted = std::isfinite(dets[i].appearance) && dets[i].appearance < p_.birth_min_appearance;
+        // A learned detection scoring under birth_min_appearance may follow a vehicle but not found one: the
+        // verifier's low-probability groups are mostly not vehicles (docs/cascade.md), and each would become a track.
+        // Its score is the verifier's probability, raised where a cue (a shadow edge) confirmed it
+        // (detect/fuse_hypotheses.hpp).
+        const bool doubted = std::isfinite(dets[i].appearance) && dets[i].score < p_.birth_min_appearance;
         if (!explained && !doubted) start_vehicle(ctx.gray, dets[i], horizon);
     }
 }

@@ -25,10 +25,12 @@
 //      expand faster than the vehicle and bias every point alike, which more points do not average out.
 //      The horizon row the contact is read against follows the car's pitch through the far scene's
 //      vertical motion, the slow part from the lanes (scene_pitch.hpp).
-//   5. Every detect_every_n frames it asks the detector parts (the phd preset: shadow) for a full
-//      detection; any detector composes (shadow, parallax, both). A detection overlapping a vehicle re-measures its
-//      contact point (UKF update), pulls its width and features' offsets towards the detected box, and
-//      counts as a hit (confirmation); an unexplained detection starts a vehicle.
+//   5. Every detect_every_n frames it asks the detector parts for a full detection; any detector composes. The
+//      detections are paired with the vehicles' predicted boxes in two stages by score (association.hpp:
+//      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left). A paired
+//      detection re-measures its vehicle's contact point (UKF update), pulls its width and features' offsets
+//      towards the detected box, and counts as a hit (confirmation); an unexplained confident detection starts a
+//      vehicle.
 //   6. A vehicle ends when the PHD weight inside its box falls under end_weight (eq. 12), when the
 //      detector has missed it max_detection_misses times in a row, or when it leaves the image. A confirmed
 //      vehicle whose weight falls under end_weight first coasts for up to coast_frames frames: a sudden change
@@ -43,6 +45,7 @@
 #pragma once
 
 #include "geometry/horizon.hpp"
+#include "track/association.hpp"
 #include "track/box_features.hpp"
 #include "track/gmphd.hpp"
 #include "track/scene_pitch.hpp"
@@ -69,11 +72,11 @@ struct PhdTrackerParams {
     double contact_sigma_px = 0.8;     // px; 1-sigma of the features' contact point (UKF R)
     double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
     double anchor_gain = 0.5;          // share of a matched detection's box taken into width and offsets
-    double match_iou = 0.3;            // detection <-> vehicle box overlap that is the same vehicle
+    AssociationParams association;     // detections <-> vehicles: Hungarian on IoU, confident ones first
     double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
     int confirm_hits = 2;              // detections before a vehicle is confirmed
-    double birth_min_appearance = 0.9;  // a detection with a learned appearance score (the cascade's) under this
-                                        // starts no vehicle (it may still re-anchor one); others are not affected
+    double birth_min_appearance = 0.9;  // a learned detection scoring under this starts no vehicle (it may still
+                                        // re-anchor one); others are not affected
     int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
     int coast_frames = 3;              // frames a confirmed vehicle whose features were lost (eq. 12) is carried by
                                        // its UKF alone before it ends (0 = it ends at once, the paper's rule)

@@ -1,4 +1,4 @@
-"""The `cascade` preset (the trained cascade's detections -> phd) on a real motorway sequence (../shared/data;
+"""The `paper004` preset (the trained cascade's detections -> phd) on a real motorway sequence (../shared/data;
 skipped when absent): a box the cascade's learned verifier doubts may follow a vehicle but not start one
 (`phd.birth_min_appearance`), so the two cars ahead are tracked throughout and few other tracks are born."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ from tests.conftest import data_path, tme08_sequence
 
 @pytest.fixture(scope="module")
 def tme08():
-    return tme08_sequence("cascade")
+    return tme08_sequence("paper004")
 
 
 def test_the_two_cars_ahead_are_tracked_and_few_other_tracks_born(tme08):
@@ -51,7 +51,7 @@ def _tme08_through_the_stack(tmp_path, values: dict) -> tuple[list, float]:
     folder = data_path("tme", "tme08")
     frames, fps = road_motion.read_tme(folder)
     cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
-    cfg = real_video_fcw.recording_config(cam, "cascade")
+    cfg = real_video_fcw.recording_config(cam, "paper004")
     for section, keys in values.items():
         cfg.setdefault(section, {}).update(keys)
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))

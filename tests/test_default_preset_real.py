@@ -1,13 +1,13 @@
-"""Issue 12's real-video bar held by the preset `cascade_shadow_phd` (cascade + shadow merged, phd): every one of
-the seven vehicles visible throughout the real sequences tracked on >= 80 % of its frames, and no warning nor
-pre-warning on any of the six recordings (../shared/data; skipped when absent). Measured: 42/50, 47/50, 85/88,
-97/100, 94/100, 35/38, 35/38 frames and 0 / 0 everywhere (docs/RESULTS.md, "Preset `cascade_shadow_phd`")."""
+"""The default preset on the real recordings (../shared/data; skipped when absent): every one of the seven vehicles
+visible throughout the real sequences tracked on >= 90 % of its frames with at most 2 identity switches in all, and
+no warning nor pre-warning on any of the six recordings. Measured: 47/50, 47/50, 85/88, 97/100, 97/100, 35/38,
+35/38 frames, no switch, and 0 / 0 everywhere (`headway eval --pipeline default --parts road_motion,real_fcw`)."""
 from __future__ import annotations
 
 from app.eval import real_video_fcw, road_motion
 from tests.conftest import DATA, data_path
 
-PRESET = "cascade_shadow_phd"
+PRESET = "default"
 
 
 def test_no_warning_nor_pre_warning_on_any_recording():
@@ -18,15 +18,16 @@ def test_no_warning_nor_pre_warning_on_any_recording():
     assert [(r["clip"], r["warnings"], r["prewarnings"]) for r in rows if r["warnings"] or r["prewarnings"]] == [], rows
 
 
-def test_the_seven_vehicles_visible_throughout_are_tracked_on_80_percent_of_their_frames():
+def test_the_seven_vehicles_visible_throughout_are_tracked_on_90_percent_of_their_frames():
     data_path("udacity", "clips")
     data_path("tme", "tme08")
     report = road_motion.evaluate(str(DATA), PRESET)
-    tracked = {(seq, name): (v["iou0.3"]["tracked_frames"], v["frames"])
-               for seq, r in report.items() if seq != "skipped"
-               for name, v in r.get("visible_throughout", {}).items()}
+    seen = {(seq, name): v for seq, r in report.items() if seq != "skipped"
+            for name, v in r.get("visible_throughout", {}).items()}
+    tracked = {k: (v["iou0.3"]["tracked_frames"], v["frames"]) for k, v in seen.items()}
     assert len(tracked) == 7, tracked
-    assert [k for k, (n, total) in tracked.items() if n < 0.8 * total] == [], tracked
+    assert [k for k, (n, total) in tracked.items() if n < 0.9 * total] == [], tracked
+    assert sum(v["iou0.3"]["id_switches"] for v in seen.values()) <= 2, seen
 
 
 def test_a_box_that_steps_wider_is_not_a_vehicle_closing_in(tmp_path):

@@ -1,0 +1,86 @@
+#include "detect/fuse_hypotheses.hpp"
+
+#include "base/stopwatch.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+namespace hw {
+
+namespace {
+
+bool learned(const Hypothesis &h) { return std::isfinite(h.appearance); }
+
+// The best-overlapping hypothesis of `cues` not yet taken, at IoU >= min_iou; -1 when none.
+int best_match(const cv::Rect2f &box, const std::vector<const Hypothesis *> &cues, const std::vector<char> &taken,
+               float min_iou) {
+    int best = -1;
+    float best_iou = min_iou;
+    for (size_t j = 0; j < cues.size(); ++j) {
+        const float v = box_iou(box, cues[j]->box);
+        if (!taken[j] && v >= best_iou) { best = int(j); best_iou = v; }
+    }
+    return best;
+}
+
+} // namespace
+
+std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, const FuseParams &p) {
+    std::vector<const Hypothesis *> primary, cues;
+    for (const Hypothesis &h : found) (learned(h) ? primary : cues).push_back(&h);
+    std::stable_sort(primary.begin(), primary.end(), [](const Hypothesis *a, const Hypothesis *b) { return a->score > b->score; });
+    const float bonus = float(p.agree_bonus);
+    std::vector<Hypothesis> out;
+    std::vector<char> taken(cues.size(), 0);
+    for (const Hypothesis *c : primary) {
+        Hypothesis v = *c;
+        const int j = best_match(c->box, cues, taken, float(p.match_iou));
+        if (j >= 0) {
+            const Hypothesis &cue = *cues[size_t(j)];
+            taken[size_t(j)] = 1;
+            v.score = std::min(1.f, std::max(c->score, cue.score) + bonus);
+            if (p.shadow_bottom && std::strcmp(cue.source, "shadow") == 0) {
+                const float bottom = cue.box.y + cue.box.height;
+                v.box.height = std::max(1.f, bottom - v.box.y);
+                v.foot = {v.box.x + 0.5f * v.box.width, bottom};
+            }
+        }
+        out.push_back(v);
+    }
+    // Cues no learned hypothesis explains; two parts' cues on one vehicle are one (the first part's box).
+    const size_t learned_end = out.size();
+    for (size_t j = 0; j < cues.size(); ++j) {
+        if (taken[j]) continue;
+        const Hypothesis &cue = *cues[j];
+        Hypothesis *same = nullptr;
+        for (size_t k = learned_end; k < out.size() && !same; ++k)
+            if (std::strcmp(out[k].source, cue.source) != 0 && box_iou(out[k].box, cue.box) >= float(p.match_iou))
+                same = &out[k];
+        if (same) {
+            same->score = std::min(1.f, same->score + bonus);
+            continue;
+        }
+        Hypothesis v = cue;
+        v.score = float(p.cue_weight) * cue.score;
+        out.push_back(v);
+    }
+    std::stable_sort(out.begin(), out.end(), [](const Hypothesis &a, const Hypothesis &b) { return a.score > b.score; });
+    return out;
+}
+
+bool DetectorSet::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+    bool any = false;
+    std::vector<Hypothesis> found;
+    for (auto &d : parts) any = d->detect(ctx, found, times) || any;
+    if (parts.size() > 1) {
+        Stopwatch sw;
+        found = fuse_hypotheses(found, fuse);
+        times.add("fuse", sw.ms());
+    }
+    last = found;
+    out.insert(out.end(), found.begin(), found.end());
+    return any;
+}
+
+} // namespace hw

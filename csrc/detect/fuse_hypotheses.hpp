@@ -1,0 +1,58 @@
+// fuse_hypotheses.hpp - one list of vehicles from the detector parts of a composition.
+//
+// The learned detectors (a hypothesis with a finite appearance score: the cascade with its CNN verifier) are
+// the primary source of vehicles. The other parts are cues (the shadow detector's verified bottom edges, the
+// parallax regions): they add the vehicles the learned detectors missed and raise the score of those they
+// confirm, and never remove one.
+//   - A learned hypothesis and a cue overlapping at IoU >= match_iou are one vehicle (each learned hypothesis,
+//     strongest first, takes its best-overlapping cue not yet taken): the box is the learned one (trained on
+//     whole-vehicle boxes, as the annotations draw them), with its bottom edge moved onto a matched shadow edge
+//     when shadow_bottom is set; the score min(1, max(c, t) + agree_bonus).
+//   - A learned hypothesis no cue confirms keeps its score c.
+//   - A cue no learned hypothesis explains keeps cue_weight * t (the shadow detector alone reaches about 0.7
+//     precision on real images, the learned detector more); cues of two parts on one vehicle (IoU >= match_iou)
+//     are one vehicle, the first part's box with the agreement bonus.
+// Returned strongest first (ties in the parts' order). With one detector part, its own hypotheses as they are.
+//
+// DetectorSet, the composition's detectors asked together, is the detection stage: of a tracked pipeline (the
+// tracker asks it for a full detection) and of `headway detect` on one image (Pipeline::run_stage "detect").
+#pragma once
+
+#include "base/params.hpp"
+#include "detect/detector.hpp"
+
+#include <memory>
+#include <vector>
+
+namespace hw {
+
+struct FuseParams {
+    double match_iou = 0.5;      // IoU; a learned hypothesis and a cue overlapping this much are one vehicle
+    double agree_bonus = 0.3;    // score added when a cue confirms a vehicle
+    double cue_weight = 0.5;     // share of its score a vehicle only a cue finds keeps
+    bool shadow_bottom = false;  // a learned box confirmed by a shadow edge takes the shadow's bottom row
+
+    void bind(ParamMap &m) {
+        m.add("match_iou", match_iou, 0.05, 0.95,
+              "IoU; a learned detection and a cue (shadow edge, parallax region) overlapping this much are one vehicle");
+        m.add("agree_bonus", agree_bonus, 0.0, 1.0, "score added to a vehicle that a cue confirms");
+        m.add("cue_weight", cue_weight, 0.0, 1.0,
+              "share of its score kept by a vehicle that only a cue (shadow or parallax detector) finds");
+        m.add("shadow_bottom", shadow_bottom,
+              "a learned box confirmed by a shadow edge takes the shadow's bottom row (where the tyres meet the road)");
+    }
+};
+
+// The vehicles of `found`: every part's hypotheses, in the order of pipeline.detectors.
+std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, const FuseParams &p);
+
+// The composition's detectors, asked together.
+struct DetectorSet {
+    std::vector<std::unique_ptr<Detector>> parts;
+    FuseParams fuse;  // how two or more parts' hypotheses become one list
+    std::vector<Hypothesis> last;  // what the last detect() gave (the pipeline reports it with the frame)
+    // The vehicles: one part's hypotheses as they are, several parts' fused; false if no part could run.
+    bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times);
+};
+
+} // namespace hw
