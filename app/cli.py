@@ -85,6 +85,20 @@ def _cmd_config(args) -> int:
 
 
 def _cmd_train(args) -> int:
+    if args.model == "proposals":   # the learned first stage (detector part proposals)
+        from app.train import proposals
+
+        if args.epochs < 1 or args.batch < 1 or args.threads < 1 or args.input_width < 16:
+            raise ValueError(f"--epochs {args.epochs} --batch {args.batch} --threads {args.threads} --input-width "
+                             f"{args.input_width}: give at least 1 epoch, 1 image a batch, 1 thread and 16 px")
+        log = _line_logger(args.log)
+        try:
+            proposals.train(args.data, args.out, epochs=args.epochs, seed=args.seed, input_width=args.input_width,
+                            batch=args.batch, lr=args.lr, cache=args.cache, limit=args.limit, log=log,
+                            threads=args.threads)
+        finally:
+            log.close()
+        return 0
     if args.model == "verifier":
         from app import config as configuration
         from app.eval.tusimple_boxes import tusimple_config
@@ -296,6 +310,19 @@ def build_parser() -> argparse.ArgumentParser:
                         "horizon row (px) and height (m), and the lowest and tallest vehicle (default 1.0,4.5 m); "
                         "TuSimple's camera: 344,1.8 (default: negatives from anywhere in the image)")
     t.add_argument("--log", help="also write the per-stage log here")
+    t = ts.add_parser("proposals", help="the learned first stage: a small fully convolutional network giving the "
+                      "vehicles' centres and boxes (ONNX for the detector part proposals; needs pip install '.[train]')")
+    t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, every vehicle boxed)")
+    t.add_argument("--out", required=True, help="the network's ONNX, written after every epoch")
+    t.add_argument("--epochs", type=int, default=6, help="passes over the fitted images (default 5, the shipped model's)")
+    t.add_argument("--batch", type=int, default=16, help="images a batch (default 16)")
+    t.add_argument("--lr", type=float, default=2e-3, help="Adam's first learning rate, falling linearly to 0 (default 2e-3)")
+    t.add_argument("--input-width", type=int, default=320, help="px: the images reduced to this width (default 320)")
+    t.add_argument("--limit", type=int, default=0, help="only the first N images (0 = all; for a quick check)")
+    t.add_argument("--threads", type=int, default=2, help="CPU threads JAX may use (default 2)")
+    t.add_argument("--cache", help=".npz keeping the reduced images between runs (made if absent; outside the repository)")
+    t.add_argument("--log", help="also write the per-epoch log here")
+    t.add_argument("--seed", type=int, default=0)
     t = ts.add_parser("verifier", help="a network judging the cascade's detections: a small CNN on the box's crop "
                       "(--out X.onnx, needs pip install '.[train]') or HOG + one hidden layer (--out X.yml[.gz])")
     t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, as for the cascade)")

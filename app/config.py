@@ -251,15 +251,21 @@ SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.
 # split (docs/cascade.md); the HOG network stays shipped as the alternative (cascade.verifier: its path).
 SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.onnx"
 SHIPPED_HOG_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml.gz"
+# The learned first stage (detector part proposals), trained by `headway train proposals` (docs/proposals.md).
+SHIPPED_PROPOSALS = Path(__file__).resolve().parent / "models" / "vehicle_proposals.onnx"
+
 
 def core_sections(cfg: dict) -> dict:
-    """The part of a validated configuration that the C++ core takes (cascade.model and verifier empty: the shipped
-    ones)."""
+    """The part of a validated configuration that the C++ core takes (cascade.model and verifier, proposals.model
+    and verifier empty: the shipped ones)."""
     core = {sec: dict(values) for sec, values in cfg.items() if sec not in SUPERVISOR_SCHEMA}
     if "cascade" in core and not core["cascade"].get("model"):
         core["cascade"]["model"] = str(SHIPPED_CASCADE)
     if "cascade" in core and not core["cascade"].get("verifier"):
         core["cascade"]["verifier"] = str(SHIPPED_VERIFIER)
+    for key, shipped in (("model", SHIPPED_PROPOSALS), ("verifier", SHIPPED_VERIFIER)):
+        if "proposals" in core and not core["proposals"].get(key):
+            core["proposals"][key] = str(shipped)
     return core
 
 

@@ -27,7 +27,7 @@ def _boxes(results) -> list:
 def test_the_registries_are_in_the_configuration_schema():
     pipe = core_schema()["pipeline"]
     assert set(pipe["preset"]["choices"].split("|")) == {"default", "thesis", "parallax", "paper004", "none"}
-    assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax", "cascade"}
+    assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax", "cascade", "proposals"}
     assert {"kalman", "particles", "none"} <= set(pipe["tracker"]["choices"].split("|"))
 
 

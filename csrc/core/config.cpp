@@ -26,6 +26,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("parallax", c.parallax);
     fn("particles", c.particles);
     fn("cascade", c.cascade);
+    fn("proposals", c.proposals);
     fn("fuse", c.fuse);
     fn("phd", c.phd);
     fn("gmphd", c.phd.phd);
@@ -87,7 +88,7 @@ void fill_preset_keys(json &root) {
 // The road section is read once and handed to every unit that uses it (their `road` member).
 void share_road(Config &c) {
     for (RoadParams *r : {&c.lanes.assembly.road, &c.shadow.road.road, &c.cascade.road.road, &c.lead.road,
-                          &c.self_calibration.road, &c.parallax.detect.road})
+                          &c.self_calibration.road, &c.parallax.detect.road, &c.proposals.road})
         *r = c.road;
 }
 

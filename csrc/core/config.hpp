@@ -4,6 +4,7 @@
 #include "base/params.hpp"
 #include "core/parts.hpp"
 #include "detect/cascade_detector.hpp"
+#include "detect/detector_proposals.hpp"
 #include "detect/detector_parallax.hpp"
 #include "detect/fuse_hypotheses.hpp"
 #include "detect/lane_features.hpp"
@@ -80,6 +81,7 @@ struct Config {
     ParallaxSection parallax;         //   aligned-difference detector and its road band
     ParticleParams particles;         //   joint particle filter
     CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
+    ProposalsParams proposals;        // detector part proposals: the learned first stage (docs/proposals.md)
     FuseParams fuse;                  // several detector parts: their hypotheses fused into one list
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
     VehicleHeightParams vehicle_height;  // a tracked vehicle's height (trucks); handed to kalman and phd by from_json

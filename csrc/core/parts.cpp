@@ -3,6 +3,7 @@
 #include "core/config.hpp"
 #include "detect/detector_cascade.hpp"
 #include "detect/detector_parallax.hpp"
+#include "detect/detector_proposals.hpp"
 #include "detect/detector_shadow.hpp"
 #include "track/tracker_kalman.hpp"
 #include "track/tracker_particles.hpp"
@@ -24,6 +25,7 @@ const std::map<std::string, Factory<Detector>> &detectors() {
         {"shadow", [](const Config &c) { return std::make_unique<ShadowDetector>(c.shadow, c.verify); }},
         {"parallax", [](const Config &c) { return std::make_unique<ParallaxDifferenceDetector>(c.parallax, c.camera); }},
         {"cascade", [](const Config &c) { return std::make_unique<CascadeDetectorPart>(c.cascade); }},
+        {"proposals", [](const Config &c) { return std::make_unique<ProposalsDetector>(c.proposals); }},
     };
     return r;
 }

@@ -1,0 +1,164 @@
+"""The learned first stage (app/train/proposals.py, proposals_onnx.py; the core's detector part "proposals",
+csrc/detect/detector_proposals.cpp, proposal_net.cpp): the ONNX file cv::dnn runs computes the trainer's network,
+the core decodes its peaks as the trainer does, and the whole path (train on a tiny set, export, load in the core,
+detect) finds the vehicles of a scene it never saw."""
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from app import config as configuration
+from app.core import CoreError, Pipeline
+from app.detect_images import image_pipeline
+from app.eval.matching import match
+from app.train import proposals_onnx as po
+from tests.conftest import data_path
+
+jax = pytest.importorskip("jax", reason="the trainer needs the train extra (pip install '.[train]')")
+
+SIZE = (320, 180)   # px of the scenes
+INPUT_WIDTH = 160   # the network's input 160 x 90: the scenes at half size, as 1280x720 images at a quarter
+# the detector alone on these scenes: no verifier, the road checks open (the scenes' boxes stand anywhere)
+OPEN = {"verifier": "off", "min_vehicle_height_m": 0.1, "max_vehicle_height_m": 20.0, "min_width_ratio": 0.0,
+        "max_width_ratio": 100.0, "nms_iou": 1.0, "top_k": 200}
+
+
+def _scene(rng, n_cars: int):
+    """A grey road scene with noise and n dark 'vehicles' (a body, a lighter window band, a black shadow under it);
+    the boxes (left, top, right, bottom) as annotations draw them."""
+    w, h = SIZE
+    img = np.tile(np.linspace(170, 90, h, dtype=np.float32)[:, None], (1, w))
+    img += rng.normal(0, 8, img.shape)
+    boxes = []
+    for _ in range(200):
+        if len(boxes) == n_cars:
+            break
+        bh = rng.uniform(24, 50)
+        bw = bh * rng.uniform(1.1, 1.5)
+        x0, y0 = rng.uniform(0, w - bw), rng.uniform(0.35 * h, h - bh - 4)
+        b = (x0, y0, x0 + bw, y0 + bh)
+        if any(min(b[2], c[2]) > max(b[0], c[0]) - 6 and min(b[3], c[3]) > max(b[1], c[1]) - 6 for c in boxes):
+            continue
+        boxes.append(b)
+        x0, y0, x1, y1 = (int(round(v)) for v in b)
+        img[y0:y1, x0:x1] = rng.uniform(30, 70)
+        img[y0 + (y1 - y0) // 5:y0 + (y1 - y0) // 2, x0 + 2:x1 - 2] += 60
+        img[y1 - 2:y1, x0:x1] = 10
+    return np.clip(img, 0, 255).astype(np.uint8), boxes
+
+
+def _folder(tmp_path, n: int, seed: int):
+    rng = np.random.default_rng(seed)
+    (tmp_path / "images").mkdir()
+    entries = []
+    for k in range(n):
+        img, boxes = _scene(rng, 3)
+        name = f"images/{k:04d}.png"
+        cv2.imwrite(str(tmp_path / name), img)
+        entries.append({"file_name": name, "bbox": [dict(zip(("left", "top", "right", "bottom"), map(float, b)))
+                                                    for b in boxes]})
+    (tmp_path / "annotation.json").write_text(json.dumps(entries))
+    return tmp_path
+
+
+def _pipeline(model, **keys):
+    cfg = configuration.load(None, {"pipeline": {"preset": "none", "detectors": ["proposals"], "tracker": "kalman"},
+                                    "proposals": {"model": str(model), "input_width": INPUT_WIDTH, **OPEN, **keys}})
+    return image_pipeline(cfg, *SIZE)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A network trained on 40 scenes (36 fitted, 4 held out) by the project's trainer, and its log."""
+    from app.train import proposals
+
+    folder = _folder(tmp_path_factory.mktemp("scenes"), 40, seed=1)
+    out = tmp_path_factory.mktemp("model") / "p.onnx"
+    lines = []
+    # a smaller network than the shipped one (16 channels, 3 blocks): the same code, trained in well under a minute
+    proposals.train([str(folder)], str(out), epochs=15, seed=0, input_width=INPUT_WIDTH, batch=6, lr=1e-2, width=16,
+                    blocks=3, log=lines.append, threads=1)
+    return out, lines
+
+
+def test_onnx_computes_the_trainers_network_at_any_size(tmp_path):
+    """cv::dnn on the written file gives the JAX forward pass's heat (after the sigmoid) and box maps, at the
+    shipped input size and at an odd one (fully convolutional: every stride rounds up)."""
+    params = po.init_params(3)
+    params["heat_b"] = np.float32([0.3])   # away from the 0.01 prior, so that the heat varies
+    path = tmp_path / "n.onnx"
+    po.save_onnx(params, str(path))
+    rng = np.random.default_rng(0)
+    for h, w in ((180, 320), (97, 131)):
+        small = rng.integers(0, 256, (h, w), np.uint8)
+        heat, box = po.run_onnx(str(path), small)
+        logit, ref_box = po.forward_jax(params, po.standardise(small))
+        assert heat.shape == (-(-h // 4), -(-w // 4)) and box.shape == (4, *heat.shape)
+        np.testing.assert_allclose(heat, 1 / (1 + np.exp(-np.asarray(logit)[0, 0])), atol=1e-4)
+        np.testing.assert_allclose(box, np.asarray(ref_box)[0], atol=1e-4)
+
+
+def test_training_logs_every_epoch_and_the_core_finds_the_vehicles_of_unseen_scenes(trained):
+    """Train, export, load in the core, detect: on 10 scenes the training never saw, the core's detection stage
+    (pipeline {detectors: [proposals]}) finds at least 80 % of the vehicles at IoU 0.5 with at most one other box
+    an image at heat >= 0.3, and the log reports every epoch."""
+    out, lines = trained
+    assert sum(line.startswith("epoch ") for line in lines) == 15
+    assert "held out" in lines[0]
+    rng = np.random.default_rng(99)
+    found = total = others = 0
+    with _pipeline(out) as pipe:
+        for _ in range(10):
+            img, boxes = _scene(rng, 3)
+            det = [t.box for t in pipe.run_stage("detect", img).tracks if t.confidence >= 0.3]
+            pairs = match(boxes, det)
+            found, total, others = found + len(pairs), total + len(boxes), others + len(det) - len(pairs)
+    assert found / total >= 0.8, (found, total)
+    assert others <= 10, others
+
+
+def test_the_core_decodes_the_peaks_as_the_trainer(trained):
+    """Every hypothesis the core reports is a peak of the network's heat map decoded as proposals_onnx.decode does
+    (box within 0.05 px, score = heat), strongest first, when no check but "standing below the horizon" and no
+    verifier removes any."""
+    out, _ = trained
+    img, _ = _scene(np.random.default_rng(5), 3)
+    small = po.prepare(img, INPUT_WIDTH)
+    heat, box = po.run_onnx(str(out), small)
+    ref = po.decode(heat, box, SIZE[0] / small.shape[1], SIZE[1] / small.shape[0], 0.05, top_k=64)
+    ref[:, [0, 2]] = ref[:, [0, 2]].clip(0, SIZE[0])
+    ref[:, [1, 3]] = ref[:, [1, 3]].clip(0, SIZE[1])
+    with _pipeline(out, min_heat=0.05) as pipe:
+        r = pipe.run_stage("detect", img)
+    tracks = r.tracks
+    ref = ref[ref[:, 3] > r.horizon_row + 1]
+    assert len(tracks) == len(ref) > 0
+    np.testing.assert_allclose([t.box for t in tracks], ref[:, :4], atol=0.05)
+    np.testing.assert_allclose([t.confidence for t in tracks], ref[:, 4], atol=1e-5)
+
+
+def test_a_file_that_is_not_a_proposal_network_is_refused_by_name(tmp_path):
+    junk = tmp_path / "junk.onnx"
+    junk.write_bytes(b"not a network")
+    with pytest.raises(CoreError, match="proposals.model: cv::dnn cannot read"):
+        _pipeline(junk)
+    with pytest.raises(CoreError, match="proposals.model: .* is not a proposal network .*outputs heat and box"):
+        _pipeline(configuration.SHIPPED_VERIFIER)
+
+
+def test_image_bench_times_the_network_and_its_verifier_apart(tmp_path):
+    """`headway bench --images DIR --config C` with C's pipeline {detectors: [proposals]} times the part's two stages,
+    "proposals" (the network, its decoding and road checks) and "prop_verifier", inside the core's whole stage."""
+    from app.bench import run_image_bench
+
+    images = data_path("tusimple", "supp", "images")
+    (tmp_path / "p.yaml").write_text("pipeline: {detectors: [proposals], tracker: kalman}\n")
+    rep = run_image_bench([str(images)], config_path=str(tmp_path / "p.yaml"), limit=2, repeats=1)
+    parts = rep["stages"]["image"]
+    assert {"read", "proposals", "prop_verifier", "core", "total"} <= set(parts) and "cascade" not in parts
+    mean = {k: s["mean_ms"] for k, s in parts.items()}
+    assert mean["core"] >= mean["proposals"] + mean["prop_verifier"] - 1e-3
+    assert mean["proposals"] > 0 and mean["prop_verifier"] > 0
