@@ -42,7 +42,7 @@ def _cmd_status(args) -> int:
     import json
     import os
 
-    from app.supervisor.status_file import StatusFileError, format_status, is_stale, read_status
+    from app.supervisor.status_file import STOPPED, UNKNOWN, StatusFileError, assess, format_status, read_status
 
     path = args.file
     if path is None:
@@ -55,12 +55,14 @@ def _cmd_status(args) -> int:
     try:
         st = read_status(path)
     except StatusFileError as exc:
-        print(f"state: unknown\nheadway: {exc}")
-        return 1
+        print(f"state: {UNKNOWN}\nheadway: {exc}")
+        return 3
     print(json.dumps(st, indent=1) if args.json and st else format_status(st, path))
     if st is None:
         return 1
-    return 3 if is_stale(st) else 0  # 3: state unknown (as systemctl's "not running")
+    # 0 while the service runs (ok, degraded, fault: its own words); 3 when it does not, as systemctl's
+    # "not running": stopped, or unknown (gone, stale, future or malformed time stamp)
+    return 0 if assess(st)[0] not in (UNKNOWN, STOPPED) else 3
 
 
 def _cmd_config(args) -> int:

@@ -27,7 +27,7 @@ from app.supervisor.faults import DEGRADED, FAULT
 from app.supervisor.health import HealthMonitor, HealthParams
 from app.supervisor.notify import Notifier
 from app.supervisor.stack import Stack
-from app.supervisor.status_file import write_status
+from app.supervisor.status_file import STOPPED, write_status
 
 log = logging.getLogger("headway")
 
@@ -66,6 +66,7 @@ class Service:
         self._status_warned = False
         self.can_session = None
         self._calibration = None  # the last frame's self-calibration estimate, for the status file
+        self._last_status: dict = {}  # the last status written, the base of the "stopped" one
 
     def _open_mcu(self, stack: ExitStack):
         port = self.cfg["mcu"]["port"]
@@ -119,8 +120,11 @@ class Service:
                      cfg["mcu"]["port"] or "none")
             self.health.start(time.monotonic())
             self._loop(pipe, sup, can_session, mcu, live)
+            self._publish_status(pipe.health())  # the counts up to the stop, the base of the "stopped" status
             self.notifier.stopping()
             log.info("stopping")
+        # after the core, the CAN session and the MCU link have stopped: `headway status` reads "stopped"
+        self._write_status({**self._last_status, "state": STOPPED, "faults": []})
         logging.shutdown()
         return 0
 
@@ -184,6 +188,10 @@ class Service:
             st["can_input"] = self.can_session.input_counts()  # vehicle-bus frames read, used, dropped by reason
         if self._calibration is not None:
             st["calibration"] = self._calibration
+        self._last_status = st
+        self._write_status(st)
+
+    def _write_status(self, st: dict) -> None:
         try:
             write_status(self.cfg["service"]["status_file"], st)
         except OSError as exc:
