@@ -344,6 +344,14 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _keep_inputs(args, images: list[str]) -> None:
+    """OutputPathError if --out names one of the command's input images or its --config."""
+    from app.output_files import check_outputs
+
+    inputs = {f"input {i + 1}": p for i, p in enumerate(images)}
+    check_outputs({"--out": args.out}, {**inputs, "--config": getattr(args, "config", None)})
+
+
 def _dispatch(args) -> int:
     if args.command == "demo":
         from app import demo
@@ -358,6 +366,7 @@ def _dispatch(args) -> int:
     if args.command == "detect":
         from app import detect_images
 
+        _keep_inputs(args, args.images)
         return detect_images.main(args)
     if args.command in ("run", "service"):
         from app.supervisor import service
@@ -384,6 +393,7 @@ def _dispatch(args) -> int:
     if args.command == "calibrate":
         from app import calibrate
 
+        _keep_inputs(args, args.images)
         return calibrate.main(args)
     if args.command == "eval":
         from app.eval import report

@@ -18,7 +18,7 @@ import yaml
 MAX_BYTES = 1 << 20   # a configuration is a few kB; 1 MB leaves room for comments and bounds memory
 MAX_ALIASES = 100     # anchors are a convenience for a few shared values, not a data structure
 MAX_DEPTH = 20        # sections are 2 levels deep; any value is a scalar
-QUOTE_CHARS = 40      # a value is quoted in an error message to at most this many characters
+QUOTE_CHARS = 80      # a value is quoted in an error message to at most this many characters
 QUOTE_NESTING = 2     # and nested containers are shown this many deep
 
 _repr = reprlib.Repr()
@@ -41,6 +41,14 @@ def short_name(name: Any) -> str:
     """A key or section name as written (no quotes), cut to QUOTE_CHARS characters."""
     text = name if isinstance(name, str) else short(name)
     return text if len(text) <= QUOTE_CHARS + 3 else text[:QUOTE_CHARS] + "..."
+
+
+def short_path(path: Any) -> str:
+    """A file path as written, its end kept (the file's name) when it is longer than QUOTE_CHARS characters;
+    a NUL or other control character shown escaped."""
+    text = str(path)
+    text = text if text.isprintable() else repr(text)[1:-1]
+    return text if len(text) <= QUOTE_CHARS + 3 else "..." + text[-QUOTE_CHARS:]
 
 
 # libyaml's parser where PyYAML has it (the PyPI wheels do): 10-50x faster than the pure-Python one; the
