@@ -77,10 +77,10 @@ def _cmd_config(args) -> int:
     cfg = configuration.load(args.file)
     from app.config_check import problems
 
-    found = problems(cfg)  # everything that would stop the service (the core checks its sections too)
-    for line in found:
-        print(f"headway: configuration error: {args.file}: {line}", file=sys.stderr)
+    # everything that would stop the service, opened as the service opens it; the first problem is the line
+    found = problems(cfg, skip_absent_devices=args.skip_absent_devices)
     if found:
+        print(f"headway: configuration error: {configuration.error_line(found[0], args.file)}", file=sys.stderr)
         return 2
     print(f"{args.file}: ok")
     return 0
@@ -337,8 +337,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
-    c = cs.add_parser("check", help="validate FILE; prints what is wrong and exits 2")
+    c = cs.add_parser("check", help="validate FILE and open what the service opens (models, output files, CAN "
+                                    "interface, source); prints the first problem in one line and exits 2")
     c.add_argument("file")
+    c.add_argument("--skip-absent-devices", action="store_true",
+                   help="do not fail on a camera that is not on this machine (checking a car's file elsewhere)")
     cs.add_parser("default", help="print the default configuration with every key documented")
     cs.add_parser("doc", help="print the configuration reference as markdown (docs/CONFIG.md)")
     return p
@@ -404,19 +407,24 @@ def _dispatch(args) -> int:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from app.config import ConfigFileError
+    if args.command == "config":
+        # a check opens models and sources: OpenCV's own log lines would come before (and say less than) ours
+        os.environ["OPENCV_LOG_LEVEL"] = "SILENT"
+    from app.config import ConfigFileError, error_line
     from app.core import ConfigError, CoreError
 
     try:
         return _dispatch(args)
     except (ConfigFileError, ConfigError) as exc:
-        print(f"headway: configuration error: {exc}", file=sys.stderr)
+        # one mapping: every configuration error is exit 2, one line, its file, the key's line, the key
+        print(f"headway: configuration error: {error_line(exc, getattr(args, 'config', None) or getattr(args, 'file', None))}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
     except (CoreError, OSError, RuntimeError, ValueError) as exc:
         # every expected failure (bad source, scenario, image, ...) as one line
-        print(f"headway: error: {exc}", file=sys.stderr)
+        print(f"headway: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
 
 

@@ -194,7 +194,7 @@ class Service:
     def _write_status(self, st: dict) -> None:
         try:
             write_status(self.cfg["service"]["status_file"], st)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:   # ValueError: a path the OS cannot take (config check refuses it)
             if not self._status_warned:  # once: a missing /run/headway outside systemd is no emergency
                 log.warning("status file %s: %s", self.cfg["service"]["status_file"], exc)
                 self._status_warned = True
@@ -206,10 +206,10 @@ def main(args) -> int:
     cfg = configuration.load(args.config, overrides)  # a bad file raises before anything starts (exit 2)
     from app.config_check import problems
 
-    found = problems(cfg, open_bus=False)  # the bus is opened (and its failure reported) by run()
-    for line in found:
-        log.error("configuration error: %s: %s", args.config, line)
+    # the bus and the source are opened (and their failure reported) by run() itself
+    found = problems(cfg, open_bus=False, open_source=False)
     if found:
+        log.error("configuration error: %s", configuration.error_line(found[0], args.config))
         return 2
     service = Service(cfg)
     received: list[int] = []
