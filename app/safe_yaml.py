@@ -179,8 +179,8 @@ def load_yaml(text: str) -> Any:
         what = " ".join(str(x) for x in (exc.context, exc.problem) if x)
         raise YamlLimitError(f"not valid YAML: {where}{what[:200]}") from None
     except yaml.reader.ReaderError as exc:
-        raise YamlLimitError(f"not valid YAML: character {exc.character:#x} at position {exc.position}: "
-                             f"{exc.reason}") from None
+        line = text.count("\n", 0, exc.position) + 1 if isinstance(exc.position, int) else "?"
+        raise YamlLimitError(f"line {line}: not valid YAML: character {exc.character:#x}: {exc.reason}") from None
     except yaml.YAMLError as exc:
         raise YamlLimitError(f"not valid YAML: {str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__}") from None
     except (ValueError, TypeError, OverflowError) as exc:  # e.g. a date that does not exist
