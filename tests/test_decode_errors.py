@@ -80,3 +80,51 @@ def test_a_bit_flipped_jpeg_in_a_folder_is_skipped_by_name_and_counted(tmp_path,
     assert "Corrupt JPEG" not in capfd.readouterr().err   # counted, not printed past us
     s = replay(str(folder), fps=10, progress=False)
     assert s.frames == 5 and "1 skipped" in s.text() and "003.jpg: corrupt JPEG data" in s.text()
+
+
+def damaged_mjpeg(tmp_path, frames: int = 60) -> tuple:
+    """A clean and a damaged MJPEG video (frames 5, 9, 17, 21 damaged) of 320x240 noise."""
+    w = cv2.VideoWriter(str(tmp_path / "clean.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 20.0, (320, 240))
+    for i in range(frames):
+        w.write(cv2.cvtColor(noise(i), cv2.COLOR_GRAY2BGR))
+    w.release()
+    data = bytearray((tmp_path / "clean.avi").read_bytes())
+    scans = [i for i in range(len(data) - 1) if data[i] == 0xFF and data[i + 1] == 0xDA]
+    (tmp_path / "bad.avi").write_bytes(damage(data, [scans[k] + 30 for k in (5, 9, 17, 21)], random.Random(40),
+                                              2000, 12, 16))
+    return tmp_path / "clean.avi", tmp_path / "bad.avi"
+
+
+def test_the_services_video_source_marks_concealed_frames_and_the_status_counts_them(tmp_path):
+    from app.core import EndOfStream, Pipeline
+    from app.supervisor.status_file import read_status
+    from tests.test_config_service_fuzz import run_service
+
+    clean, bad = damaged_mjpeg(tmp_path, frames=200)   # more than the service runs: it is stopped, not ended
+    cam = {"width": 320, "height": 240, "fx": 300.0, "fy": 300.0, "cx": 160.0, "cy": 120.0}
+    concealed = {}
+    for name, path in (("clean", clean), ("bad", bad)):
+        with Pipeline({"camera": cam, "pipeline": {"preset": "thesis"}}) as pipe:
+            pipe.start({"kind": "video", "path": str(path)})
+            frames = []
+            try:
+                while True:
+                    r = pipe.pop(timeout_s=10)
+                    if r is None:
+                        break
+                    frames.append(r)
+            except EndOfStream:
+                pass
+        assert len(frames) == 200
+        concealed[name] = [r.frame for r in frames if "concealed" in r.events]
+    assert concealed["clean"] == []
+    # OpenCV 4.6 decodes on several threads: a frame's messages may arrive a read or two after it
+    assert 3 <= len(concealed["bad"]) <= 4 and all(any(0 <= f - d <= 2 for d in (5, 9, 17, 21)) for f in concealed["bad"])
+    cfg = tmp_path / "service.yaml"
+    cfg.write_text(f"camera: {{width: 320, height: 240, fx: 300, fy: 300, cx: 160, cy: 120}}\n"
+                   f"source: {{kind: video, path: {bad}}}\ncan: {{interface: virtual, channel: dec-{id(cfg)}}}\n"
+                   f"service: {{status_file: {tmp_path / 'status.json'}}}\n")
+    frames, why = run_service(cfg)
+    assert not why, why
+    st = read_status(str(tmp_path / "status.json"))
+    assert st["state"] == "stopped" and st["decode_errors"]["concealed"] == len(concealed["bad"])

@@ -67,6 +67,7 @@ class Service:
         self.can_session = None
         self._calibration = None  # the last frame's self-calibration estimate, for the status file
         self._last_status: dict = {}  # the last status written, the base of the "stopped" one
+        self._concealed = 0  # frames the video decoder reported damaged and concealed (processed all the same)
 
     def _open_mcu(self, stack: ExitStack):
         port = self.cfg["mcu"]["port"]
@@ -147,6 +148,7 @@ class Service:
                 status = self.report.as_dict() if self.report else None
                 decision = sup.step(r, time.time(), pipe, status=status)
                 self._calibration = r.calibration
+                self._concealed += "concealed" in r.events
                 if tracks:
                     tracks.write(r, decision.level)
             if now >= next_status or r is None:
@@ -183,7 +185,10 @@ class Service:
         self.notifier.status(rep.summary())
         st = rep.as_dict()
         st.update(camera=rep.camera, source_state=core_health["source_state"],
-                  frames_captured=core_health["frames_captured"], fcw=None)
+                  frames_captured=core_health["frames_captured"], fcw=None,
+                  # frames the source could not use (undecodable, or of another size), and frames decoded
+                  # with errors the decoder concealed
+                  decode_errors={"skipped": core_health["decode_errors"], "concealed": self._concealed})
         if self.can_session is not None:
             st["can_input"] = self.can_session.input_counts()  # vehicle-bus frames read, used, dropped by reason
         if self._calibration is not None:
