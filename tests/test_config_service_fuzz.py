@@ -198,7 +198,12 @@ def main(argv=None) -> int:
     args = a.parse_args(argv)
     t0 = time.monotonic()
 
+    shown = [0]
+
     def progress(case, counts):
+        for failure in counts["failures"][shown[0]:]:   # each failure as it comes: a long run may be cut short
+            print(f"FAILURE {failure}", file=sys.stderr, flush=True)
+        shown[0] = len(counts["failures"])
         if (case + 1) % 250 == 0:
             print(f"{case + 1} cases, {counts['accepted']} accepted and run, {counts['refused']} refused, "
                   f"{len(counts['failures'])} failures, {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
