@@ -56,7 +56,7 @@ def input_problem(path: str, what: str = "file") -> Optional[str]:
     if not p.exists():
         return f"no such {what}"
     if not os.access(p, os.R_OK):
-        return f"cannot be read (permission denied)"
+        return "cannot be read (permission denied)"
     return None
 
 
