@@ -113,6 +113,14 @@ class _BoundedLoader(_Yaml12Loader):
         finally:
             self._depth -= 1
 
+    def construct_object(self, node, deep=False):
+        try:
+            return super().construct_object(node, deep)
+        except YamlLimitError:
+            raise
+        except (ValueError, TypeError, OverflowError) as exc:   # e.g. !!float 'x', a date that does not exist
+            raise YamlLimitError(f"line {node.start_mark.line + 1}: a value cannot be read: {short(str(exc))}") from None
+
     def construct_mapping(self, node, deep=False):
         seen: dict = {}
         for key_node, _value in node.value:
