@@ -42,7 +42,7 @@ def _cmd_status(args) -> int:
     import json
     import os
 
-    from app.supervisor.status_file import StatusFileError, format_status, is_stale, read_status
+    from app.supervisor.status_file import STOPPED, UNKNOWN, StatusFileError, assess, format_status, read_status
 
     path = args.file
     if path is None:
@@ -55,12 +55,14 @@ def _cmd_status(args) -> int:
     try:
         st = read_status(path)
     except StatusFileError as exc:
-        print(f"state: unknown\nheadway: {exc}")
-        return 1
+        print(f"state: {UNKNOWN}\nheadway: {exc}")
+        return 3
     print(json.dumps(st, indent=1) if args.json and st else format_status(st, path))
     if st is None:
         return 1
-    return 3 if is_stale(st) else 0  # 3: state unknown (as systemctl's "not running")
+    # 0 while the service runs (ok, degraded, fault: its own words); 3 when it does not, as systemctl's
+    # "not running": stopped, or unknown (gone, stale, future or malformed time stamp)
+    return 0 if assess(st)[0] not in (UNKNOWN, STOPPED) else 3
 
 
 def _cmd_config(args) -> int:
@@ -75,10 +77,10 @@ def _cmd_config(args) -> int:
     cfg = configuration.load(args.file)
     from app.config_check import problems
 
-    found = problems(cfg)  # everything that would stop the service (the core checks its sections too)
-    for line in found:
-        print(f"headway: configuration error: {args.file}: {line}", file=sys.stderr)
+    # everything that would stop the service, opened as the service opens it; the first problem is the line
+    found = problems(cfg, skip_absent_devices=args.skip_absent_devices)
     if found:
+        print(f"headway: configuration error: {configuration.error_line(found[0], args.file)}", file=sys.stderr)
         return 2
     print(f"{args.file}: ok")
     return 0
@@ -365,11 +367,22 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("config", help="check a configuration file, or print the documented defaults")
     cs = s.add_subparsers(dest="action", required=True, metavar="ACTION")
-    c = cs.add_parser("check", help="validate FILE; prints what is wrong and exits 2")
+    c = cs.add_parser("check", help="validate FILE and open what the service opens (models, output files, CAN "
+                                    "interface, source); prints the first problem in one line and exits 2")
     c.add_argument("file")
+    c.add_argument("--skip-absent-devices", action="store_true",
+                   help="do not fail on a camera that is not on this machine (checking a car's file elsewhere)")
     cs.add_parser("default", help="print the default configuration with every key documented")
     cs.add_parser("doc", help="print the configuration reference as markdown (docs/CONFIG.md)")
     return p
+
+
+def _keep_inputs(args, images: list[str]) -> None:
+    """OutputPathError if --out names one of the command's input images or its --config."""
+    from app.output_files import check_outputs
+
+    inputs = {f"input {i + 1}": p for i, p in enumerate(images)}
+    check_outputs({"--out": args.out}, {**inputs, "--config": getattr(args, "config", None)})
 
 
 def _dispatch(args) -> int:
@@ -386,6 +399,7 @@ def _dispatch(args) -> int:
     if args.command == "detect":
         from app import detect_images
 
+        _keep_inputs(args, args.images)
         return detect_images.main(args)
     if args.command in ("run", "service"):
         from app.supervisor import service
@@ -412,6 +426,7 @@ def _dispatch(args) -> int:
     if args.command == "calibrate":
         from app import calibrate
 
+        _keep_inputs(args, args.images)
         return calibrate.main(args)
     if args.command == "eval":
         from app.eval import report
@@ -422,19 +437,24 @@ def _dispatch(args) -> int:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from app.config import ConfigFileError
+    if args.command == "config":
+        # a check opens models and sources: OpenCV's own log lines would come before (and say less than) ours
+        os.environ["OPENCV_LOG_LEVEL"] = "SILENT"
+    from app.config import ConfigFileError, error_line
     from app.core import ConfigError, CoreError
 
     try:
         return _dispatch(args)
     except (ConfigFileError, ConfigError) as exc:
-        print(f"headway: configuration error: {exc}", file=sys.stderr)
+        # one mapping: every configuration error is exit 2, one line, its file, the key's line, the key
+        print(f"headway: configuration error: {error_line(exc, getattr(args, 'config', None) or getattr(args, 'file', None))}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
     except (CoreError, OSError, RuntimeError, ValueError) as exc:
         # every expected failure (bad source, scenario, image, ...) as one line
-        print(f"headway: error: {exc}", file=sys.stderr)
+        print(f"headway: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import difflib
 import functools
+import re
 from pathlib import Path
 from typing import Any, Optional, Union
 
@@ -20,7 +21,7 @@ from app.can.config_schema import CAN_SCHEMA
 from app.core import core_moved_keys, core_presets, core_removed_presets, core_schema
 from app.fcw import FCW_SCHEMA
 from app.recording import FPS_MAX, FPS_MIN
-from app.safe_yaml import YamlLimitError, load_yaml, short, short_name
+from app.safe_yaml import YamlLimitError, key_lines, load_yaml, short, short_name, short_path
 from app.schema import key as _key
 from app.supervisor.health import HEALTH_SCHEMA
 
@@ -234,14 +235,50 @@ def load(path: Optional[Union[str, Path]] = None, overrides: Optional[dict] = No
         origin = str(path)
         p = Path(path)
         if not p.is_file():
-            raise ConfigFileError(f"{origin}: no such file")
-        data = parse(p.read_text(errors="replace"), origin)
+            raise ConfigFileError(f"{origin}: {'is a folder, not a configuration file' if p.is_dir() else 'no such file'}")
+        try:
+            text = p.read_text(errors="replace")
+        except OSError as exc:
+            raise ConfigFileError(f"{origin}: cannot be read ({exc.strerror or exc})") from None
+        data = parse(text, origin)
     merged = copy.deepcopy(data)
     for sec, values in (overrides or {}).items():
         if not isinstance(merged.get(sec) or {}, dict):
             raise ConfigFileError(f"{origin}: {sec}: expected a mapping of keys to values")
         merged[sec] = {**(merged.get(sec) or {}), **values}
     return validate(merged, origin)
+
+
+MAX_ERROR_CHARS = 170   # an error line's text after "headway: configuration error: ": 200 in all
+_FOLDERS = re.compile(r"(?<![\w.])/(?:[^\s/:'\"()]+/)+")   # the folders of an absolute path in a message
+_KEY_PATH = re.compile(r"(?<![\w./-])([A-Za-z_]\w*\.[A-Za-z_]\w*)")
+
+
+def error_line(message: object, path: Optional[Union[str, Path]] = None, limit: int = MAX_ERROR_CHARS) -> str:
+    """A configuration error as one line of at most ``limit`` characters: the file, the line of the first key the
+    message names (as written in the file), the message with its whitespace and newlines folded."""
+    text = " ".join(str(message).split())
+    where = ""
+    if path is not None:
+        name = str(path)
+        text = text[len(name) + 2:] if text.startswith(name + ": ") else text
+        try:
+            lines = key_lines(Path(path).read_text(errors="replace")) if Path(path).is_file() else {}
+        except (OSError, ValueError):
+            lines = {}
+        named = next((m.group(1) for m in _KEY_PATH.finditer(text) if m.group(1) in lines), None)
+        if named is None:   # an unknown or misplaced section: its own line (its name may be quoted cut short)
+            first = text.split(":", 1)[0]
+            named = next((k for k in lines if "." not in k and (k == first or first.endswith("...")
+                                                                  and k.startswith(first[:-3]))), None)
+        line = f"line {lines[named]}: " if named and not text.startswith("line ") else ""
+        where = f"{short_path(name)}: {line}"
+        if len(where) + len(text) > limit:   # too long: the file by its name (the user knows which one was checked)
+            where = f"{Path(name).name}: {line}"
+        if len(where) + len(text) > limit:   # still: the paths in the message by their names too
+            text = _FOLDERS.sub("", text)
+    room = max(40, limit - len(where))
+    return where + (text if len(text) <= room else text[:room - 3] + "...")
 
 
 # The Haar cascade trained by `headway train cascade` (recipe and log in docs/cascade.md).

@@ -65,6 +65,7 @@ EVENTS = {
     lib.HW_EVENT_SOURCE_LOST: "source_lost",
     lib.HW_EVENT_RECONNECTED: "reconnected",
     lib.HW_EVENT_SIZE_CHANGED: "size_changed",
+    lib.HW_EVENT_CONCEALED: "concealed",
 }
 ROAD_MOTION = {lib.HW_ROAD_ACCEPTED: "accepted", lib.HW_ROAD_PREDICTED: "predicted"}
 # hw_calib_state -> name (the status, the tracks file and HW_CALIBRATION's STATE use these names)

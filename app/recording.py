@@ -16,12 +16,15 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Optional, Union
 
 import cv2
 import numpy as np
+
+from app.decode_errors import FfmpegErrors, jpeg_warnings
 
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff", ".webp")
 # Frame rates a recording may be played at (frames/s): a tenth of a frame per second (time-lapse) up to
@@ -98,7 +101,12 @@ def read_image(path: Union[str, Path], flags: int = cv2.IMREAD_GRAYSCALE) -> tup
     why = truncation(data, p.suffix)
     if why:
         return None, why
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
+    if p.suffix.lower() in (".jpg", ".jpeg"):   # libjpeg decodes corrupt data into grey blocks, with a warning
+        img, warned = jpeg_warnings(data, flags)
+        if warned and img is not None:
+            return None, f"corrupt JPEG data (libjpeg: {warned})"
+    else:
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     if img is None:
         return None, "cannot be decoded as an image"
     return img, ""
@@ -113,6 +121,8 @@ class Recording:
     expected: Optional[int]        # the container's frame count, or the folder's images; None if unknown
     decoded: int = 0               # frames delivered so far
     skipped: list[str] = field(default_factory=list)   # "name or number: why", one per frame or run
+    damaged: list[int] = field(default_factory=list)   # video frames the decoder logged errors for (concealed)
+    decode_errors: Counter = field(default_factory=Counter)   # FFmpeg's error messages by reason
     _names: list[Path] = field(default_factory=list, repr=False)
 
     def frames(self) -> Iterator[tuple[int, float, np.ndarray]]:
@@ -149,11 +159,18 @@ class Recording:
                 yield i, i / self.fps, img, read_image(name, cv2.IMREAD_COLOR)[0] if colour else None
 
     def _video_frames(self, colour: bool):
-        cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
+        # one decoding thread: FFmpeg's messages then belong to the frame being read, the same on every run
+        cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1])
+        errors = FfmpegErrors.watch()   # FFmpeg conceals a damaged frame; its log says so
         i, failed = 0, 0  # frame number of the next read; failed reads in a row before it
         try:
             while True:
+                mark = errors.mark() if errors else None
                 ok, bgr = cap.read()
+                new = errors.since(mark) if errors else None
+                if new:
+                    self.damaged.append(i)
+                    self.decode_errors.update(new)
                 if not ok or bgr is None:
                     if self.expected is None or i >= self.expected:
                         break  # the end the container announced
@@ -179,7 +196,18 @@ class Recording:
     def account(self) -> str:
         """'N of M frames decoded' (M the container's count or the folder's images)."""
         of = f" of {self.expected}" if self.expected is not None else ""
-        return f"{self.decoded}{of} frames decoded"
+        if not self.damaged:
+            return f"{self.decoded}{of} frames decoded"
+        reasons = ", ".join(f"{why} {n}" for why, n in self.decode_errors.most_common(3))
+        return (f"{self.decoded}{of} frames decoded, {len(self.damaged)} of them with decoder errors, concealed by "
+                f"FFmpeg: {_frame_list(self.damaged)}; the frames after a damaged one may be spoilt up to the next "
+                f"key frame ({reasons})")
+
+
+def _frame_list(frames: list[int]) -> str:
+    """"frames 3, 9, 17" (the first 8 and how many more)."""
+    shown = ", ".join(str(f) for f in frames[:8])
+    return f"frame{'s' if len(frames) > 1 else ''} {shown}" + (f" and {len(frames) - 8} more" if len(frames) > 8 else "")
 
 
 def _frame_run(first: int, last: int, why: str) -> str:
@@ -211,6 +239,7 @@ def open_recording(source: Union[str, Path], fps: Optional[float] = None) -> Rec
         raise RecordingError(f"{source}: is a still image; replay a folder of images (with --fps) or use "
                              f"`headway detect`")
     cap = cv2.VideoCapture(str(p), cv2.CAP_FFMPEG)
+    FfmpegErrors.watch()   # from OpenCV's first open on, FFmpeg's errors are counted, not printed
     try:
         ok, frame = cap.read() if cap.isOpened() else (False, None)
         if not ok:

@@ -22,6 +22,7 @@ from app import config as configuration
 from app.annotate import VideoOut, annotate
 from app.core import FrameResult, Pipeline
 from app.fcw_level import FcwLevel
+from app.output_files import check_outputs, written_whole
 from app.recording import RecordingError, open_recording
 from app.tracks_file import TracksWriter
 
@@ -109,13 +110,15 @@ def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], lab
     from app.supervisor.stack import Stack
 
     with contextlib.ExitStack() as stack:
+        # each output is written beside its place and renamed into it once the run is complete
+        tracks_tmp, video_tmp, can_tmp = (stack.enter_context(written_whole(p)) for p in (tracks_path, out_video, can_out))
         pipe = stack.enter_context(Pipeline(configuration.core_sections(cfg)))
-        writer = TracksWriter(stack.enter_context(open(tracks_path, "w"))) if tracks_path else None
-        video = VideoOut(out_video, fps) if out_video else None
+        writer = TracksWriter(stack.enter_context(open(tracks_tmp, "w"))) if tracks_path else None
+        video = VideoOut(video_tmp, fps) if out_video else None
         if video:
             stack.callback(video.close)
         try:
-            session = stack.enter_context(CanSession.for_replay(cfg, can_in=can_in, can_out=can_out))
+            session = stack.enter_context(CanSession.for_replay(cfg, can_in=can_in, can_out=can_tmp))
         except (CanLogError, DbcError, VehicleInputError, OSError) as exc:
             raise ReplayError(str(exc)) from None
         sup = Stack(cfg, session)
@@ -203,6 +206,8 @@ def replay_scenario(source: str, config_path: Optional[str] = None, out_video: O
 
 
 def replay(source: str, **kw) -> ReplaySummary:
+    check_outputs({"--tracks": kw.get("tracks_path"), "--out-video": kw.get("out_video"), "--can-out": kw.get("can_out")},
+                  {"the source": source, "--can-in": kw.get("can_in"), "--config": kw.get("config_path")})
     if is_scenario(source):
         kw.pop("fps", None)
         return replay_scenario(source, **kw)

@@ -32,7 +32,10 @@ def rss_kb(pid: int) -> int:
     return 0
 
 
-def _feed(fifo: Path, frames: list[bytes], fps: float, stop: threading.Event) -> None:
+def _feed(fifo: Path, frames: list[bytes], fps: float, stop: threading.Event, fed: list) -> None:
+    """Writes the frames into the FIFO at ``fps``, looping; ``fed[0]``: frames written whole so far, and
+    ``fed[1]``: how many were written later than their slot by more than a frame period (the service did not
+    keep up with the camera rate)."""
     while not fifo.exists() and not stop.is_set():
         time.sleep(0.01)
     fd = os.open(fifo, os.O_WRONLY)
@@ -44,14 +47,18 @@ def _feed(fifo: Path, frames: list[bytes], fps: float, stop: threading.Event) ->
             except BrokenPipeError:
                 return
             i += 1
+            fed[0] = i
+            if time.monotonic() - next_t > period:
+                fed[1] += 1
             next_t += period
             time.sleep(max(0.0, next_t - time.monotonic()))
     finally:
         os.close(fd)
 
 
-def soak(clip: str, minutes: float, every_s: float, workdir: Path) -> dict:
+def soak(clip: str, minutes: float, every_s: float, workdir: Path, fps: float | None = None) -> dict:
     rec = open_recording(clip)
+    fps = fps or rec.fps
     frames = [g.tobytes() for g in rec.read_all()]
     w, h = rec.size
     cfg = workdir / "config.yaml"
@@ -63,7 +70,8 @@ def soak(clip: str, minutes: float, every_s: float, workdir: Path) -> dict:
     p = subprocess.Popen([sys.executable, "-m", "app.cli", "service", "--config", str(cfg)], cwd=REPO,
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     stop = threading.Event()
-    feeder = threading.Thread(target=_feed, args=(workdir / "frames.fifo", frames, rec.fps, stop), daemon=True)
+    fed = [0, 0]
+    feeder = threading.Thread(target=_feed, args=(workdir / "frames.fifo", frames, fps, stop, fed), daemon=True)
     feeder.start()
     samples = []
     t_start = time.monotonic()
@@ -81,10 +89,16 @@ def soak(clip: str, minutes: float, every_s: float, workdir: Path) -> dict:
                             "latency_median_ms": st.get("latency_median_ms"),
                             "latency_p99_ms": st.get("latency_p99_ms")})
     finally:
+        stop.set()          # the last frames are processed before the stop: every frame fed is accounted for
+        feeder.join(timeout=5)
+        time.sleep(2.0)
         p.send_signal(signal.SIGTERM)
         rc = p.wait(timeout=30)
-        stop.set()
         err = p.stderr.read()
+    try:
+        final = json.loads((workdir / "status.json").read_text())
+    except (OSError, ValueError):
+        final = {}
     import can
 
     lines = (workdir / "out.log").read_text().splitlines()
@@ -92,7 +106,10 @@ def soak(clip: str, minutes: float, every_s: float, workdir: Path) -> dict:
     after = [s for s in samples if s["t_s"] >= 60.0] or samples  # after a minute of warm-up
     med = [s["latency_median_ms"] for s in samples if s["latency_median_ms"] is not None]
     p99 = [s["latency_p99_ms"] for s in samples if s["latency_p99_ms"] is not None]
-    return {"clip": clip, "frames_in_clip": len(frames), "size": f"{w}x{h}", "fps": rec.fps, "minutes": minutes,
+    return {"clip": clip, "frames_in_clip": len(frames), "size": f"{w}x{h}", "fps": fps, "minutes": minutes,
+            "frames_fed": fed[0], "frames_fed_late": fed[1], "frames_captured": final.get("frames_captured"),
+            "frames_processed": final.get("frames"), "queue_drops": final.get("queue_drops"),
+            "state_after_stop": final.get("state"),
             "exit_code": rc, "traceback": "Traceback" in err,
             "rss_kb_at_1min": after[0]["rss_kb"], "rss_kb_end": samples[-1]["rss_kb"],
             "rss_kb_max": max(s["rss_kb"] for s in samples),
@@ -107,10 +124,11 @@ def main(argv=None) -> int:
     a.add_argument("clip")
     a.add_argument("--minutes", type=float, default=15.0)
     a.add_argument("--every-s", type=float, default=10.0)
+    a.add_argument("--fps", type=float, help="frames/s written into the FIFO (default: the clip's own)")
     a.add_argument("--out", default="soak.json")
     args = a.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="headway-soak-") as tmp:
-        rep = soak(args.clip, args.minutes, args.every_s, Path(tmp))
+        rep = soak(args.clip, args.minutes, args.every_s, Path(tmp), args.fps)
     Path(args.out).write_text(json.dumps(rep, indent=1))
     print(json.dumps({k: v for k, v in rep.items() if k != "samples"}, indent=1))
     return 0

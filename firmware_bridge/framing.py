@@ -97,6 +97,8 @@ class FrameDecoder:
         self.max_encoded_len = max_encoded_len
         self.stats = DecoderStats()
         self.last_error: str | None = None  # text of the last rejection, for health reports
+        # the peer's protocol minor version, once its HELLO or HELLO_ACK said it: a newer one may append fields
+        self.peer_minor = messages.PROTOCOL_MINOR
         self._buf = bytearray()
         self._overflow = False  # too long: dropping bytes up to the next delimiter
 
@@ -138,7 +140,7 @@ class FrameDecoder:
         out = []
         for frame in self.feed(data):
             try:
-                out.append((frame.seq, messages.decode(frame.msg_id, frame.payload)))
+                out.append((frame.seq, messages.decode(frame.msg_id, frame.payload, self.peer_minor)))
             except UnknownMessageError as e:
                 self.stats.unknown_messages += 1
                 self.last_error = str(e)

@@ -328,6 +328,7 @@ class McuLink:
 
     def _on_hello_ack(self, now: float, ack: m.HelloAck) -> None:
         self._mcu = ack
+        self._decoder.peer_minor = ack.protocol_minor
         if ack.protocol_major != m.PROTOCOL_MAJOR:
             if self._state is not LinkState.INCOMPATIBLE:
                 log.error("MCU link: MCU speaks protocol %d.%d, host %d.%d", ack.protocol_major,

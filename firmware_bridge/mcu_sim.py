@@ -193,6 +193,7 @@ class McuSimulator:
         if isinstance(msg, m.Hello):
             self.stats.hellos += 1
             self.host_hello = msg
+            self.decoder.peer_minor = msg.protocol_minor
             cfg = self.config
             self._send(m.HelloAck(cfg.protocol_major, cfg.protocol_minor, *cfg.fw_version, fw_name=cfg.fw_name))
         elif isinstance(msg, m.Heartbeat):

@@ -5,8 +5,12 @@ little-endian layout (a `struct.Struct`). Physical values are SI units sent as u
 (u16, 0.01 per count, so 0..655.34); the raw value 0xFFFF means "not available". Constructing a
 message checks every field, so an out-of-range value raises `FieldRangeError` both when the host
 builds a message to send and when a received payload decodes to a value the protocol does not
-allow. A receiver rejects a payload shorter than its layout (`PayloadLengthError`) and ignores bytes
-after it: a later minor version may append fields.
+allow. A frame whose CRC is right can still carry nonsense (a byte flipped before the CRC was computed,
+a peer out of step), so a received payload is also checked against what the peer's protocol version
+sends: from a peer of this minor version (or an older one) the payload has exactly its layout's length
+and every reserved bit is 0; from a newer minor one (which may append fields and use reserved bits) it is
+at least the layout's length and reserved bits are ignored. Anything else is a `PayloadLengthError` or
+a `FieldRangeError`, counted by the decoder as a bad payload.
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ PROTOCOL_MINOR = 0  # new messages or fields appended at the end of a payload; c
 NOT_AVAILABLE = 0xFFFF  # u16 fixed-point value meaning "no value" (no lead, unknown speed...)
 CENTI = 100  # counts per SI unit in the u16 fixed-point fields (resolution 0.01)
 MAX_CENTI_VALUE = (NOT_AVAILABLE - 1) / CENTI  # 655.34, the largest value a u16 field carries
+MAX_SPEED_MPS = 150.0  # m/s (540 km/h); a vehicle speed above it is a corrupt value, not a car
 
 
 class MsgId(IntEnum):
@@ -104,6 +109,7 @@ class Message:
     LAYOUT: ClassVar[struct.Struct]
     SENDER: ClassVar[str]  # "host", "mcu" or "both"
     RATE: ClassVar[str]  # when it is sent (at the default periods), as in the protocol document
+    RESERVED: ClassVar[dict[str, int]] = {}  # {raw layout field: its reserved bits}, 0 from this minor version
 
     def fields(self) -> tuple:
         """The raw layout values, in layout order (the dataclass fields, unless scaled)."""
@@ -118,11 +124,27 @@ class Message:
         return self.LAYOUT.pack(*self.fields())
 
     @classmethod
-    def unpack(cls, payload: bytes):
+    def unpack(cls, payload: bytes, peer_minor: int = PROTOCOL_MINOR):
+        """The message in a received payload, checked as sent by a peer of protocol minor ``peer_minor``."""
         if len(payload) < cls.LAYOUT.size:
             raise PayloadLengthError(
                 f"{cls.MSG_ID.name} payload is {len(payload)} bytes, its layout needs {cls.LAYOUT.size}")
-        return cls.from_fields(*cls.LAYOUT.unpack_from(payload))
+        raw = cls.LAYOUT.unpack_from(payload)
+        # HELLO and HELLO_ACK state their sender's version themselves
+        own = raw[cls.LAYOUT_FIELDS.index("protocol_minor")] if "protocol_minor" in cls.LAYOUT_FIELDS else 0
+        newer = max(peer_minor, own) > PROTOCOL_MINOR
+        if len(payload) > cls.LAYOUT.size and not newer:
+            raise PayloadLengthError(
+                f"{cls.MSG_ID.name} payload is {len(payload)} bytes, its layout in protocol "
+                f"{PROTOCOL_MAJOR}.{PROTOCOL_MINOR} is {cls.LAYOUT.size}")
+        if not newer:
+            names = cls.LAYOUT_FIELDS
+            for name, mask in cls.RESERVED.items():
+                value = raw[names.index(name)]
+                if value & mask:
+                    raise FieldRangeError(f"{cls.MSG_ID.name}.{name}=0x{value:02X} has reserved bits set "
+                                          f"(0x{value & mask:02X})")
+        return cls.from_fields(*raw)
 
 
 @dataclass(frozen=True)
@@ -131,6 +153,8 @@ class Hello(Message):
 
     MSG_ID: ClassVar[MsgId] = MsgId.HELLO
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<BBHH")
+    LAYOUT_FIELDS: ClassVar[tuple[str, ...]] = ("protocol_major", "protocol_minor", "heartbeat_period_ms",
+                                                "host_timeout_ms")
     SENDER: ClassVar[str] = "host"
     RATE: ClassVar[str] = "every 250 ms until HELLO_ACK; again after silence or an MCU reset"
 
@@ -155,6 +179,8 @@ class HelloAck(Message):
 
     MSG_ID: ClassVar[MsgId] = MsgId.HELLO_ACK
     LAYOUT: ClassVar[struct.Struct] = struct.Struct(f"<BBBBB{FW_NAME_LEN}s")
+    LAYOUT_FIELDS: ClassVar[tuple[str, ...]] = ("protocol_major", "protocol_minor", "fw_major", "fw_minor",
+                                                "fw_patch", "fw_name")
     SENDER: ClassVar[str] = "mcu"
     RATE: ClassVar[str] = "once per HELLO received, within 50 ms"
 
@@ -196,8 +222,12 @@ class Heartbeat(Message):
 
     MSG_ID: ClassVar[MsgId] = MsgId.HEARTBEAT
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<IB")
+    LAYOUT_FIELDS: ClassVar[tuple[str, ...]] = ("uptime_ms", "status")
     SENDER: ClassVar[str] = "both"
+    # neither side's status bits: the host's (HostStatus) and the MCU's (McuStatus) together
     RATE: ClassVar[str] = "every 100 ms, each side"
+
+    RESERVED: ClassVar[dict[str, int]] = {"status": 0xFF & ~0x0F}
 
     uptime_ms: int = 0  # since the sender started, wraps after 2^32 ms (49.7 days)
     status: int = 0  # HostStatus bits from the host, McuStatus bits from the MCU
@@ -205,6 +235,9 @@ class Heartbeat(Message):
     def __post_init__(self):
         _check_uint("HEARTBEAT", "uptime_ms", self.uptime_ms, 32)
         _check_uint("HEARTBEAT", "status", self.status, 8)
+        if self.status & self.RESERVED["status"]:
+            raise FieldRangeError(f"HEARTBEAT.status=0x{self.status:02X} has reserved bits set "
+                                  f"(0x{self.status & self.RESERVED['status']:02X})")
 
 
 @dataclass(frozen=True)
@@ -213,6 +246,7 @@ class FcwWarning(Message):
 
     MSG_ID: ClassVar[MsgId] = MsgId.WARNING
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<BHH")
+    LAYOUT_FIELDS: ClassVar[tuple[str, ...]] = ("level", "ttc", "lead_range")
     SENDER: ClassVar[str] = "host"
     RATE: ClassVar[str] = "on every change, and repeated every 100 ms"
 
@@ -243,7 +277,9 @@ class VehicleSignals(Message):
 
     MSG_ID: ClassVar[MsgId] = MsgId.VEHICLE_SIGNALS
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<HB")
+    LAYOUT_FIELDS: ClassVar[tuple[str, ...]] = ("speed", "flags")
     SENDER: ClassVar[str] = "mcu"
+    RESERVED: ClassVar[dict[str, int]] = {"flags": 0xFF & ~0x07}
     RATE: ClassVar[str] = "every 50 ms, and at once when brake or a turn signal changes"
 
     speed_mps: float | None = None  # vehicle speed magnitude; None: unknown
@@ -253,6 +289,9 @@ class VehicleSignals(Message):
 
     def __post_init__(self):
         _check_centi("VEHICLE_SIGNALS", "speed_mps", self.speed_mps)
+        if self.speed_mps is not None and self.speed_mps > MAX_SPEED_MPS:
+            raise FieldRangeError(f"VEHICLE_SIGNALS.speed_mps={self.speed_mps!r} is above {MAX_SPEED_MPS:g} m/s, "
+                                  f"faster than any road vehicle (None: unknown)")
         for name in ("brake", "turn_left", "turn_right"):
             _check_bool("VEHICLE_SIGNALS", name, getattr(self, name))
 
@@ -272,9 +311,10 @@ MESSAGES: dict[int, type[Message]] = {cls.MSG_ID: cls for cls in (Hello, HelloAc
 MAX_PAYLOAD_LEN = 64  # bytes; every layout is far below it, so later minor versions can grow
 
 
-def decode(msg_id: int, payload: bytes) -> Message:
-    """The message for one frame's id and payload; raises a ProtocolError naming what was wrong."""
+def decode(msg_id: int, payload: bytes, peer_minor: int = PROTOCOL_MINOR) -> Message:
+    """The message for one frame's id and payload, sent by a peer of protocol minor ``peer_minor``; raises a
+    ProtocolError naming what was wrong."""
     cls = MESSAGES.get(msg_id)
     if cls is None:
         raise UnknownMessageError(f"message id 0x{msg_id:02X} is not defined in protocol {PROTOCOL_MAJOR}.{PROTOCOL_MINOR}")
-    return cls.unpack(payload)
+    return cls.unpack(payload, peer_minor)

@@ -46,7 +46,7 @@ def test_config_check_finds_what_would_stop_the_service(tmp_path):
     r = check(tmp_path, f"source: {{kind: fifo, path: {tmp_path / 'frames.raw'}}}\n")
     assert r.returncode == 2 and "exists and is not a FIFO" in r.stderr
     r = check(tmp_path, "source: {kind: video, path: /nonexistent/drive.mp4}\n")
-    assert r.returncode == 2 and "source.path" in r.stderr and "no such file" in r.stderr
+    assert r.returncode == 2 and "source.path" in r.stderr and "no such video file" in r.stderr
     r = check(tmp_path, f"can: {{output_log: {tmp_path / 'frames.raw' / 'out.log'}}}\n")  # under a file
     assert r.returncode == 2 and "can.output_log" in r.stderr
     r = check(tmp_path, "can: {interface: socketcan, channel: nosuchcan9}\n")

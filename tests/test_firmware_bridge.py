@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from firmware_bridge import cobs, crc, examples, framing
 from firmware_bridge import messages as m
+from firmware_bridge.errors import FieldRangeError
 from firmware_bridge.errors import (CobsError, CrcError, FieldRangeError, FrameLengthError, PayloadLengthError,
                                     ProtocolError, UnknownMessageError)
 
@@ -33,10 +34,12 @@ def random_message(rng: random.Random) -> m.Message:
         name = "".join(chr(rng.randrange(0x20, 0x7F)) for _ in range(rng.randrange(9)))
         return m.HelloAck(*(rng.randrange(256) for _ in range(5)), fw_name=name)
     if kind == 2:
-        return m.Heartbeat(rng.randrange(2**32), rng.randrange(256))
+        return m.Heartbeat(rng.randrange(2**32), rng.randrange(16))
     if kind == 3:
         return m.FcwWarning(rng.randrange(3), centi(), centi())
-    return m.VehicleSignals(centi(), rng.random() < 0.5, rng.random() < 0.5, rng.random() < 0.5)
+    speed = centi()
+    return m.VehicleSignals(None if speed is None else min(speed, m.MAX_SPEED_MPS), rng.random() < 0.5,
+                            rng.random() < 0.5, rng.random() < 0.5)
 
 
 def frame_stream(msgs: list[m.Message], first_seq: int = 0):
@@ -162,11 +165,11 @@ def test_cobs_decode_rejects_malformed_input_naming_the_offset(bad, where):
 ROUND_TRIPS = [
     m.Hello(), m.Hello(3, 7, 1, 65535),
     m.HelloAck(), m.HelloAck(1, 2, 3, 4, 5, "ABCDEFGH"), m.HelloAck(fw_name="x y~"),
-    m.Heartbeat(), m.Heartbeat(2**32 - 1, 0xFF),
+    m.Heartbeat(), m.Heartbeat(2**32 - 1, 0x0F),
     m.FcwWarning(), m.FcwWarning(m.WarningLevel.WARNING, 1.85, 23.4), m.FcwWarning(1, 0.0, 655.34),
     m.FcwWarning(2, 655.34, None),
     m.VehicleSignals(), m.VehicleSignals(27.78, True, False, True), m.VehicleSignals(0.0, False, True, False),
-    m.VehicleSignals(655.34, True, True, True),
+    m.VehicleSignals(m.MAX_SPEED_MPS, True, True, True),
 ] + [msg for _, msg, _ in examples.EXAMPLES]
 
 
@@ -195,7 +198,10 @@ def test_fixed_point_scaling_and_not_available():
     assert m.VehicleSignals(None, brake=True).pack() == R("ffff01")
     assert m.VehicleSignals(13.89, turn_left=True, turn_right=True).pack() == R("6d0506")
     assert m.decode(m.MsgId.WARNING, R("01feff0a00")) == m.FcwWarning(1, 655.34, 0.1)
-    assert m.decode(m.MsgId.VEHICLE_SIGNALS, R("e803f8")) == m.VehicleSignals(10.0)  # reserved bits ignored
+    # reserved bits: ignored from a peer of a newer minor version (it may use them), nonsense from one of ours
+    assert m.decode(m.MsgId.VEHICLE_SIGNALS, R("e803f8"), peer_minor=m.PROTOCOL_MINOR + 1) == m.VehicleSignals(10.0)
+    with pytest.raises(FieldRangeError, match="reserved bits"):
+        m.decode(m.MsgId.VEHICLE_SIGNALS, R("e803f8"))
 
 
 @given(ttc=st.floats(0, 655.34), rng=st.one_of(st.none(), st.floats(0, 655.34)), level=st.sampled_from([0, 1, 2]))
@@ -242,8 +248,12 @@ def test_decoding_bad_payloads_raises_the_specific_error():
         m.decode(m.MsgId.HELLO_ACK, R("0100000000") + b"AB\0C\0\0\0\0")
     with pytest.raises(FieldRangeError, match="fw_name"):
         m.decode(m.MsgId.HELLO_ACK, R("0100000000") + b"\xff" * 8)
-    # A longer payload (a later minor version appended fields) decodes; the extra bytes are ignored.
-    assert m.decode(m.MsgId.WARNING, R("02b9002409") + b"\x55\x66") == m.FcwWarning(2, 1.85, 23.4)
+    # A longer payload from a peer of a later minor version (it appended fields) decodes, the extra bytes
+    # ignored; from a peer of this version it is nonsense.
+    longer = R("02b9002409") + b"\x55\x66"
+    assert m.decode(m.MsgId.WARNING, longer, peer_minor=m.PROTOCOL_MINOR + 1) == m.FcwWarning(2, 1.85, 23.4)
+    with pytest.raises(PayloadLengthError, match="WARNING payload is 7 bytes, its layout in protocol 1.0 is 5"):
+        m.decode(m.MsgId.WARNING, longer)
 
 
 # ---- framing ---------------------------------------------------------------------------------------

@@ -41,8 +41,11 @@ def test_a_1x1_image_is_named_as_too_small_not_as_a_configuration_error(tmp_path
 
 
 def test_status_of_a_stale_file_is_unknown_with_a_non_zero_exit(tmp_path):
+    from app.supervisor.status_file import write_status
+
     path = tmp_path / "status.json"
-    path.write_text(json.dumps({"state": "ok", "faults": [], "written_unix_s": time.time() - 60}))
+    write_status(str(path), {"state": "ok", "faults": []})
+    path.write_text(json.dumps({**json.loads(path.read_text()), "written_unix_s": time.time() - 60}))
     r = headway("status", "--file", str(path))
     assert r.returncode != 0 and "state: unknown" in r.stdout and "state: ok" not in r.stdout
     assert re.search(r"status is \d+ s old", r.stdout) and "last report said ok" in r.stdout
@@ -53,7 +56,7 @@ def test_status_of_a_malformed_file_is_one_line_not_a_traceback(tmp_path, text):
     path = tmp_path / "status.json"
     path.write_text(text)
     r = headway("status", "--file", str(path))
-    assert r.returncode == 1 and "Traceback" not in r.stderr + r.stdout
+    assert r.returncode == 3 and "Traceback" not in r.stderr + r.stdout
     assert "state: unknown" in r.stdout and "not a status file" in r.stdout
 
 

@@ -4,8 +4,9 @@ Any format python-can reads (``can.LogReader``: candump .log, .asc, .blf, .csv, 
 gzipped). A candump .log is read line by line: a line that is not a candump ``-L`` frame (garbage,
 a truncated write, an odd number of hex digits) is counted in ``bad_lines`` and skipped, and only
 good lines reach python-can's ``CanutilsLogReader``, which would otherwise stop at the first bad
-line. Other formats are read by python-can directly; if one fails part-way, what was read is kept
-and ``read_error`` says where it stopped.
+line. An .asc frame line python-can cannot parse is counted in ``bad_lines`` and skipped the same way
+(``_ASCReader``). Other formats are read by python-can directly; if one fails part-way, what was read is
+kept and ``read_error`` says where it stopped.
 
 Timestamps are checked before anything else: a frame whose timestamp is more than ``OUTLIER_S`` from
 the median of its neighbours (a stray line at time 0, a clock glitch) is dropped and counted as
@@ -13,7 +14,8 @@ the median of its neighbours (a stray line at time 0, a clock glitch) is dropped
 counted as ``out_of_order`` (it would set an input back in time). Every frame read ends in exactly one
 count: delivered, or dropped by reason (``drops``), or not reached (after the replay's end).
 
-Times: ``t0`` is the first (non-outlier) frame's timestamp; a frame's replay time is ``timestamp - t0 + offset_s``
+Times: ``t0`` is the log's start as its first CLOCK_FRAMES frames give it (``robust_start``: a stray frame a
+second early neither sets it nor shifts the inputs; it is counted as ``out_of_order``); a frame's replay time is ``timestamp - t0 + offset_s``
 (``vehicle.log_offset_s``), the clock of the video's frames (frame 0 at t = 0).
 """
 from __future__ import annotations
@@ -24,9 +26,10 @@ import math
 import heapq
 import itertools
 import re
+import statistics
 from collections import Counter
 from pathlib import Path
-from typing import Iterable, Iterator, Optional, TypeVar, Union
+from typing import Callable, Iterable, Iterator, Optional, TypeVar, Union
 
 import can
 
@@ -43,6 +46,30 @@ SAME_TIME_S = 1e-6
 # (s): far above any pause between frames of a live bus, far below the jump of a stray line at t = 0.
 OUTLIER_S = 10.0
 NEIGHBOURS = 9  # odd: the frame and 4 on each side; up to 4 stray frames in a row are recognised
+# The log's clock (t0, the time of replay 0) is set by this many first frames (after the outlier filter), not
+# by the first alone: a stray frame a second early would shift every input by that second.
+CLOCK_FRAMES = 25
+
+
+def robust_start(items: Iterator[tuple[float, T]], window_s: float, drops: Counter,
+                 on_t0: Callable[[float], None]) -> Iterator[tuple[float, T]]:
+    """(timestamp, item) pairs as they come; first calls ``on_t0`` with the log's start, fixed by the first
+    CLOCK_FRAMES frames: the median of ``t_k - k dt`` (dt: their median gap) is where a steady log starts,
+    and t0 is the earliest of them no more than ``window_s`` before it. A frame further before t0 than that is
+    outside the log's time: dropped and counted as ``out_of_order``."""
+    head = list(itertools.islice(items, CLOCK_FRAMES))
+    if not head:
+        return
+    ts = [t for t, _ in head]
+    dt = statistics.median(b - a for a, b in zip(ts, ts[1:])) if len(ts) > 1 else 0.0
+    start = statistics.median(t - k * dt for k, t in enumerate(ts))
+    t0 = min(t for t in ts if t >= start - window_s)
+    on_t0(t0)
+    for t, item in itertools.chain(head, items):
+        if t < t0 - window_s:
+            drops["out_of_order"] += 1
+            continue
+        yield t, item
 
 
 def drop_time_outliers(items: Iterator[tuple[float, T]], drops: Counter) -> Iterator[tuple[float, T]]:
@@ -106,13 +133,14 @@ class _GoodLines:
 
     closed = False
 
-    def __init__(self, lines: Iterator[str], ids: Optional[frozenset[int]], drops: Counter):
+    def __init__(self, lines: Iterator[str], ids: Optional[frozenset[int]], drops: Counter, window_s: float):
         self.bad = 0
         self.read = 0
         self.first_bad: Optional[tuple[int, str]] = None
         self.first_t: Optional[float] = None
         self._ids = ids
         self._drops = drops
+        self._window_s = window_s
         self._gen = self._filter(lines)
 
     def _frames(self, lines: Iterator[str]) -> Iterator[tuple[float, tuple[int, str]]]:
@@ -128,9 +156,11 @@ class _GoodLines:
             yield float(m.group(1)), (int(m.group(2), 16), s)
 
     def _filter(self, lines: Iterator[str]) -> Iterator[str]:
-        for t, (frame_id, s) in drop_time_outliers(self._frames(lines), self._drops):
-            if self.first_t is None:
-                self.first_t = t
+        def start(t0: float) -> None:
+            self.first_t = t0
+
+        frames = drop_time_outliers(self._frames(lines), self._drops)
+        for _t, (frame_id, s) in robust_start(frames, self._window_s, self._drops, start):
             if self._ids is not None and frame_id not in self._ids:
                 self._drops["unknown_id"] += 1
             else:
@@ -148,9 +178,34 @@ class _GoodLines:
         pass
 
 
+class _ASCReader(can.ASCReader):
+    """python-can's .asc reader, but a frame line it cannot parse (bad hex, missing bytes) is counted in ``bad``
+    and skipped, and reading goes on; python-can's own stops the whole log at it."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.bad = 0
+        self.first_bad: Optional[tuple[int, str]] = None
+
+    def _skip_bad(self, parse, rest: str, kwargs: dict) -> Optional[can.Message]:
+        try:
+            return parse(rest, kwargs)
+        except (ValueError, IndexError, KeyError) as exc:
+            self.bad += 1
+            if self.first_bad is None:
+                self.first_bad = (0, f"{rest[:40]} ({type(exc).__name__})")
+            return None
+
+    def _process_classic_can_frame(self, line, msg_kwargs):
+        return self._skip_bad(super()._process_classic_can_frame, line, msg_kwargs)
+
+    def _process_fd_can_frame(self, line, msg_kwargs):
+        return self._skip_bad(super()._process_fd_can_frame, line, msg_kwargs)
+
+
 # python-can's LogReader looks its plugins up in the installed packages' entry points on every call
 # (~25 ms); the formats it ships are opened directly.
-_READERS = {".asc": can.ASCReader, ".blf": can.BLFReader, ".csv": can.CSVReader, ".trc": can.TRCReader}
+_READERS = {".asc": _ASCReader, ".blf": can.BLFReader, ".csv": can.CSVReader, ".trc": can.TRCReader}
 
 
 def _open_reader(path: Path):
@@ -195,6 +250,7 @@ class CanLogReader:
         self._t0: Optional[float] = None
         self.messages_read = 0  # frames that passed the id and time filters
         self._good: Optional[_GoodLines] = None
+        self._other = None   # the reader of a log other than candump
         self.read_error: Optional[str] = None
         self._iter = self._ordered()
         self._next: Optional[can.Message] = None
@@ -204,7 +260,7 @@ class CanLogReader:
     # ---- raw reading -------------------------------------------------------------------------------
     def _raw_candump(self) -> Iterator[can.Message]:
         with _open_text(self.path) as f:
-            self._good = _GoodLines(iter(f), self._ids, self.drops)
+            self._good = _GoodLines(iter(f), self._ids, self.drops, self.window_s)
             while True:
                 # A fresh reader after any surprise: the line that raised is consumed and skipped.
                 try:
@@ -218,7 +274,8 @@ class CanLogReader:
         def timed() -> Iterator[tuple[float, can.Message]]:
             # a read that fails part-way ends here, so the frames already read still go through the filter
             try:
-                for msg in _open_reader(self.path):
+                self._other = _open_reader(self.path)
+                for msg in self._other:
                     self._read_other += 1
                     t = msg.timestamp
                     if t is None or not math.isfinite(t):
@@ -228,9 +285,10 @@ class CanLogReader:
             except Exception as exc:
                 self.read_error = f"stopped after {self._read_other} frames: {type(exc).__name__}: {exc}"[:200]
 
-        for t, msg in drop_time_outliers(timed(), self.drops):
-            if self._t0 is None:
-                self._t0 = t
+        def start(t0: float) -> None:
+            self._t0 = t0
+
+        for _t, msg in robust_start(drop_time_outliers(timed(), self.drops), self.window_s, self.drops, start):
             if self._ids is not None and msg.arbitration_id not in self._ids:
                 self.drops["unknown_id"] += 1
                 continue
@@ -280,11 +338,13 @@ class CanLogReader:
 
     @property
     def bad_lines(self) -> int:
-        return self._good.bad if self._good else 0
+        """Lines that look like frames but cannot be read as one: counted and skipped."""
+        return (self._good or self._other).bad if isinstance(self._good or self._other, (_GoodLines, _ASCReader)) else 0
 
     @property
     def first_bad_line(self) -> Optional[tuple[int, str]]:
-        return self._good.first_bad if self._good else None
+        src = self._good or self._other
+        return src.first_bad if isinstance(src, (_GoodLines, _ASCReader)) else None
 
     def replay_time(self, msg: can.Message) -> float:
         return msg.timestamp - (self.t0 or 0.0) + self.offset_s

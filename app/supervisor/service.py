@@ -27,7 +27,7 @@ from app.supervisor.faults import DEGRADED, FAULT
 from app.supervisor.health import HealthMonitor, HealthParams
 from app.supervisor.notify import Notifier
 from app.supervisor.stack import Stack
-from app.supervisor.status_file import write_status
+from app.supervisor.status_file import STOPPED, write_status
 
 log = logging.getLogger("headway")
 
@@ -66,6 +66,8 @@ class Service:
         self._status_warned = False
         self.can_session = None
         self._calibration = None  # the last frame's self-calibration estimate, for the status file
+        self._last_status: dict = {}  # the last status written, the base of the "stopped" one
+        self._concealed = 0  # frames the video decoder reported damaged and concealed (processed all the same)
 
     def _open_mcu(self, stack: ExitStack):
         port = self.cfg["mcu"]["port"]
@@ -119,8 +121,11 @@ class Service:
                      cfg["mcu"]["port"] or "none")
             self.health.start(time.monotonic())
             self._loop(pipe, sup, can_session, mcu, live)
+            self._publish_status(pipe.health())  # the counts up to the stop, the base of the "stopped" status
             self.notifier.stopping()
             log.info("stopping")
+        # after the core, the CAN session and the MCU link have stopped: `headway status` reads "stopped"
+        self._write_status({**self._last_status, "state": STOPPED, "faults": []})
         logging.shutdown()
         return 0
 
@@ -143,6 +148,7 @@ class Service:
                 status = self.report.as_dict() if self.report else None
                 decision = sup.step(r, time.time(), pipe, status=status)
                 self._calibration = r.calibration
+                self._concealed += "concealed" in r.events
                 if tracks:
                     tracks.write(r, decision.level)
             if now >= next_status or r is None:
@@ -179,14 +185,21 @@ class Service:
         self.notifier.status(rep.summary())
         st = rep.as_dict()
         st.update(camera=rep.camera, source_state=core_health["source_state"],
-                  frames_captured=core_health["frames_captured"], fcw=None)
+                  frames_captured=core_health["frames_captured"], fcw=None,
+                  # frames the source could not use (undecodable, or of another size), and frames decoded
+                  # with errors the decoder concealed
+                  decode_errors={"skipped": core_health["decode_errors"], "concealed": self._concealed})
         if self.can_session is not None:
             st["can_input"] = self.can_session.input_counts()  # vehicle-bus frames read, used, dropped by reason
         if self._calibration is not None:
             st["calibration"] = self._calibration
+        self._last_status = st
+        self._write_status(st)
+
+    def _write_status(self, st: dict) -> None:
         try:
             write_status(self.cfg["service"]["status_file"], st)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:   # ValueError: a path the OS cannot take (config check refuses it)
             if not self._status_warned:  # once: a missing /run/headway outside systemd is no emergency
                 log.warning("status file %s: %s", self.cfg["service"]["status_file"], exc)
                 self._status_warned = True
@@ -198,10 +211,10 @@ def main(args) -> int:
     cfg = configuration.load(args.config, overrides)  # a bad file raises before anything starts (exit 2)
     from app.config_check import problems
 
-    found = problems(cfg, open_bus=False)  # the bus is opened (and its failure reported) by run()
-    for line in found:
-        log.error("configuration error: %s: %s", args.config, line)
+    # the bus and the source are opened (and their failure reported) by run() itself
+    found = problems(cfg, open_bus=False, open_source=False)
     if found:
+        log.error("configuration error: %s", configuration.error_line(found[0], args.config))
         return 2
     service = Service(cfg)
     received: list[int] = []

@@ -35,6 +35,7 @@ enum FrameEvent : int {
     kEventSourceLost = 2,    // a live device stopped delivering
     kEventReconnected = 4,   // a live device came back
     kEventSizeChanged = 16,  // a frame of another size than the first one was skipped
+    kEventConcealed = 32,    // this frame was decoded with errors the decoder concealed (damaged regions filled in)
 };
 
 // The car's own motion from the vehicle bus.

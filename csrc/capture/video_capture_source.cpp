@@ -3,11 +3,41 @@
 #include "base/errors.hpp"
 #include "base/stopwatch.hpp"
 
+#include <atomic>
+#include <cstdarg>
+#include <dlfcn.h>
 #include <filesystem>
 
 namespace hw {
 
 namespace fs = std::filesystem;
+
+namespace {
+
+// FFmpeg conceals a damaged frame (fills the regions it cannot decode) and only says so in its log. Its
+// messages of level error or worse (AV_LOG_ERROR 16) are counted through its log callback, in the
+// libavutil that OpenCV's videoio already loaded (looked up by name, so the build needs no FFmpeg headers);
+// a frame during whose read the count rose is a concealed frame. The count is process-wide, as FFmpeg's log.
+constexpr int kAvLogError = 16;
+std::atomic<long long> g_ffmpeg_errors{0};
+
+void count_ffmpeg_log(void *, int level, const char *, va_list) {
+    if (level <= kAvLogError) g_ffmpeg_errors.fetch_add(1, std::memory_order_relaxed);
+}
+
+// Set again after every open: OpenCV sets its own callback when it opens a file with OPENCV_FFMPEG_LOGLEVEL set.
+void watch_ffmpeg_errors() {
+    using SetCallback = void (*)(void (*)(void *, int, const char *, va_list));
+    static const SetCallback set = []() -> SetCallback {
+        for (const char *name : {"libavutil.so.57", "libavutil.so.58", "libavutil.so.59", "libavutil.so.56"})
+            if (void *lib = dlopen(name, RTLD_NOW | RTLD_NOLOAD))
+                return reinterpret_cast<SetCallback>(dlsym(lib, "av_log_set_callback"));
+        return nullptr;
+    }();
+    if (set) set(count_ffmpeg_log);
+}
+
+} // namespace
 
 // ---------------------------------------------------------------- live cameras
 
@@ -82,13 +112,19 @@ VideoFileSource::VideoFileSource(const std::string &path, SourceSize size) : pat
     // FFmpeg would play a single still image as a one-frame video; that is almost always a mistake.
     if (is_image_file_name(path))
         throw SourceError("video " + path + ": is a still image; play a folder of images (kind: folder) or use `headway detect`");
+    // (OpenCV 4.6 decodes with several threads and cannot be asked for one: a message may come one or two
+    // reads after the frame it is about, so the frames counted are the right number, not always the right ones)
     cap_.open(path, cv::CAP_FFMPEG);
+    watch_ffmpeg_errors();
     if (!cap_.isOpened())
         throw SourceError("video " + path + ": cannot be opened as a video (not a video file, or a codec FFmpeg lacks)");
     fps_ = cap_.get(cv::CAP_PROP_FPS);
     if (!(fps_ > 0 && fps_ < 1000)) fps_ = 30.0;
     frame_count_ = int64_t(cap_.get(cv::CAP_PROP_FRAME_COUNT));
-    if (!cap_.read(bgr_) || bgr_.empty())
+    const long long errors_before = g_ffmpeg_errors.load();
+    const bool read_first = cap_.read(bgr_);
+    first_concealed_ = g_ffmpeg_errors.load() != errors_before;
+    if (!read_first || bgr_.empty())
         throw SourceError("video " + path + ": no frame could be decoded (empty or corrupt file)");
     if (bgr_.cols != size_.width || bgr_.rows != size_.height)
         throw SourceError("video " + path + ": frames are " + std::to_string(bgr_.cols) + "x" +
@@ -98,8 +134,12 @@ VideoFileSource::VideoFileSource(const std::string &path, SourceSize size) : pat
 
 ReadStatus VideoFileSource::read(Frame &out) {
     // The constructor already decoded frame 0 into bgr_.
+    bool concealed = next_number_ == 0 && first_concealed_;
     if (next_number_ > 0) {
-        if (!cap_.read(bgr_) || bgr_.empty()) {
+        const long long errors_before = g_ffmpeg_errors.load();
+        const bool got = cap_.read(bgr_);
+        concealed = g_ffmpeg_errors.load() != errors_before;
+        if (!got || bgr_.empty()) {
             // A read that fails before the container's frame count is a damaged or truncated file:
             // skip forward once, then call it the end.
             if (frame_count_ > 0 && next_number_ < frame_count_ - 1 && cap_.grab()) {
@@ -114,6 +154,7 @@ ReadStatus VideoFileSource::read(Frame &out) {
         return ReadStatus::SizeChanged;
     }
     out.gray = to_gray(bgr_).clone();
+    out.events = concealed ? kEventConcealed : 0;
     // Media time from the frame number and the container rate: monotonic even where the container's
     // own timestamps are missing or jump.
     out.t_s = double(next_number_) / fps_;

@@ -54,6 +54,7 @@ private:
     double fps_ = 0.0;
     int64_t frame_count_ = 0;   // as the container says; 0 if unknown
     int64_t next_number_ = 0;
+    bool first_concealed_ = false;  // FFmpeg logged errors while the constructor decoded frame 0
 };
 
 } // namespace hw

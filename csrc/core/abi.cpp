@@ -69,7 +69,8 @@ void require(const void *p, const char *what) {
 }
 
 static_assert(HW_EVENT_DECODE_ERROR == hw::kEventDecodeError && HW_EVENT_SOURCE_LOST == hw::kEventSourceLost &&
-                  HW_EVENT_RECONNECTED == hw::kEventReconnected && HW_EVENT_SIZE_CHANGED == hw::kEventSizeChanged,
+                  HW_EVENT_RECONNECTED == hw::kEventReconnected && HW_EVENT_SIZE_CHANGED == hw::kEventSizeChanged &&
+                  HW_EVENT_CONCEALED == hw::kEventConcealed,
               "hw::FrameEvent bits must equal the ABI's HW_EVENT_* (events are copied as they are)");
 
 int source_state_code(hw::SourceState s) {

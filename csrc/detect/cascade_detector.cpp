@@ -13,6 +13,20 @@
 
 namespace hw {
 
+namespace {
+
+// A model file that does not load is reported under the key that names it, in one line: OpenCV's own
+// exceptions carry a source file and line and a newline.
+template <class Load> auto load_keyed(const std::string &key, const std::string &path, Load &&load) {
+    try {
+        return load();
+    } catch (const cv::Exception &e) {
+        throw std::invalid_argument(key + ": '" + path + "' cannot be read as its model (" + e.err + ")");
+    }
+}
+
+} // namespace
+
 CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
     if (p_.model.empty())
         throw std::invalid_argument("cascade.model: no cascade XML given (Headway's Python side fills in the shipped one)");
@@ -25,12 +39,15 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
             throw std::invalid_argument("cascade.opencv_scan: OpenCV's scan steps 2 px; set cascade.step_px to 2 with it");
         win_ = cc_->getOriginalWindowSize();
     } else {
-        haar_ = std::make_unique<HaarCascade>(p_.model, p_.scan_lanes);
+        haar_ = load_keyed("cascade.model", p_.model, [&] { return std::make_unique<HaarCascade>(p_.model, p_.scan_lanes); });
         win_ = haar_->window();
         for (int k = 1; k < p_.threads; ++k) helpers_.push_back(std::make_unique<HaarCascade>(*haar_));
     }
     pool_ = std::make_unique<WorkerPool>(p_.threads);
-    if (!p_.verifier.empty() && p_.verifier != "off") verifier_ = make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
+    if (!p_.verifier.empty() && p_.verifier != "off")
+        verifier_ = load_keyed("cascade.verifier", p_.verifier, [&] {
+            return make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
+        });
     if (verifier_) verifier_->set_pool(pool_.get());
     if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
         throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");

@@ -77,6 +77,7 @@ typedef enum {
 #define HW_EVENT_SOURCE_LOST 2    /* a live device stopped delivering (unplugged, read failure) */
 #define HW_EVENT_RECONNECTED 4    /* a live device came back */
 #define HW_EVENT_SIZE_CHANGED 16  /* a frame of another size than the first one was skipped */
+#define HW_EVENT_CONCEALED 32     /* this frame was decoded with errors the decoder concealed */
 
 typedef struct {
     int32_t id;            /* stable track id, >= 1 */

@@ -1,0 +1,70 @@
+"""Output files that never destroy an input and are never seen half-written.
+
+``check_outputs`` refuses, before anything is opened, an output path that is one of the command's inputs
+(the same path, a hard or symbolic link to it, or the same file under another name) or another output:
+opening it for writing would truncate the input first. ``written_whole`` gives the writer a temporary
+file beside the output (same folder, so the rename stays on one file system; same suffix, so writers that
+choose the format by it, OpenCV's and python-can's, choose the right one) and renames it into place only
+when the work completed; a run that fails leaves the previous output as it was and no partial file.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+from typing import Iterator, Mapping, Optional
+
+from app.safe_yaml import short_path
+
+
+class OutputPathError(ValueError):
+    """An output path that would overwrite an input or another output; the message names both."""
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def check_outputs(outputs: Mapping[str, Optional[str]], inputs: Mapping[str, Optional[str]]) -> None:
+    """OutputPathError if an output (``{"--tracks": path}``; None = not written) names an input (same shape)
+    or another output."""
+    given_in = [(name, Path(p)) for name, p in inputs.items() if p]
+    seen: list[tuple[str, Path]] = []
+    for name, path in outputs.items():
+        if not path:
+            continue
+        out = Path(path)
+        for other, p in given_in + seen:
+            if _same(out, p):
+                kind = "an output" if (other, p) in seen else "an input"
+                raise OutputPathError(f"{name} {short_path(path)}: is {other} ({short_path(p)}), {kind} of "
+                                      f"this run; writing it would destroy it: give another path")
+        seen.append((name, out))
+
+
+def partial_path(path: str) -> Path:
+    """The temporary file an output is written to before it is renamed into place."""
+    p = Path(path)
+    return p.with_name(f".{p.stem}.partial-{os.getpid()}{p.suffix}")
+
+
+@contextlib.contextmanager
+def written_whole(path: Optional[str]) -> Iterator[Optional[str]]:
+    """The path to write ``path``'s content to; renamed to ``path`` when the block ends without an error,
+    removed when it raises. None passes through (no output)."""
+    if not path:
+        yield None
+        return
+    tmp = partial_path(path)
+    try:
+        yield str(tmp)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    if tmp.exists():
+        os.replace(tmp, path)
