@@ -29,10 +29,10 @@ def test_the_two_cars_ahead_are_tracked_and_few_other_tracks_born(tme08):
 
 
 def test_every_cascade_box_may_start_a_vehicle_when_asked(tme08):
-    """birth_min_appearance 0 and high_score 0 (every box starts a vehicle) give far more confirmed tracks on the
-    same sequence: those keys are what hold them down."""
+    """birth_min_appearance 0, high_score 0 and birth_lanes_beside 4 (every box starts a vehicle) give far more
+    confirmed tracks on the same sequence: those keys are what hold them down."""
     frames, fps, values = tme08
-    cfg = road_motion.core_config({**values, "phd": {"birth_min_appearance": 0.0, "high_score": 0.0}})
+    cfg = road_motion.core_config({**values, "phd": {"birth_min_appearance": 0.0, "high_score": 0.0, "birth_lanes_beside": 4}})
     assert road_motion.track_continuity(frames, cfg, fps)["ids"] >= 20
 
 

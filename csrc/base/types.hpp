@@ -89,6 +89,14 @@ struct LaneModel {
 
     // Ego lane width in pixels at row y, NaN when unknown.
     float lane_width_px(float y) const { return ego_right.x_at(y) - ego_left.x_at(y); }
+    // Whether a point (u, y) lies on the ego lane or within `lanes_beside` ego-lane widths of it; true when the
+    // model does not say (not valid, or no width at that row).
+    bool near_ego_lane(float u, float y, int lanes_beside) const {
+        const float l = ego_left.x_at(y), r = ego_right.x_at(y);
+        if (!valid || !std::isfinite(l) || !std::isfinite(r) || !(r > l)) return true;
+        const float w = r - l;
+        return u >= l - float(lanes_beside) * w && u <= r + float(lanes_beside) * w;
+    }
 };
 
 // A vehicle as a tracker reports it.

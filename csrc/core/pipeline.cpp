@@ -72,8 +72,9 @@ FrameOutput Pipeline::process(const Frame &frame) {
         const bool first = !std::isfinite(prev_t_s_);
         lanes_.update(frame.gray, out.lanes, last_tracks_);
         // Nothing tracked yet: the first frame is a single image, and gets the single image's lane model, so that
-        // its detections are exactly what `headway detect` finds in it (run_stage "detect").
-        if (first) out.lanes = detect_lanes(frame.gray, cfg_.lanes, cfg_.camera);
+        // its detections are exactly what `headway detect` finds in it (run_stage "detect"). Not when the camera's
+        // mounting is yet to be found (self_calibration.from_scratch): the lane tracker's wide search is needed.
+        if (first && !cfg_.self_calibration.from_scratch) out.lanes = detect_lanes(frame.gray, cfg_.lanes, cfg_.camera);
         out.times.add("lanes", sw.ms());
     }
     if (parts_.tracker) {

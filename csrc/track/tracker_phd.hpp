@@ -77,6 +77,7 @@ struct PhdTrackerParams {
     int confirm_hits = 2;              // detections before a vehicle is confirmed
     double birth_min_appearance = 0.9;  // a learned detection scoring under this starts no vehicle (it may still
                                         // re-anchor one); others are not affected
+    int birth_lanes_beside = 2;        // lanes; a detection farther beside the ego lane starts no vehicle
     int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
     int coast_frames = 3;              // frames a confirmed vehicle whose features were lost (eq. 12) is carried by
                                        // its UKF alone before it ends (0 = it ends at once, the paper's rule)

@@ -118,11 +118,11 @@ DETECTION_SCENES = {"steady_following": 60, "dense_traffic": 40, "cut_in": 40, "
 
 def found_by_the_cascade(look: str) -> tuple[int, int]:
     """(found, of): sprite-drawn cars and vans within 60 m, half visible or more, at least 20 px high, on every
-    DETECTION_SCENES[name]-th frame, that the core's cascade stage (as `headway detect --detector cascade`) finds at
+    DETECTION_SCENES[name]-th frame, that the paper004 detection stage (as `headway detect --preset paper004`) finds at
     its operating point with IoU >= 0.5."""
     from app import config as configuration
     from app.core import Pipeline
-    from app.detect_images import OPERATING_POINT, STAGES, detector_config
+    from app.detect_images import OPERATING_POINT, detector_config
     from app.eval.matching import iou_matrix
     from app.sim import frame_count
     from app.sim.frames import scenario_camera
@@ -130,12 +130,12 @@ def found_by_the_cascade(look: str) -> tuple[int, int]:
     found = total = 0
     for name, step in DETECTION_SCENES.items():
         scenario = dataclasses.replace(load_scenario(name), vehicle_look=look)
-        cfg = detector_config(None, "cascade")
+        cfg = detector_config(None, "paper004")
         cfg["camera"].update(dataclasses.asdict(scenario_camera(scenario)))
         with Pipeline(configuration.core_sections(cfg)) as pipe:
             for frame in render(scenario, frames=range(0, frame_count(scenario), step)):
-                result = pipe.run_stage(STAGES["cascade"], frame.image)
-                boxes = [t.box for t in result.tracks if t.confidence >= OPERATING_POINT["cascade"]]
+                result = pipe.run_stage("detect", frame.image)
+                boxes = [d[:4] for d in result.detections if d[4] >= OPERATING_POINT["paper004"]]
                 for v in frame.truth:
                     if (v["kind"] != "truck" and v["longitudinal_m"] <= 60 and v["visible_fraction"] >= 0.5
                             and v["box"][3] - v["box"][1] >= 20):
