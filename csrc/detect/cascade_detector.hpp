@@ -110,8 +110,8 @@ struct CascadeParams {
               "true = the CNN verifier is run by cv::dnn, the reference, instead of their "
               "own forward pass (detect/verifier_net.hpp: the trainer's architecture in AVX2 loops with Winograd "
               "convolutions, plain loops without AVX2, compared with cv::dnn when the file is loaded; answers within 1e-5 "
-              "on real crops). Measured side by side with cv::dnn (docs/PERFORMANCE.md, session 14): the fused bench's "
-              "cascade stage at 640x480 35.0 -> 18.6 ms median, `headway detect` 88 -> 43 ms CPU per 1280x720 JPEG. For "
+              "on real crops). Measured side by side with cv::dnn (docs/PERFORMANCE.md): the cascade stage at 640x480 "
+              "35.0 -> 18.6 ms median, `headway detect` 88 -> 43 ms CPU per 1280x720 JPEG. For "
               "tests and comparison; a network of another form (channel counts not multiples of 8) is run by cv::dnn "
               "either way");
         m.add("group_iou", group_iou, 0.05, 0.95,
@@ -158,8 +158,8 @@ struct CascadeParams {
         m.add("verify_mirrored", verify_mirrored,
               "true = the CNN verifier also judges the mirror image of each crop it believes (mirror_min_p) and "
               "averages the two answers (probability and box offsets): a vehicle from behind is nearly symmetric and "
-              "the network was trained on crops mirrored at random. Held-out training images (docs/cascade.md, session "
-              "10), best recall at precision 0.85 with rejudge_move 0.5: fused 0.664 against 0.655 without, cascade "
+              "the network was trained on crops mirrored at random. Held-out training images (docs/cascade.md, "
+              "verify_mirrored), best recall at precision 0.85 with rejudge_move 0.5: fused 0.664 against 0.655 without, cascade "
               "0.669 against 0.654. A HOG verifier judges the crop as it is");
         m.add("mirror_min_p", mirror_min_p, 0.0, 1.0,
               "probability; with verify_mirrored only the crops the plain look gives at least this are judged "
