@@ -83,6 +83,16 @@ def test_corrupt_image_in_folder_is_a_decode_event(tmp_path):
     assert [r.frame for r in results] == [0, 2] and "decode_error" in results[1].events
 
 
+def test_a_folders_decode_event_is_reported_with_the_next_frame_only(tmp_path):
+    for i in range(6):
+        cv2.imwrite(str(tmp_path / f"{i:03d}.png"), np.zeros((480, 640), np.uint8))
+    (tmp_path / "001.png").write_bytes(b"\x89PNG garbage")
+    results, health = play({"kind": "folder", "path": str(tmp_path), "fps": 10.0})
+    assert [r.frame for r in results] == [0, 2, 3, 4, 5]
+    assert [sorted(r.events) for r in results] == [[], ["decode_error"], [], [], []]
+    assert health["decode_errors"] == 1
+
+
 def test_truncated_jpeg_in_folder_is_a_decode_event_not_a_grey_frame(tmp_path):
     """libjpeg decodes a cut file into a half-grey image and reports success; the folder source must not."""
     rng = np.random.default_rng(14)

@@ -88,6 +88,7 @@ void RealtimeLoop::run_frames() {
             source_state_ = SourceState::kRunning;
             continue;
         }
+        frame.events = 0;  // the frame is reused: only what happened before this one may be reported with it
         const ReadStatus st = source_->read(frame);
         switch (st) {
         case ReadStatus::Again: continue;
