@@ -5,6 +5,7 @@ summary that compares what was tracked with the truth.
 """
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -15,7 +16,15 @@ from app.sim.sprites import patches_problem
 DEMO_SCENARIO = "cut_in"
 
 
-def main(args) -> int:
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("demo", help="render the built-in scenario, run the full pipeline, write ./headway-demo/")
+    s.add_argument("--out", default="headway-demo", help="output folder (default ./headway-demo)")
+    s.add_argument("--scenario", default=DEMO_SCENARIO, help=argparse.SUPPRESS)
+    s.add_argument("--config", default=None, help=argparse.SUPPRESS)
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     counts = {"truth": 0, "found": 0}

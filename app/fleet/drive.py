@@ -26,7 +26,7 @@ from typing import Optional
 
 import yaml
 
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
 from app.fleet.manifest import Drive, code_version
 
 def drive_dir(out: str | Path, name: str) -> Path:
