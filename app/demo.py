@@ -10,10 +10,15 @@ import json
 from pathlib import Path
 
 from app.eval.matching import iou_matrix
+from app.output_files import check_outputs, folder_outputs
 from app.replay import replay_scenario
 from app.sim.sprites import patches_problem
 
 DEMO_SCENARIO = "cut_in"
+
+
+# What the demo writes into its folder.
+WRITTEN = ("annotated.mp4", "tracks.jsonl", "truth.jsonl", "can_out.log", "summary.txt")
 
 
 def add_parser(subparsers) -> None:
@@ -25,6 +30,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
+    check_outputs(folder_outputs("--out", args.out, WRITTEN), {"--scenario": args.scenario, "--config": args.config})
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     counts = {"truth": 0, "found": 0}
@@ -52,5 +58,5 @@ def run(args) -> int:
                           f"{counts['truth']} vehicle-frames ({recall:.0%})")
     (out / "summary.txt").write_text(summary + "\n")
     print(summary)
-    print(f"\nDemo written to {out.resolve()}/ (annotated.mp4, tracks.jsonl, truth.jsonl, can_out.log, summary.txt)")
+    print(f"\nDemo written to {out.resolve()}/ ({', '.join(WRITTEN)})")
     return 0

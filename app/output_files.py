@@ -52,6 +52,14 @@ def numbered(name: str, paths: Iterable[Optional[str]]) -> dict[str, Optional[st
     return {f"{name} {i + 1}": p for i, p in enumerate(paths)}
 
 
+def folder_outputs(option: str, folder: Optional[str], names: Iterable[str]) -> dict[str, Optional[str]]:
+    """An output folder and the files a command writes into it, in ``check_outputs``' form: the folder must
+    not be an input, nor may any of those files (an input kept where the command writes)."""
+    if not folder:
+        return {}
+    return {option: folder, **{f"{option}'s {name}": str(Path(folder) / name) for name in names}}
+
+
 def partial_path(path: str) -> Path:
     """The temporary file an output is written to before it is renamed into place."""
     p = Path(path)

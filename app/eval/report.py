@@ -17,8 +17,12 @@ from app.eval import (compare, fcw_scenarios, lane_clips, lanes_sample, range_cl
                       synthetic, tusimple_boxes)
 from app.eval.compare import figure as _f
 from app.fleet.engine import map_ordered
+from app.output_files import check_outputs, folder_outputs
 
 PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion", "real_fcw", "cost")
+# What one preset's run writes into its folder, and what several presets' comparison adds beside their folders.
+RUN_FILES = ("report.json", "report.md", "lanes_sample_pred.json", "lane_clips_pred.json", "examples")
+COMPARE_FILES = ("compare.md", "compare.json")
 
 
 def markdown(report: dict) -> str:
@@ -268,6 +272,9 @@ def run(args) -> int:
         raise ValueError(f"--workers {args.workers}: need at least one worker")
     scenarios = args.scenarios.split(",") if args.scenarios else None
     out = Path(args.out or f"reports/eval-{'-'.join(presets)}")
+    written = RUN_FILES if len(presets) == 1 else \
+        COMPARE_FILES + tuple(presets) + tuple(f"{p}/{name}" for p in presets for name in RUN_FILES)
+    check_outputs(folder_outputs("--out", str(out), written), {"--config": args.config, "--data": args.data})
     if len(presets) == 1:
         report = evaluate(presets[0], str(out), parts, args.data, args.config, scenarios, workers=args.workers,
                      scheduler=args.scheduler)

@@ -11,12 +11,18 @@ from typing import Optional
 from app.fleet import compare, engine, report
 from app.fleet.drive import drive_dir, is_done, load_row, partial_prefix, run_drive
 from app.fleet.manifest import code_version, drive_key, load_manifest
+from app.output_files import check_outputs, folder_outputs
 
 
 def run_fleet(manifest: str, out: str, scheduler: Optional[str] = None, workers: Optional[int] = None,
               config: Optional[str] = None, progress: bool = True) -> dict:
     """Replay the manifest's drives into OUT/drives/NAME/ and write OUT/report.json and report.md."""
     drives = load_manifest(manifest, config)
+    inputs = {"the manifest": manifest, "--config": config}
+    for d in drives:
+        inputs |= {f"drive {d.name}'s {what}": p for what, p in (("source", d.source), ("can_in", d.can_in),
+                                                               ("truth", d.truth)) if p and p != "scenario"}
+    check_outputs(folder_outputs("--out", out, ("report.json", "report.md", "drives")), inputs)
     outp = Path(out)
     (outp / "drives").mkdir(parents=True, exist_ok=True)
     _clear_partials(outp, [d.name for d in drives])

@@ -6,7 +6,9 @@ import sys
 
 from tqdm import tqdm
 
+from app.output_files import check_outputs, folder_outputs
 from app.sim import load_scenario, write_scenario
+from app.sim.writer import WRITTEN
 
 
 def add_parser(subparsers) -> None:
@@ -18,6 +20,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
+    check_outputs(folder_outputs("--out", args.out, WRITTEN), {"the scenario": args.scenario})
     sc = load_scenario(args.scenario)
     with tqdm(total=None, desc=sc.name, unit="frame", file=sys.stderr, disable=not sys.stderr.isatty(),
               leave=False) as bar:

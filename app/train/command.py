@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from app import config as configuration
 from app.eval.tusimple_boxes import tusimple_config
+from app.output_files import check_outputs, numbered
 from app.train import proposals, verifier, verifier_cnn
 from app.train.cascade import TrainParams, train
 
@@ -124,8 +125,19 @@ def add_parser(subparsers) -> None:
     t.set_defaults(run=run_verifier)
 
 
+def _keep_inputs(args) -> None:
+    """OutputPathError if an output names a training input (a folder, its annotations, the model resumed or
+    judged, the configuration) or another output."""
+    # the cache is read when present and written when absent: it may be neither an input nor another output
+    check_outputs({"--out": args.out, "--log": getattr(args, "log", None), "--cache": getattr(args, "cache", None)},
+                  {**numbered("--data folder", args.data),
+                   **{f"--data folder {i + 1}'s annotation.json": f"{d}/annotation.json" for i, d in enumerate(args.data)},
+                   **{opt: getattr(args, opt[2:], None) for opt in ("--resume", "--cascade", "--config")}})
+
+
 def run_cascade(args) -> int:
     """The Viola-Jones trainer (app/train/cascade, independent of the rest of app)."""
+    _keep_inputs(args)
     w, h = args.window
     p = TrainParams(width=w, height=h, stages=args.stages, num_pos=args.num_pos, num_neg=args.num_neg,
                     features=args.features, min_hit_rate=args.min_hit_rate, max_false_alarm=args.max_false_alarm,
@@ -144,6 +156,7 @@ def run_cascade(args) -> int:
 
 def run_proposals(args) -> int:
     """The learned first stage (detector part proposals)."""
+    _keep_inputs(args)
     if args.epochs < 1 or args.batch < 1 or args.threads < 1 or args.input_width < 16:
         raise ValueError(f"--epochs {args.epochs} --batch {args.batch} --threads {args.threads} --input-width "
                          f"{args.input_width}: give at least 1 epoch, 1 image a batch, 1 thread and 16 px")
@@ -159,6 +172,7 @@ def run_proposals(args) -> int:
 
 def run_verifier(args) -> int:
     """The convolutional verifier run by cv::dnn in the core (--out X.onnx), or HOG + one hidden layer."""
+    _keep_inputs(args)
     cfg = configuration.load(args.config) if args.config else tusimple_config(configuration.load(None))
     if args.out.endswith(".onnx"):
         log = _line_logger(args.log)
