@@ -25,6 +25,7 @@ order as ONNX's Flatten of NCHW.
 """
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 CROP_W, CROP_H = 48, 32   # px: the cascade's aspect 1.5; a 40 px box (the scored band's smallest) at ~1:1
@@ -59,8 +60,6 @@ def area_cells(ii: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray
 def crop_boxes(gray: np.ndarray, boxes, margin: float = MARGIN) -> np.ndarray:
     """(n, CROP_H, CROP_W) uint8: every box (left, top, right, bottom) with its margin, border replicated."""
     out = np.zeros((len(boxes), CROP_H, CROP_W), np.uint8)
-    import cv2
-
     ii = None
     for i, (l, t, r, b) in enumerate(np.asarray(boxes, float).reshape(-1, 4)):
         mx, my = margin * (r - l), margin * (b - t)
