@@ -174,6 +174,7 @@ def batch_arrays(images, boxes, idx, rng, aug: bool):
 def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3, decay: float = 1e-5,
         width: int = po.WIDTH, blocks: int = po.BLOCKS, on_epoch: Callable[[int, dict, float, float], None] | None = None) -> dict:
     """Parameters (numpy, proposals_onnx's names) fitted by Adam on the focal and box losses (module docstring)."""
+    # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax
     import jax.numpy as jnp
 

@@ -83,6 +83,7 @@ def blocks_of(params: dict) -> int:
 
 def forward_jax(p: dict, z):
     """(heat logits (n, 1, h, w), box (n, 4, h, w)) of the standardised input z (n, 1, H, W), in JAX."""
+    # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax.numpy as jnp
     from jax import lax
 
@@ -122,6 +123,7 @@ def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, mi
 def save_onnx(params: dict, path: str, doc: str = "") -> None:
     """Write the network as ONNX (opset 11): input `image` (1, 1, H, W) (any size: fully convolutional), outputs
     `heat` (1, 1, h, w) after the sigmoid and `box` (1, 4, h, w)."""
+    # onnx is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import onnx
     from onnx import TensorProto, helper, numpy_helper
 

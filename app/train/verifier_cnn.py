@@ -113,6 +113,7 @@ def fit(crops, extra, y, channels=(8, 16, 32), hidden=64, epochs=6, lr=2e-3, dec
     are ~90 % of the samples and most are easy, so an epoch costs about neg_share of a full one."""
     if not 0 < neg_share <= 1:
         raise ValueError(f"neg_share={neg_share}: a share in (0, 1]")
+    # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax
     import jax.numpy as jnp
     from jax import lax

@@ -143,6 +143,7 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
     the file (cv::dnn exposes no other way to carry a number in the file).
     The extra features' standardisation is folded into the dense layer: W_e' = scale_e W_e,
     b' = b - (mean_e scale_e) . W_e."""
+    # onnx is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import onnx
     from onnx import TensorProto, helper, numpy_helper
 
@@ -198,6 +199,7 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
 
 def load_onnx(path: str) -> dict:
     """The parameters of a verifier ONNX written by `save_onnx` (standardisation folded: mean 0, scale 1)."""
+    # onnx is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import onnx
     from onnx import numpy_helper
 
