@@ -15,7 +15,7 @@ import numpy as np
 
 from app.core import FrameResult, Track
 from app.fcw import FcwOutput
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
 
 # BGR
 _LANE = (0, 200, 255)

@@ -20,7 +20,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
+import yaml
+
+from app import calibrate_drive
+from app.output_files import check_outputs, numbered
 
 MIN_VIEWS = 3
 # Photos a pixel or two larger than the first are the same camera (Udacity's camera_cal has 1281x721
@@ -62,8 +67,6 @@ def parse_board(text: str) -> tuple[int, int]:
 
 def find_corners(gray: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
     """The board's inner corners refined to sub-pixel, (N, 2) row by row; None when not found."""
-    import cv2
-
     ok, corners = cv2.findChessboardCorners(gray, board, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
     if not ok:
         return None
@@ -75,8 +78,6 @@ def find_corners(gray: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
 
 def calibrate(paths: list[str], board: tuple[int, int]) -> Calibration:
     """Intrinsics from chessboard photos; ValueError naming the photos when it cannot be done."""
-    import cv2
-
     if not paths:
         raise ValueError("no chessboard images given")
     size = None
@@ -121,8 +122,6 @@ def _fit(obj: np.ndarray, corners: list[np.ndarray], size: tuple[int, int], boar
     distortion keeps that from showing up as reprojection error and bending the intrinsics (Udacity
     camera_cal, 16 views: RMS 0.83 px with the board taken as flat, 0.48 px released). The corner at the end
     of the first row stays fixed with the first corner (the scale)."""
-    import cv2
-
     pts = [c.astype(np.float32) for c in corners]
     rms, K, dist, rvecs, tvecs, new_obj = cv2.calibrateCameraRO([obj] * len(pts), pts, size, board[0] - 1,
                                                                None, None)[:6]
@@ -135,8 +134,6 @@ def _fit(obj: np.ndarray, corners: list[np.ndarray], size: tuple[int, int], boar
 
 def undistort(cal: Calibration, pts: np.ndarray) -> np.ndarray:
     """Image points (N, 2) without the lens distortion, in pixels of the same camera matrix."""
-    import cv2
-
     return cv2.undistortPoints(pts.reshape(-1, 1, 2).astype(np.float64), cal.K, cal.dist, P=cal.K).reshape(-1, 2)
 
 
@@ -155,20 +152,31 @@ def row_straightness(corners: np.ndarray, board: tuple[int, int]) -> float:
 
 
 def write_yaml(cal: Calibration, out: str | Path) -> None:
-    import yaml
-
     text = (f"# headway calibrate: {len(cal.used)} views, RMS reprojection error {cal.rms_px:.3f} px\n"
             "# the mounting (height_m, pitch_deg, yaw_deg) is not measured by a chessboard: set it separately\n")
     text += yaml.safe_dump({"camera": cal.camera_section()}, sort_keys=False)
     Path(out).write_text(text)
 
 
-def main(args) -> int:
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("calibrate", help="camera intrinsics and lens distortion from chessboard photos, or the "
+                                         "mounting (pitch, yaw, height) from a drive (--from-video) -> YAML")
+    s.add_argument("images", nargs="*", help="chessboard photos from the camera, the board in different poses")
+    s.add_argument("--board", default="9x6", help="inner corners per row x per column (default 9x6)")
+    s.add_argument("--from-video", metavar="CLIP",
+                   help="a drive on a marked road (video file or image folder): self-calibration's pitch, yaw and "
+                        "height with their sigmas, written into the camera section of --config's copy")
+    s.add_argument("--config", help="with --from-video: the configuration with the camera's intrinsics (and height)")
+    s.add_argument("--fps", type=float, help="with --from-video: an image folder's frame rate")
+    s.add_argument("--out", required=True, help="write the configuration here (.yaml)")
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
+    check_outputs({"--out": args.out}, {**numbered("input", args.images), "--config": args.config})
     if args.from_video:
         if args.images:
             raise ValueError("give chessboard photos or --from-video CLIP, not both")
-        from app import calibrate_drive
-
         return calibrate_drive.main(args)
     if not args.images:
         raise ValueError("give chessboard photos (intrinsics) or --from-video CLIP (the mounting from a drive)")

@@ -11,6 +11,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
+import yaml
+
+from app.replay import replay_recording
 from app.safe_yaml import load_yaml
 
 STATES_USABLE = ("converged", "learning")  # an estimate at a bound or switched off is not written
@@ -23,8 +26,6 @@ class DriveCalibrationError(ValueError):
 def calibrate_drive(clip: str, config_path: Optional[str] = None, fps: Optional[float] = None) -> dict:
     """Self-calibration's estimate at the end of `clip`: {pitch_deg, yaw_deg, height_m, *_sigma_*, updates, state,
     frames, converged_frame (first frame in the converged state, or None)}."""
-    from app.replay import replay_recording
-
     seen: dict = {"frames": 0, "converged_frame": None, "last": None}
 
     def keep(r, _decision, _truth):
@@ -47,8 +48,6 @@ def calibrate_drive(clip: str, config_path: Optional[str] = None, fps: Optional[
 
 def write_config(est: dict, out: str, config_path: Optional[str], clip: str) -> None:
     """A copy of `config_path` (or an empty configuration) with the estimate in its camera section."""
-    import yaml
-
     cfg = (load_yaml(Path(config_path).read_text()) if config_path else None) or {}  # checked by the replay
     cam = cfg.setdefault("camera", {})
     cam.update(pitch_deg=round(est["pitch_deg"], 3), yaw_deg=round(est["yaw_deg"], 3),

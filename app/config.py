@@ -18,12 +18,12 @@ from typing import Any, Optional, Union
 import yaml
 
 from app.can.config_schema import CAN_SCHEMA
+from app.contracts.config_key import key as _key
+from app.contracts.health_config import HEALTH_SCHEMA
 from app.core import core_moved_keys, core_presets, core_removed_presets, core_schema
 from app.fcw import FCW_SCHEMA
 from app.recording import FPS_MAX, FPS_MIN
 from app.safe_yaml import YamlLimitError, key_lines, load_yaml, short, short_name, short_path
-from app.schema import key as _key
-from app.supervisor.health import HEALTH_SCHEMA
 
 
 class ConfigFileError(ValueError):

@@ -16,6 +16,13 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from app import config as configuration
+from app.can import CanBusError, VehicleInputError
+from app.can.bus import bus_from_config
+from app.can.log_replay import CanLogError, channel_map
+from app.can.vehicle_input import specs_from_config
+from app.core import CoreError, Pipeline
+from app.output_files import OutputPathError, check_outputs
+from app.recording import folder_images, is_image_file
 from app.safe_yaml import short_path as _short_path
 
 QUOTE_PATH_CHARS = 40  # a path in a problem line is quoted by its last this many characters: the line stays short
@@ -85,8 +92,6 @@ def output_problem(path: str, make_folders: bool) -> Optional[str]:
 
 def _core(cfg: dict) -> Optional[str]:
     """The pipeline the service builds first: every section and model file as the core reads them."""
-    from app.core import CoreError, Pipeline
-
     cascade = cfg.get("cascade", {})
     for key in MODEL_KEYS:
         value = cascade.get(key, "")
@@ -102,10 +107,6 @@ def _core(cfg: dict) -> Optional[str]:
 
 
 def _vehicle(cfg: dict) -> Optional[str]:
-    from app.can import VehicleInputError
-    from app.can.log_replay import CanLogError, channel_map
-    from app.can.vehicle_input import specs_from_config
-
     veh = cfg["vehicle"]
     for key, value in veh.items():
         if (key == "dbc" or key.endswith("_dbc")) and value:
@@ -141,8 +142,6 @@ def _inputs(cfg: dict) -> dict[str, str]:
 
 
 def _files(cfg: dict) -> Optional[str]:
-    from app.output_files import OutputPathError, check_outputs
-
     out_log = cfg["can"]["output_log"]
     if out_log:
         if Path(out_log).suffix.lower() not in (".log", ".asc", ".blf"):
@@ -168,9 +167,6 @@ def _files(cfg: dict) -> Optional[str]:
 
 
 def _bus(cfg: dict) -> Optional[str]:
-    from app.can import CanBusError
-    from app.can.bus import bus_from_config
-
     if not cfg["can"]["enabled"]:
         return None
     try:
@@ -189,8 +185,6 @@ def _device_absent(src: dict) -> bool:
 
 def _source_path(cfg: dict) -> Optional[str]:
     """The source's path is what its kind needs."""
-    from app.recording import folder_images, is_image_file
-
     src = cfg["source"]
     kind, path = src["kind"], src["path"]
     if kind in ("video", "folder", "fifo"):
@@ -222,8 +216,6 @@ def _source_path(cfg: dict) -> Optional[str]:
 
 def _source_opens(cfg: dict, skip_absent_devices: bool = False) -> Optional[str]:
     """The source opens as the service opens it, and its frames have the size `camera` gives."""
-    from app.core import CoreError, Pipeline
-
     src, cam = cfg["source"], cfg["camera"]
     kind = src["kind"]
     key = "source.path" if kind in ("video", "folder", "fifo") else "source.device"

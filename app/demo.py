@@ -5,17 +5,32 @@ summary that compares what was tracked with the truth.
 """
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
 from app.eval.matching import iou_matrix
+from app.output_files import check_outputs, folder_outputs
 from app.replay import replay_scenario
 from app.sim.sprites import patches_problem
 
 DEMO_SCENARIO = "cut_in"
 
 
-def main(args) -> int:
+# What the demo writes into its folder.
+WRITTEN = ("annotated.mp4", "tracks.jsonl", "truth.jsonl", "can_out.log", "summary.txt")
+
+
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("demo", help="render the built-in scenario, run the full pipeline, write ./headway-demo/")
+    s.add_argument("--out", default="headway-demo", help="output folder (default ./headway-demo)")
+    s.add_argument("--scenario", default=DEMO_SCENARIO, help=argparse.SUPPRESS)
+    s.add_argument("--config", default=None, help=argparse.SUPPRESS)
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
+    check_outputs(folder_outputs("--out", args.out, WRITTEN), {"--scenario": args.scenario, "--config": args.config})
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     counts = {"truth": 0, "found": 0}
@@ -43,5 +58,5 @@ def main(args) -> int:
                           f"{counts['truth']} vehicle-frames ({recall:.0%})")
     (out / "summary.txt").write_text(summary + "\n")
     print(summary)
-    print(f"\nDemo written to {out.resolve()}/ (annotated.mp4, tracks.jsonl, truth.jsonl, can_out.log, summary.txt)")
+    print(f"\nDemo written to {out.resolve()}/ ({', '.join(WRITTEN)})")
     return 0

@@ -17,8 +17,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Optional
 
-from app.fcw_level import FcwLevel
-from app.schema import key as _key
+from app.contracts.config_key import key as _key
+from app.contracts.fcw_level import FcwLevel
+from app.contracts.ttc_source import TtcSource
 
 NONE, PREWARNING, WARNING = FcwLevel.NONE, FcwLevel.PREWARNING, FcwLevel.WARNING
 
@@ -108,7 +109,7 @@ class EgoState:
 class FcwOutput:
     level: FcwLevel
     ttc_used_s: Optional[float]
-    ttc_source: Optional[str]       # "range" | "range_accel" | "scale" | None
+    ttc_source: Optional[TtcSource]  # None: no TTC decided
     lead_id: Optional[int]
     lead_range_m: Optional[float]
     lead_range_rate_mps: Optional[float]
@@ -121,7 +122,8 @@ class FcwOutput:
 @dataclass
 class FcwStateMachine:
     params: FcwParams = field(default_factory=FcwParams)
-    ego_front_m: float = 2.0        # camera to bumper: range_m is from the camera
+    # camera to bumper (range_m is from the camera): the core's kinematics.ego_front_m, which owns it
+    ego_front_m: float = field(kw_only=True)
 
     def __post_init__(self) -> None:
         self.level = NONE
@@ -138,11 +140,11 @@ class FcwStateMachine:
         a = lead.range_accel_mps2
         return min(0.0, a) if (self.params.use_accel and a is not None) else 0.0
 
-    def _ttc(self, lead: Lead) -> tuple[Optional[float], Optional[str]]:
+    def _ttc(self, lead: Lead) -> tuple[Optional[float], Optional[TtcSource]]:
         """Once the range filter knows the range rate it decides (and says "not closing" with None);
         before that the scale-based TTC stands in."""
         if lead.range_rate_mps is not None:
-            ttc, src = lead.ttc_s, "range"
+            ttc, src = lead.ttc_s, TtcSource.RANGE
             a = self._accel(lead)
             if a < 0 and lead.range_m is not None:
                 # gap + v t + a t^2 / 2 = 0: the first contact with the closing speeding up
@@ -150,10 +152,10 @@ class FcwStateMachine:
                 v = lead.range_rate_mps
                 t_acc = (-v - math.sqrt(v * v - 2.0 * a * gap)) / a
                 if ttc is None or t_acc < ttc:
-                    ttc, src = t_acc, "range_accel"
+                    ttc, src = t_acc, TtcSource.RANGE_ACCEL
             return (ttc, src) if ttc is not None else (None, None)
         if self.params.use_scale_ttc and lead.ttc_scale_s is not None:
-            return lead.ttc_scale_s, "scale"
+            return lead.ttc_scale_s, TtcSource.SCALE
         return None, None
 
     def _required_decel(self, lead: Lead) -> Optional[float]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 from pathlib import Path
-from typing import Iterator, Mapping, Optional
+from typing import Iterable, Iterator, Mapping, Optional
 
 from app.safe_yaml import short_path
 
@@ -45,6 +45,19 @@ def check_outputs(outputs: Mapping[str, Optional[str]], inputs: Mapping[str, Opt
                 raise OutputPathError(f"{name} {short_path(path)}: is {other} ({short_path(p)}), {kind} of "
                                       f"this run; writing it would destroy it: give another path")
         seen.append((name, out))
+
+
+def numbered(name: str, paths: Iterable[Optional[str]]) -> dict[str, Optional[str]]:
+    """Several inputs of one kind in ``check_outputs``' form, named by their place: {"input 1": path, ...}."""
+    return {f"{name} {i + 1}": p for i, p in enumerate(paths)}
+
+
+def folder_outputs(option: str, folder: Optional[str], names: Iterable[str]) -> dict[str, Optional[str]]:
+    """An output folder and the files a command writes into it, in ``check_outputs``' form: the folder must
+    not be an input, nor may any of those files (an input kept where the command writes)."""
+    if not folder:
+        return {}
+    return {option: folder, **{f"{option}'s {name}": str(Path(folder) / name) for name in names}}
 
 
 def partial_path(path: str) -> Path:

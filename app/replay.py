@@ -18,12 +18,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator, Optional
 
+from tqdm import tqdm
+
 from app import config as configuration
 from app.annotate import VideoOut, annotate
+from app.can import CanLogError, CanSession, DbcError, VehicleInputError
+from app.contracts.fcw_level import FcwLevel
 from app.core import FrameResult, Pipeline
-from app.fcw_level import FcwLevel
 from app.output_files import check_outputs, written_whole
 from app.recording import RecordingError, open_recording
+from app.sim import ScenarioError, frame_count, list_scenarios, load_scenario, render
+from app.sim.can_log import write_ego_speed_log
+from app.sim.frames import scenario_camera
+from app.sim.world import World
+from app.supervisor.stack import Stack
 from app.tracks_file import TracksWriter
 
 SIM_DBC = Path(__file__).resolve().parent / "sim" / "ego_speed_placeholder.dbc"
@@ -90,25 +98,18 @@ def is_scenario(source: str) -> bool:
         return True
     if p.exists():
         return False
-    from app.sim import list_scenarios
-
     return source in list_scenarios()
 
 
 def _progress(total: Optional[int], desc: str, enabled: bool):
     if not enabled or not sys.stderr.isatty():
         return contextlib.nullcontext(None)
-    from tqdm import tqdm
-
     return tqdm(total=total, desc=desc, unit="frame", file=sys.stderr, leave=False)
 
 
 def _run(frames, cfg: dict, summary: ReplaySummary, n_frames: Optional[int], label: str,
          out_video: Optional[str], fps: float, tracks_path: Optional[str], can_in: Optional[str],
          can_out: Optional[str], on_result: Optional[Callable], progress: bool) -> ReplaySummary:
-    from app.can import CanLogError, CanSession, DbcError, VehicleInputError
-    from app.supervisor.stack import Stack
-
     with contextlib.ExitStack() as stack:
         # each output is written beside its place and renamed into it once the run is complete
         tracks_tmp, video_tmp, can_tmp = (stack.enter_context(written_whole(p)) for p in (tracks_path, out_video, can_out))
@@ -177,11 +178,6 @@ def replay_scenario(source: str, config_path: Optional[str] = None, out_video: O
                     overrides: Optional[dict] = None, vehicle_look: Optional[str] = None) -> ReplaySummary:
     """`overrides`: configuration values applied over the file's (same shape, e.g. {"pipeline": {"preset": ...}});
     `vehicle_look` ("real" or "plain") replaces the scenario's own."""
-    from app.sim import ScenarioError, frame_count, load_scenario, render
-    from app.sim.can_log import write_ego_speed_log
-    from app.sim.frames import scenario_camera
-    from app.sim.world import World
-
     try:
         scenario = load_scenario(source)
     except ScenarioError as exc:
@@ -203,6 +199,27 @@ def replay_scenario(source: str, config_path: Optional[str] = None, out_video: O
         frames = ((f.index, f.t_s, f.image, f.truth, None) for f in render(scenario))
         return _run(frames, cfg, summary, n, scenario.name, out_video, scenario.fps, tracks_path, can_in, can_out,
                     on_result, progress)
+
+
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("replay", help="run a video file, an image folder or a scenario through the pipeline")
+    s.add_argument("source", help="video file, image folder (give --fps) or scenario")
+    s.add_argument("--config", help="configuration YAML (default: built-in defaults)")
+    s.add_argument("--fps", type=float, help="frame rate of an image folder, or to override a video's own "
+                                              "(0.1 to 1000 frames/s)")
+    s.add_argument("--out-video", help="write an annotated video here (.mp4)")
+    s.add_argument("--tracks", help="write the tracks here (.jsonl, one line per frame)")
+    s.add_argument("--can-in", help="vehicle CAN log replayed on the frame clock (.log candump, .asc, .blf); "
+                                    "a scenario uses its own ego-speed log when not given")
+    s.add_argument("--can-out", help="write every CAN frame Headway sends here (.log, .asc or .blf)")
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
+    s = replay(args.source, config_path=args.config, fps=args.fps, out_video=args.out_video,
+               tracks_path=args.tracks, can_in=args.can_in, can_out=args.can_out)
+    print(s.text())
+    return 0
 
 
 def replay(source: str, **kw) -> ReplaySummary:

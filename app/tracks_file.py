@@ -18,7 +18,7 @@ import json
 from typing import IO, Optional
 
 from app.core import FrameResult
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
 
 
 def _r(x: Optional[float], nd: int = 2) -> Optional[float]:

@@ -20,7 +20,7 @@ from dataclasses import astuple, dataclass
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
 
 from .errors import FieldRangeError, PayloadLengthError, UnknownMessageError
 

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from app import annotate
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
 from app.replay import replay_recording, replay_scenario
 
 

@@ -9,7 +9,7 @@ import cantools
 import pytest
 
 from app.can import CanBusError, CanOutput, CanPacker, CanParser, CanSession, headway_database, open_bus
-from app.can.bench import fake_result
+from app.bench.can_output import fake_result
 from app.can.config_schema import defaults
 from tests.conftest import REPO
 

@@ -11,7 +11,7 @@ import can
 import pytest
 
 from app.can import CanOutput, CanSession, headway_database
-from app.can.bench import fake_result
+from app.bench.can_output import fake_result
 from app.can.config_schema import defaults
 from app.can.messages import CALIBRATION_STATES
 from app.can.vehicle_input import VehicleInput

@@ -55,7 +55,7 @@ def test_value_tables_name_the_states_and_levels():
 
 
 def test_fault_bits_are_the_health_registry_bit_for_bit():
-    faults = pytest.importorskip("app.supervisor.faults", reason="the health registry is not in this tree")
+    faults = pytest.importorskip("app.contracts.faults", reason="the health registry is not in this tree")
     status = headway_database().get_message_by_name("HW_STATUS")
     assert fault_names(headway_database()) == [f.name for f in sorted(faults.FAULTS, key=lambda f: f.bit)]
     for f in faults.FAULTS:

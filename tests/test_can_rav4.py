@@ -11,7 +11,7 @@ import random
 import pytest
 
 from app.can import CanLogReader, CanParser, CanSession, VehicleInput, headway_database
-from app.can.bench import fake_result
+from app.bench.can_output import fake_result
 from app.can.config_schema import defaults
 from tests.conftest import data_path
 

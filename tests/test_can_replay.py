@@ -16,7 +16,7 @@ import cantools
 import pytest
 
 from app.can import CanLogError, CanLogReader, CanOutput, CanParser, CanSession, headway_database
-from app.can.bench import fake_result
+from app.bench.can_output import fake_result
 from app.can.config_schema import defaults
 from tests.conftest import REPO
 

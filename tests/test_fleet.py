@@ -257,11 +257,11 @@ def test_manifest_suite_and_folder(world, tmp_path):
 
 def test_eval_synthetic_through_the_engine_matches_one_process(world, tmp_path):
     from app.eval import synthetic
-    from app.eval.report import run
+    from app.eval.report import evaluate
 
     scen = [str(world["root"] / "follow.yaml")]
     alone = synthetic.evaluate_suite("thesis", scen)
-    rep = run("thesis", str(tmp_path / "eval"), parts=("synthetic",), scenarios=scen, workers=1)
+    rep = evaluate("thesis", str(tmp_path / "eval"), parts=("synthetic",), scenarios=scen, workers=1)
     assert rep["synthetic"]["per_scenario"] == alone["per_scenario"]
     assert rep["synthetic"]["overall"] == alone["overall"]
     assert rep["synthetic"]["per_scenario"][scen[0]]["tp"] > 0

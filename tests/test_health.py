@@ -1,7 +1,7 @@
 """The health monitor: one overall state and fault bits from made-up inputs, second by second."""
 from __future__ import annotations
 
-from app.supervisor.faults import FAULTS, fault_bits, fault_names
+from app.contracts.faults import FAULTS, fault_bits, fault_names
 from app.supervisor.health import HealthMonitor, HealthParams
 
 

@@ -1,5 +1,6 @@
-"""One definition per concept (issue 11): the FCW level, the fault severities and overall states, the
-health parameters and the camera defaults are each written once, and everything else reads them.
+"""One definition per concept: the FCW level, the TTC source, the fault severities and overall states, the
+health parameters, the camera defaults and the camera-to-bumper distance are each written once, and
+everything else reads them.
 
 The pins check each definition against the other form that must agree with it (the C header, the DBC,
 the configuration schema, the core's described defaults); the source scan fails when a level or a
@@ -16,11 +17,15 @@ from pathlib import Path
 
 import pytest
 
+from app.can import CanPacker, CanParser
 from app.can.database import headway_database
+from app.can.messages import fcw_signals, ttc_of
+from app.contracts import faults as registry
+from app.contracts.fcw_level import FcwLevel
+from app.contracts.ttc_source import TtcSource
 from app.core import core_schema
-from app.fcw_level import FcwLevel
+from app.fcw import Lead
 from app.sim.camera import CAMERA_KEYS, Camera, default_camera
-from app.supervisor import faults as registry
 from app.supervisor.health import HEALTH_SCHEMA, HealthMonitor, HealthParams
 from tests.conftest import REPO
 
@@ -32,7 +37,7 @@ HEADER = REPO / "csrc" / "include" / "headway.h"
 def test_fcw_level_is_the_c_enum_of_headway_h():
     enum = re.search(r"typedef\s+enum\s*\{([^}]*)\}\s*hw_fcw_level\s*;", HEADER.read_text())
     if enum is None:
-        pytest.skip("headway.h no longer declares hw_fcw_level: app/fcw_level.py is then the only definition")
+        pytest.skip("headway.h no longer declares hw_fcw_level: app/contracts/fcw_level.py is then the only definition")
     c_levels = {name: int(value) for name, value in re.findall(r"HW_FCW_(\w+)\s*=\s*(\d+)", enum.group(1))}
     assert c_levels == {m.name: m.value for m in FcwLevel}
     from app._headway_core import lib  # the built core says the same
@@ -50,6 +55,45 @@ def test_the_mcu_link_sends_the_same_levels():
     from firmware_bridge.messages import FcwWarning
     assert WarningLevel is FcwLevel
     assert [FcwWarning(m).fields()[0] for m in FcwLevel] == [0, 1, 2]
+
+
+# ---- the TTC source -----------------------------------------------------------------------------------
+
+def test_hw_fcw_ttc_source_table_is_the_enum_in_order():
+    signal = headway_database().get_message_by_name("HW_FCW").get_signal_by_name("TTC_SOURCE")
+    assert {int(k): str(v) for k, v in signal.choices.items()} == {s.raw: s.value for s in TtcSource}
+    assert (signal.minimum, signal.maximum) == (0, len(TtcSource) - 1)
+
+
+@pytest.mark.parametrize("source", list(TtcSource))
+def test_each_ttc_source_reaches_the_wire_as_its_raw_value(source):
+    sent = fcw_signals(FcwLevel.WARNING, True, 1.5, source)
+    assert sent["TTC_SOURCE"] == source.raw
+    db = headway_database()
+    frame = CanPacker(db).pack("HW_FCW", sent)
+    name, values = CanParser(db).update(frame)
+    assert name == "HW_FCW" and values["TTC_SOURCE"] == source.raw
+    choices = db.get_message_by_name("HW_FCW").get_signal_by_name("TTC_SOURCE").choices
+    assert str(choices[values["TTC_SOURCE"]]) == source.value
+
+
+def test_the_state_machine_and_the_can_fallback_name_their_sources_from_the_enum():
+    from app.fcw import FcwStateMachine
+
+    closing = Lead(id=1, range_m=30.0, range_rate_mps=-10.0, ttc_s=2.8, ttc_scale_s=3.0, range_accel_mps2=-3.0)
+    assert FcwStateMachine(ego_front_m=2.0)._ttc(closing)[1] is TtcSource.RANGE_ACCEL
+    steady = dataclasses.replace(closing, range_accel_mps2=0.0)
+    assert FcwStateMachine(ego_front_m=2.0)._ttc(steady)[1] is TtcSource.RANGE
+    assert ttc_of(None) == (None, TtcSource.NONE)
+
+
+def test_the_fcw_takes_the_bumper_distance_from_the_core_and_the_sim_ego_agrees_by_default():
+    from app.fcw import FcwStateMachine
+    from app.sim.scenario import EgoSpec
+
+    with pytest.raises(TypeError, match="ego_front_m"):
+        FcwStateMachine()   # no default of its own: the service passes kinematics.ego_front_m
+    assert EgoSpec(speed_kmh=0.0).front_m == core_schema()["kinematics"]["ego_front_m"]["default"]
 
 
 # ---- fault severities and the overall state ----------------------------------------------------------
@@ -200,7 +244,7 @@ PATTERNS = [
      re.compile(rf"[\"'](?:{_FAULT_NAMES})[\"']\s*,\s*[\"'](?:{_FAULT_NAMES})[\"']")),
 ]
 # The one definition of each: the scan does not look there.
-DEFINITIONS = {Path("app/fcw_level.py"), Path("app/supervisor/faults.py")}
+DEFINITIONS = {Path("app/contracts/fcw_level.py"), Path("app/contracts/faults.py")}
 
 
 def _code_lines(text: str) -> list[tuple[int, str]]:
@@ -231,7 +275,7 @@ def _product_sources(root: Path):
 
 def test_no_fcw_level_or_severity_is_written_outside_its_one_definition():
     found = [f"{rel}:{n}: {what}: {line}" for rel, text in _product_sources(REPO) for n, what, line in scan(text)]
-    assert not found, "written again outside app/fcw_level.py / app/supervisor/faults.py:\n" + "\n".join(found)
+    assert not found, "written again outside app/contracts/fcw_level.py / app/contracts/faults.py:\n" + "\n".join(found)
 
 
 # Lines of the code before issue 11 (each wrote a level or a severity again), and lines that are not.

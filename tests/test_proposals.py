@@ -152,7 +152,7 @@ def test_a_file_that_is_not_a_proposal_network_is_refused_by_name(tmp_path):
 def test_image_bench_times_the_network_and_its_verifier_apart(tmp_path):
     """`headway bench --images DIR --config C` with C's pipeline {detectors: [proposals]} times the part's two stages,
     "proposals" (the network, its decoding and road checks) and "prop_verifier", inside the core's whole stage."""
-    from app.bench import run_image_bench
+    from app.bench.pipeline import run_image_bench
 
     images = data_path("tusimple", "supp", "images")
     (tmp_path / "p.yaml").write_text("pipeline: {detectors: [proposals], tracker: kalman}\n")

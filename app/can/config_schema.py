@@ -9,7 +9,7 @@ Vehicle inputs are flat: for each input NAME in INPUTS, ``NAME_message`` (empty 
 """
 from __future__ import annotations
 
-from app.schema import key
+from app.contracts.config_key import key
 
 INTERFACES = ("socketcan|virtual|slcan|socketcand|pcan|kvaser|vector|ixxat|gs_usb|neovi|nican|nixnet|"
               "iscan|systec|usb2can|cantact|canalystii|seeedstudio|robotell|serial|udp_multicast|etas|neousys")

@@ -10,12 +10,12 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Mapping, Optional
 
-from app.fcw_level import FcwLevel
-from app.supervisor.faults import FAULT, FAULTS, STATES
+from app.contracts.fcw_level import FcwLevel
+from app.contracts.faults import FAULT, FAULTS, STATES
+from app.contracts.ttc_source import TtcSource
 
 from .database import wire_id
 
-TTC_SOURCES = ("none", "range", "scale", "range_accel")
 # Faults of severity "fault" in the health registry: Headway cannot warn the driver reliably.
 FATAL_FAULTS = frozenset(f.name for f in FAULTS if f.severity == FAULT)
 
@@ -28,25 +28,25 @@ def _num(x: Any) -> Optional[float]:
 
 
 def fcw_signals(level: int = FcwLevel.NONE, available: bool = False, ttc_s: Optional[float] = None,
-                ttc_source: str = "none", lead: Any = None) -> dict:
+                ttc_source: str = TtcSource.NONE, lead: Any = None) -> dict:
     """HW_FCW. ``level`` is forced to none when FCW is not available: no warning without its inputs."""
     if not available:
         level = FcwLevel.NONE
     return {"FCW_LEVEL": int(level), "FCW_AVAILABLE": int(bool(available)),
-            "TTC_SOURCE": TTC_SOURCES.index(ttc_source) if _num(ttc_s) is not None else 0,
+            "TTC_SOURCE": TtcSource(ttc_source).raw if _num(ttc_s) is not None else TtcSource.NONE.raw,
             "TTC_USED_S": _num(ttc_s),
             "LEAD_RANGE_M": _num(getattr(lead, "range_m", None)),
             "LEAD_RANGE_RATE_MPS": _num(getattr(lead, "range_rate_mps", None)),
             "LEAD_ID": wire_id(getattr(lead, "id", None))}
 
 
-def ttc_of(lead: Any) -> tuple[Optional[float], str]:
-    """(TTC, source) of a lead: range-based when available, else scale-based, else (None, 'none')."""
-    for attr, source in (("ttc_s", "range"), ("ttc_scale_s", "scale")):
+def ttc_of(lead: Any) -> tuple[Optional[float], TtcSource]:
+    """(TTC, source) of a lead: range-based when available, else scale-based, else (None, NONE)."""
+    for attr, source in (("ttc_s", TtcSource.RANGE), ("ttc_scale_s", TtcSource.SCALE)):
         ttc = _num(getattr(lead, attr, None))
         if ttc is not None:
             return ttc, source
-    return None, "none"
+    return None, TtcSource.NONE
 
 
 def lead_signals(lead: Any) -> dict:

@@ -23,8 +23,9 @@ from typing import Any, Mapping, Optional, Union
 
 import can
 
-from app.fcw_level import FcwLevel
-from app.supervisor.faults import overall_state
+from app.contracts.fcw_level import FcwLevel
+from app.contracts.faults import overall_state
+from app.contracts.ttc_source import TtcSource
 
 from . import messages as hm
 from .bus import CanOutput, bus_from_config
@@ -228,7 +229,7 @@ class CanSession:
         available = get("available")
         ttc = get("ttc_s")
         f = hm.fcw_signals(get("level", FcwLevel.NONE), speed_ok if available is None else available,
-                           get("ttc_used_s") if ttc is None else ttc, get("ttc_source") or "none", lead)
+                           get("ttc_used_s") if ttc is None else ttc, get("ttc_source") or TtcSource.NONE, lead)
         self.scheduler.update("fcw", [("HW_FCW", f)], now_s, key=(f["FCW_LEVEL"], f["FCW_AVAILABLE"]))
         lead_frames = [("HW_LEAD", hm.lead_signals(lead)), ("HW_LEAD_TTC", hm.lead_ttc_signals(lead))]
         self.scheduler.update("lead", lead_frames, now_s)

@@ -7,14 +7,18 @@ from __future__ import annotations
 
 from typing import Optional
 
-from app.eval.report import _f
+
+def figure(x, nd=3) -> str:
+    """A report's number as its tables print it: nd decimals, "n/a" when it was not measured."""
+    return "n/a" if x is None else f"{x:.{nd}f}"
+
 
 # thresholds of the TuSimple score curve shown (the curve holds more; these are where operating points lie)
 CURVE_THRESHOLDS = (0.0, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.99)
 
 
 def _rp(recall, precision) -> str:
-    return f"{_f(recall)} / {_f(precision)}"
+    return f"{figure(recall)} / {figure(precision)}"
 
 
 def _rate(v: dict) -> str:
@@ -58,13 +62,13 @@ def markdown(reports: list[dict], folders: Optional[list[str]] = None) -> str:
             cells = []
             for r in reports:
                 o = (r.get("synthetic") or {}).get("overall")
-                cells.append(dash if o is None else (str(o[key]) if nd is None else _f(o[key], nd)))
+                cells.append(dash if o is None else (str(o[key]) if nd is None else figure(o[key], nd)))
             rows.append((f"all scenarios: {label}", cells))
         for name in _keys(reports, lambda r: (r.get("synthetic") or {}).get("per_scenario")):
             cells = []
             for r in reports:
                 m = ((r.get("synthetic") or {}).get("per_scenario") or {}).get(name)
-                cells.append(dash if m is None else f"{_f(m['mota'])} / {_f(m['idf1'])}")
+                cells.append(dash if m is None else f"{figure(m['mota'])} / {figure(m['idf1'])}")
             rows.append((f"{name}: MOTA / IDF1", cells))
         out += _table("measure", presets, rows)
 
@@ -106,7 +110,7 @@ def markdown(reports: list[dict], folders: Optional[list[str]] = None) -> str:
             cells = []
             for r in reports:
                 x = r.get(key)
-                cells.append(dash if not x else f"{_f(x['accuracy'])} / {_f(x['fp'])} / {_f(x['fn'])}")
+                cells.append(dash if not x else f"{figure(x['accuracy'])} / {figure(x['fp'])} / {figure(x['fn'])}")
             rows.append((label, cells))
         out += _table("set", presets, rows)
 

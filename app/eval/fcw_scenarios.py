@@ -10,7 +10,7 @@ from typing import Optional
 import can
 
 from app.can import headway_database
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
 from app.replay import replay_scenario
 
 # scenario -> the true TTC (s) by which a warning must have come (NCAP FCW confirmation test);

@@ -19,11 +19,13 @@ from pathlib import Path
 from typing import Callable, Optional
 
 import cv2
+import yaml
 
 from app import config as configuration
 from app.core import Pipeline
 from app.eval.tusimple_boxes import TUSIMPLE_CAMERA, TUSIMPLE_LANE_PITCH_DEG, tusimple_config
 from app.eval.tusimple_lanes import evaluate_lanes, segments_to_tusimple, write_predictions
+from app.replay import replay_recording
 
 FPS = 20.0           # TuSimple clips: 20 frames in one second
 FRAMES_PER_CLIP = 20
@@ -95,8 +97,6 @@ def evaluate(clips_dir: str, config_path: Optional[str] = None, preset: str = "t
 def write_camera_config(path: str, pitch_deg: Optional[float] = None, from_scratch: bool = False) -> str:
     """A configuration file with TuSimple's camera as calibration.txt gives it (intrinsics, 1.80 m height) and the
     bonnet's 8 % hood line; the pitch only if given; self_calibration.from_scratch if asked. Returns `path`."""
-    import yaml
-
     cam = {k: v for k, v in TUSIMPLE_CAMERA.items() if k != "pitch_deg"}
     cam["hood_frac"] = 0.08
     if pitch_deg is not None:
@@ -121,8 +121,6 @@ def evaluate_replay(clips_dir: str, config_path: Optional[str] = None, on_frame:
     """TuSimple accuracy / FP / FN of the last frame of every clip replayed as `headway replay CLIP --fps 20`.
 
     on_frame(label, result) is called for every frame of every clip (the calibration's course)."""
-    from app.replay import replay_recording
-
     preds: dict[str, list] = {}
     last: dict = {}
     width = None

@@ -16,8 +16,10 @@ from typing import Optional
 import numpy as np
 import yaml
 
+from app import config as configuration
 from app.eval.matching import match
 from app.eval.synthetic import RANGE_BANDS, evaluate_scenario, summarize
+from app.sim import list_scenarios
 
 
 def _band_stats(rows: list[tuple[float, float, float, float]]) -> dict:
@@ -49,8 +51,6 @@ def _band_stats(rows: list[tuple[float, float, float, float]]) -> dict:
 
 
 def evaluate(preset: str, config_path: Optional[str] = None, scenarios: Optional[list[str]] = None) -> dict:
-    from app.sim import list_scenarios
-
     rows: list[tuple[float, float, float, float]] = []  # true range, range, true rate, rate
 
     def on_frame(f, r):
@@ -70,7 +70,7 @@ def evaluate(preset: str, config_path: Optional[str] = None, scenarios: Optional
 
 def main(argv: Optional[list[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--pipeline", default="default")
+    p.add_argument("--pipeline", default=configuration.DEFAULT_PRESET)
     p.add_argument("--set", action="append", default=[], help="SECTION.KEY=VALUE (YAML value); repeatable")
     p.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     p.add_argument("--out", help="write the JSON report here")

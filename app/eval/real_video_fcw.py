@@ -21,7 +21,7 @@ import yaml
 
 from app import config as configuration
 from app.eval.road_motion import fit_horizon, read_tme, read_video, tme_camera, udacity_camera
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
 from app.replay import replay_recording
 from app.sim.can_log import DBC_PATH, write_ego_speed_log
 from app.sim.world import Motion1D

@@ -2,6 +2,7 @@
 table and a few annotated example images into one folder."""
 from __future__ import annotations
 
+import functools
 import json
 import sys
 from pathlib import Path
@@ -9,13 +10,19 @@ from typing import Optional
 
 import cv2
 
+from app import config as configuration
 from app.annotate import annotate
+from app.bench.pipeline import run_bench
+from app.eval import (compare, fcw_scenarios, lane_clips, lanes_sample, range_clip, real_video_fcw, road_motion,
+                      synthetic, tusimple_boxes)
+from app.eval.compare import figure as _f
+from app.fleet.engine import map_ordered
+from app.output_files import check_outputs, folder_outputs
 
 PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion", "real_fcw", "cost")
-
-
-def _f(x, nd=3) -> str:
-    return "n/a" if x is None else f"{x:.{nd}f}"
+# What one preset's run writes into its folder, and what several presets' comparison adds beside their folders.
+RUN_FILES = ("report.json", "report.md", "lanes_sample_pred.json", "lane_clips_pred.json", "examples")
+COMPARE_FILES = ("compare.md", "compare.json")
 
 
 def markdown(report: dict) -> str:
@@ -90,8 +97,6 @@ def markdown(report: dict) -> str:
         out.append("")
     rm = report.get("road_motion")
     if rm:
-        from app.eval import road_motion
-
         out += [road_motion.markdown(rm), ""]
     fc = report.get("fcw")
     if fc:
@@ -110,8 +115,6 @@ def markdown(report: dict) -> str:
         out.append("")
     rv = report.get("real_fcw")
     if rv:
-        from app.eval import real_video_fcw
-
         out += ["### False warnings on the real recordings (nothing dangerous happens in them)", "",
                 real_video_fcw.markdown(rv, report["preset"]), ""]
     cost = report.get("cost")
@@ -124,17 +127,13 @@ def markdown(report: dict) -> str:
     return "\n".join(out)
 
 
-def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data", config_path: Optional[str] = None,
-        scenarios: Optional[list[str]] = None, examples: int = 4, workers: Optional[int] = None,
-        scheduler: Optional[str] = None) -> dict:
+def evaluate(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data",
+             config_path: Optional[str] = None, scenarios: Optional[list[str]] = None, examples: int = 4,
+             workers: Optional[int] = None, scheduler: Optional[str] = None) -> dict:
     """With `workers` or `scheduler`, the synthetic suite and the FCW scenarios run one task per scenario on
     the fleet's engine (app/fleet/engine.py); the other parts run here."""
     mapper = None
     if workers is not None or scheduler is not None:
-        import functools
-
-        from app.fleet.engine import map_ordered
-
         mapper = functools.partial(map_ordered, scheduler=scheduler, workers=workers)
     out = Path(out_dir)
     (out / "examples").mkdir(parents=True, exist_ok=True)
@@ -145,15 +144,11 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
         print(f"eval {preset}: {msg}", file=sys.stderr)
 
     if "synthetic" in parts:
-        from app.eval import synthetic
-
         report["synthetic"] = synthetic.evaluate_suite(preset, scenarios, config_path,
                                                        progress=lambda n: say(f"scenario {n}"), mapper=mapper)
     if "tusimple" in parts:
         supp = data / "tusimple" / "supp"
         if supp.exists():
-            from app.eval import tusimple_boxes
-
             shown = [0]
 
             def keep(e, gray, r):
@@ -187,8 +182,6 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
 
         sample = data / "tusimple" / "lane_sample"
         if sample.exists():
-            from app.eval import lanes_sample
-
             say("lane sample")
             report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=lane_example("lanes"),
                                                     predictions_out=str(out / "lanes_sample_pred.json"))
@@ -196,8 +189,6 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
             report["skipped"]["lanes"] = f"{sample} not found"
         clips = data / "tusimple" / "lane_clips"
         if clips.exists():
-            from app.eval import lane_clips
-
             say("lane clips")
             report["lane_clips"] = lane_clips.evaluate(str(clips), config_path, preset,
                                                        predictions_out=str(out / "lane_clips_pred.json"),
@@ -207,15 +198,11 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
     if "range" in parts:
         clip = data / "tusimple" / "train_clip1"
         if clip.exists():
-            from app.eval import range_clip
-
             say("train_clip1 range")
             report["range"] = range_clip.evaluate(str(clip), config_path, preset)
         else:
             report["skipped"]["range"] = f"{clip} not found"
     if "fcw" in parts:
-        from app.eval import fcw_scenarios
-
         names = list(fcw_scenarios.REQUIRED_TTC_S) + list(fcw_scenarios.NO_WARNING)
         if mapper is not None:
             report["fcw"] = mapper(fcw_scenarios.evaluate, [(n, config_path, preset) for n in names], names, "FCW")
@@ -225,21 +212,15 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
                 say(f"FCW {name}")
                 report["fcw"].append(fcw_scenarios.evaluate(name, config_path, preset))
     if "road_motion" in parts:
-        from app.eval import road_motion
-
         say("road homography and track continuity on TME / Udacity")
         report["road_motion"] = road_motion.evaluate(str(data), preset, config_path=config_path)
     if "real_fcw" in parts:
         if (data / "udacity").exists():
-            from app.eval import real_video_fcw
-
             say("false warnings on the real recordings")
             report["real_fcw"] = real_video_fcw.evaluate(str(data), preset, config_path)
         else:
             report["skipped"]["real_fcw"] = f"{data / 'udacity'} not found"
     if "cost" in parts:
-        from app.bench import run_bench
-
         say("ms per frame (dense_traffic, 640x480, this machine)")
         bench = run_bench("dense_traffic", preset, 640, 480, repeats=1, config_path=config_path)
         report["cost"] = {"frame_size": bench["frame_size"], "frames": bench["frames"], "machine": bench["machine"],
@@ -251,8 +232,6 @@ def run(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/data"
 
 def presets_of(arg: str) -> list[str]:
     """The presets --pipeline names (one, or several separated by commas), each checked against the core's list."""
-    from app import config as configuration
-
     known = list(configuration.presets())
     presets = [p.strip() for p in arg.split(",") if p.strip()]
     bad = [p for p in presets if p not in known]
@@ -264,7 +243,26 @@ def presets_of(arg: str) -> list[str]:
     return presets
 
 
-def main(args) -> int:
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
+    s.add_argument("--pipeline", default=configuration.DEFAULT_PRESET,
+                   help="preset to evaluate: default, thesis, parallax, paper004 (default: %(default)s); several separated "
+                        "by commas (e.g. default,thesis,parallax,paper004) are evaluated one after another, each into "
+                        "OUT/PRESET/, and set side by side in OUT/compare.md")
+    s.add_argument("--parts", help="comma-separated subset of synthetic,tusimple,lanes,range,fcw,road_motion,real_fcw,cost "
+                                         "(default all)")
+    s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
+    s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
+    s.add_argument("--out", help="report folder (default reports/eval-PIPELINE; with several presets "
+                                 "reports/eval-A-B-...)")
+    s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--workers", type=int, help="run the synthetic and FCW scenarios on a local Dask cluster of N "
+                                               "worker processes (docs/fleet.md)")
+    s.add_argument("--scheduler", help="... or on an existing Dask cluster (tcp://HOST:8786)")
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
     parts = tuple(args.parts.split(",")) if args.parts else PARTS
     unknown = set(parts) - set(PARTS)
     if unknown:
@@ -274,15 +272,16 @@ def main(args) -> int:
         raise ValueError(f"--workers {args.workers}: need at least one worker")
     scenarios = args.scenarios.split(",") if args.scenarios else None
     out = Path(args.out or f"reports/eval-{'-'.join(presets)}")
+    written = RUN_FILES if len(presets) == 1 else \
+        COMPARE_FILES + tuple(presets) + tuple(f"{p}/{name}" for p in presets for name in RUN_FILES)
+    check_outputs(folder_outputs("--out", str(out), written), {"--config": args.config, "--data": args.data})
     if len(presets) == 1:
-        report = run(presets[0], str(out), parts, args.data, args.config, scenarios, workers=args.workers,
+        report = evaluate(presets[0], str(out), parts, args.data, args.config, scenarios, workers=args.workers,
                      scheduler=args.scheduler)
         print(markdown(report))
         print(f"\nreport: {out.resolve()}/report.json, report.md, examples/")
         return 0
-    from app.eval import compare
-
-    reports = [run(p, str(out / p), parts, args.data, args.config, scenarios, workers=args.workers,
+    reports = [evaluate(p, str(out / p), parts, args.data, args.config, scenarios, workers=args.workers,
                    scheduler=args.scheduler) for p in presets]
     text = compare.markdown(reports, folders=presets)
     (out / "compare.md").write_text(text)

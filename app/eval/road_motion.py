@@ -14,15 +14,23 @@ from __future__ import annotations
 import configparser
 import json
 import math
+import sys
+import tempfile
 from pathlib import Path
 from typing import Optional
 
 import cv2
 import numpy as np
+import yaml
 
 from app import config as configuration
 from app.core import Pipeline
+from app.eval.matching import iou_matrix
 from app.recording import open_recording
+from app.sim import load_scenario, render
+from app.sim.frames import scenario_camera
+from app.sim.scenario import resolve_path
+from app.sim.world import World
 
 TME_FPS = 20.0  # frames/s of the TME Motorway sequences
 UDACITY_FX_AT_1280 = 1150.0  # px, assumed (typical of the Udacity dash camera at 1280x720)
@@ -141,8 +149,6 @@ def identity(frames: list[np.ndarray], config: dict, fps: float, vehicles: list[
     """For each annotated vehicle and IoU level: the frames a confirmed track was on it, the id switches
     (the track on it changed id from one tracked frame to the next) and the fragments (runs of consecutive
     tracked frames; 1 = tracked without a break once it started)."""
-    from app.eval.matching import iou_matrix
-
     hits = {(v["name"], m): [] for v in vehicles for m in min_ious}
     with Pipeline(config) as p:
         for k, img in enumerate(frames):
@@ -172,9 +178,6 @@ def identity(frames: list[np.ndarray], config: dict, fps: float, vehicles: list[
 def true_road_homography(scenario, prev, cur):
     """Synthetic frames: the exact road-plane homography (pixels, prev -> cur) of the two frames' shaken
     cameras and the ego travel between them, and the current frame's camera."""
-    from app.sim.frames import scenario_camera
-    from app.sim.world import World
-
     world = World(scenario)
     cam0 = scenario_camera(scenario)
     cp = cam0.shaken(prev.pitch_deg - cam0.pitch_deg, prev.yaw_deg - cam0.yaw_deg)
@@ -205,13 +208,6 @@ def synthetic_homography(cases=(("empty_road", None), ("empty_road", 0.4), ("ove
                          duration_s: float = 5.0, window: int = 8, step: int = 4) -> list[dict]:
     """The homography on shaken synthetic roads: per (scenario, shake pitch deg or None = the file's, Kalman
     setting), windows of `window` frames through run_stage every `step` frames, the last pair judged."""
-    import tempfile
-
-    import yaml
-
-    from app.sim import load_scenario, render
-    from app.sim.scenario import resolve_path
-
     rows = []
     for name, shake in cases:
         doc = yaml.safe_load(resolve_path(name).read_text())
@@ -311,9 +307,6 @@ def markdown(report: dict) -> str:
 
 
 if __name__ == "__main__":  # python -m app.eval.road_motion [data_dir | synthetic]
-    import json
-    import sys
-
     if sys.argv[1:2] == ["synthetic"]:
         print("| scenario | shake pitch deg | Kalman | windows | accepted | residual | true H | none |")
         print("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: |")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import tempfile
 from pathlib import Path
 from typing import Optional
 
@@ -17,8 +18,11 @@ import numpy as np
 
 from app import config as configuration
 from app.core import Pipeline
+from app.eval import lane_clips as clips_eval
 from app.eval.matching import match
 from app.eval.tusimple_boxes import TUSIMPLE_CAMERA, TUSIMPLE_LANE_PITCH_DEG, tusimple_config
+from app.sim import load_scenario, render
+from app.sim.frames import scenario_camera
 
 # The issue's starting error: 2 deg off in pitch and yaw, 15 % off in height.
 OFFSETS = {"pitch_deg": 2.0, "yaw_deg": 2.0, "height_rel": 0.15}
@@ -56,9 +60,6 @@ def synthetic_runs(scenario: str = "calibration_drive", runs: Optional[list] = N
     error afterwards. The CAN bus gives the ego speed and the true yaw rate (the curves', the lane changes'),
     unless a run says ``can_yaw_rate: False``; a run's ``self_calibration`` and ``road`` mappings override
     those sections. `vehicle_look` ("real" or "plain", docs/sim.md) replaces the scenario's own."""
-    from app.sim import load_scenario, render
-    from app.sim.frames import scenario_camera
-
     runs = runs or [{"offsets": None, "enabled": True}]
     sc = load_scenario(scenario)
     if vehicle_look is not None:
@@ -151,10 +152,6 @@ def lane_clips(data: str, within_deg: float = 0.3) -> dict:
     the hood line ("from_scratch"), and with the pitch given as well ("pitch_given"). Per run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's
     estimate at the last frame and, from scratch, the first frame from which pitch and yaw stay within `within_deg`
     of the last frame's estimate with the pitch given (None: not within at the end)."""
-    import tempfile
-
-    from app.eval import lane_clips as clips_eval
-
     clips = str(Path(data) / "tusimple" / "lane_clips")
     out: dict = {}
     course: dict = {}

@@ -15,6 +15,8 @@ import numpy as np
 from app import config as configuration
 from app.core import Pipeline
 from app.eval.track_score import TrackScorer, detection_metrics
+from app.sim import list_scenarios, load_scenario, render
+from app.sim.frames import scenario_camera
 
 RANGE_BANDS = ((0, 20), (20, 40), (40, 60), (60, 90))
 
@@ -23,9 +25,6 @@ def evaluate_scenario(name: str, preset: str, config_path: Optional[str] = None,
                       min_visible: float = 0.5, on_frame: Optional[Callable] = None,
                       vehicle_look: Optional[str] = None) -> dict:
     """`vehicle_look` ("real" or "plain", docs/sim.md) replaces the scenario's own."""
-    from app.sim import load_scenario, render
-    from app.sim.frames import scenario_camera
-
     sc = load_scenario(name)
     if vehicle_look is not None:
         sc = dataclasses.replace(sc, vehicle_look=vehicle_look)
@@ -74,8 +73,6 @@ def evaluate_suite(preset: str, scenarios: Optional[list[str]] = None, config_pa
                    vehicle_look: Optional[str] = None) -> dict:
     """`mapper(fn, arg_list, names, desc)`, when given, runs the scenarios (app/fleet/engine.map_ordered);
     `vehicle_look` replaces every scenario's own (None: each scenario's, "real" unless it says)."""
-    from app.sim import list_scenarios
-
     names = scenarios or list_scenarios()
     if mapper is not None:
         results = mapper(functools.partial(evaluate_scenario, vehicle_look=vehicle_look),

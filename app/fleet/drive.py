@@ -26,8 +26,11 @@ from typing import Optional
 
 import yaml
 
-from app.fcw_level import FcwLevel
+from app.contracts.fcw_level import FcwLevel
+from app.eval.fcw_scenarios import NO_WARNING, REQUIRED_TTC_S, true_ttc
+from app.eval.track_score import TrackScorer
 from app.fleet.manifest import Drive, code_version
+from app.replay import replay
 
 def drive_dir(out: str | Path, name: str) -> Path:
     return Path(out) / "drives" / name
@@ -97,14 +100,10 @@ def _publish(partial: Path, final: Path, key: str) -> None:
 
 def _replay_into(drive: Drive, folder: Path) -> tuple[dict, Optional[dict], Optional[float]]:
     """(summary, metrics or None, median ms per frame) of the drive replayed into `folder`."""
-    from app.replay import replay
-
     cfg_path = folder / "config.yaml"
     cfg_path.write_text(yaml.safe_dump(drive.config, sort_keys=True))
     scorer, truth_ttc, boxes = None, [], None
     if drive.truth is not None:
-        from app.eval.track_score import TrackScorer
-
         scorer = TrackScorer()
         if drive.truth != "scenario":
             boxes = read_boxes(drive.truth)
@@ -114,8 +113,6 @@ def _replay_into(drive: Drive, folder: Path) -> tuple[dict, Optional[dict], Opti
             return
         confirmed = [t for t in r.tracks if t.confirmed]
         if truth is not None:     # a scenario's own truth
-            from app.eval.fcw_scenarios import true_ttc
-
             scorer.update(r.frame, truth, confirmed)
             truth_ttc.append((r.t_s, true_ttc(truth)))
         else:
@@ -141,8 +138,6 @@ def _replay_into(drive: Drive, folder: Path) -> tuple[dict, Optional[dict], Opti
 
 def _fcw_timing(scenario: str, warnings: list, truth_ttc: list) -> dict:
     """A scenario's first warning against the NCAP requirement (app/eval/fcw_scenarios.py)."""
-    from app.eval.fcw_scenarios import NO_WARNING, REQUIRED_TTC_S
-
     name = Path(scenario).stem
     first = next(((t, ttc) for t, level, ttc in warnings if level == FcwLevel.WARNING.label), None)
     out = {"first_warning_t_s": None if first is None else round(first[0], 6), "true_ttc_s": None,

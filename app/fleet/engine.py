@@ -14,7 +14,10 @@ import sys
 import uuid
 from typing import Callable, Iterable, Iterator, Optional
 
-from distributed import WorkerPlugin
+import cv2
+import dask
+from distributed import Client, LocalCluster, WorkerPlugin, as_completed
+from tqdm import tqdm
 
 from app.fleet.drive import one_line
 
@@ -28,8 +31,6 @@ class PinToCore(WorkerPlugin):
     and keeps OpenCV on that one thread."""
 
     def setup(self, worker) -> None:
-        import cv2
-
         cv2.setNumThreads(1)
         if hasattr(os, "sched_setaffinity"):
             cores = sorted(os.sched_getaffinity(0))
@@ -40,9 +41,6 @@ class PinToCore(WorkerPlugin):
 def cluster(scheduler: Optional[str] = None, workers: Optional[int] = None) -> Iterator:
     """A dask.distributed Client: on `scheduler` (tcp://HOST:PORT) or on a new local cluster of `workers`
     processes (default: one per allowed core)."""
-    import dask
-    from distributed import Client, LocalCluster
-
     if scheduler:
         try:
             client = Client(scheduler, timeout="15s")
@@ -78,8 +76,6 @@ class Progress:
         self.desc = desc
         self.bar = None
         if enabled and self.tty:
-            from tqdm import tqdm
-
             self.bar = tqdm(total=total, initial=done, desc=desc, unit="drive", file=sys.stderr)
             self._postfix()
 
@@ -116,8 +112,6 @@ def run_tasks(client, fn: Callable, items: Iterable[tuple[str, tuple]], on_done:
               ) -> None:
     """Submit fn(*args) for each (name, args); call on_done(name, result, error_line) as each finishes (error
     None when it returned). A task whose worker died more often than allowed ends with its error line."""
-    from distributed import as_completed
-
     run_id = uuid.uuid4().hex[:12]   # two runs on one scheduler never share a task
     futures = {client.submit(fn, *args, key=f"headway-{name}-{run_id}", pure=False, retries=0): name
                for name, args in items}

@@ -32,6 +32,8 @@ import yaml
 from app import config as configuration
 from app.recording import is_image_file
 from app.replay import is_scenario
+from app.sim import list_scenarios
+from app.sim.scenario import SCENARIO_DIR
 
 VIDEO_EXTS = {".mp4", ".avi", ".mkv", ".mov", ".webm", ".m4v", ".mpg", ".mpeg"}
 DRIVE_KEYS = {"source", "name", "fps", "can_in", "config", "truth"}
@@ -112,8 +114,6 @@ def _expand(entry: dict, where: str, root: Path, base_config: Optional[str]) -> 
     can_in = _path(entry["can_in"], root, where, "can_in") if entry.get("can_in") else None
     common = dict(fps=float(fps) if fps is not None else None, config=cfg)
     if "suite" in entry:
-        from app.sim import list_scenarios
-
         names = list_scenarios() if entry["suite"] == "synthetic" else entry["suite"]
         if not isinstance(names, list) or not names:
             raise ManifestError(f"{where}: suite: `synthetic` (every shipped scenario) or a list of scenario names")
@@ -181,8 +181,6 @@ def _hash_input(path: Optional[str]) -> Optional[str]:
         return None
     p = Path(path)
     if not p.exists():   # a shipped scenario's name
-        from app.sim.scenario import SCENARIO_DIR
-
         p = SCENARIO_DIR / f"{path}.yaml"
     h = hashlib.sha256()
     if p.is_dir():

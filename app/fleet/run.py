@@ -8,15 +8,21 @@ import time
 from pathlib import Path
 from typing import Optional
 
-from app.fleet import engine, report
+from app.fleet import compare, engine, report
 from app.fleet.drive import drive_dir, is_done, load_row, partial_prefix, run_drive
 from app.fleet.manifest import code_version, drive_key, load_manifest
+from app.output_files import check_outputs, folder_outputs
 
 
 def run_fleet(manifest: str, out: str, scheduler: Optional[str] = None, workers: Optional[int] = None,
               config: Optional[str] = None, progress: bool = True) -> dict:
     """Replay the manifest's drives into OUT/drives/NAME/ and write OUT/report.json and report.md."""
     drives = load_manifest(manifest, config)
+    inputs = {"the manifest": manifest, "--config": config}
+    for d in drives:
+        inputs |= {f"drive {d.name}'s {what}": p for what, p in (("source", d.source), ("can_in", d.can_in),
+                                                               ("truth", d.truth)) if p and p != "scenario"}
+    check_outputs(folder_outputs("--out", out, ("report.json", "report.md", "drives")), inputs)
     outp = Path(out)
     (outp / "drives").mkdir(parents=True, exist_ok=True)
     _clear_partials(outp, [d.name for d in drives])
@@ -64,10 +70,22 @@ def _clear_partials(out: Path, names: list[str]) -> None:
             shutil.rmtree(p, ignore_errors=True)
 
 
-def main(args) -> int:
-    if args.compare:
-        from app.fleet import compare
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("fleet", help="replay many drives in parallel on Dask (local or an existing cluster); "
+                                     "one report; --compare two runs")
+    s.add_argument("manifest", nargs="?", help="manifest YAML: one entry per drive (docs/fleet.md)")
+    s.add_argument("--out", help="output folder: drives/NAME/ per drive, report.md, report.json")
+    s.add_argument("--scheduler", help="address of an existing Dask scheduler, e.g. tcp://HOST:8786 "
+                                       "(default: a local cluster on this machine)")
+    s.add_argument("--workers", type=int, help="local cluster: worker processes (default: one per core)")
+    s.add_argument("--config", help="configuration YAML under every drive's own overrides")
+    s.add_argument("--compare", nargs=2, metavar=("OLD_DIR", "NEW_DIR"),
+                   help="compare two fleet runs' outputs drive by drive (FCW events, tracks, metrics, CAN)")
+    s.set_defaults(run=run)
 
+
+def run(args) -> int:
+    if args.compare:
         if args.manifest or args.out:
             raise ValueError("--compare OLD NEW takes no manifest and no --out")
         result = compare.compare(*args.compare)

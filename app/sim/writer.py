@@ -14,6 +14,10 @@ from .scenario import Scenario, scenario_to_dict
 from .world import World
 
 
+# What write_scenario writes into its folder (besides frames/): a command checks them against its inputs.
+WRITTEN = ("scenario.yaml", "camera.json", "truth.jsonl", "ego_speed.log", "video.mp4")
+
+
 def write_scenario(scenario: Scenario, out_dir: str | Path, video: bool = False,
                    progress: Callable[[int, int], Any] | None = None,
                    camera_overrides: Mapping[str, Any] | None = None) -> dict:

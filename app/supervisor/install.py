@@ -58,7 +58,15 @@ def install(root: Path, bench: bool = False, enable: bool = True) -> list[str]:
     return done
 
 
-def main(args) -> int:
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("install-service", help="install the systemd unit, the CAN set-up and /etc/headway/config.yaml")
+    s.add_argument("--root", default="/", help="install into this root folder (default /; for packaging and tests)")
+    s.add_argument("--bench", action="store_true", help="also set up a virtual CAN interface vcan0")
+    s.add_argument("--no-enable", action="store_true", help="do not run systemctl (no daemon-reload, no enable)")
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
     for line in install(Path(args.root), bench=args.bench, enable=not args.no_enable):
         print(line)
     return 0

@@ -21,13 +21,19 @@ import time
 from contextlib import ExitStack
 from typing import Optional
 
+from firmware_bridge.link import LinkConfig, LinkThread, McuLink
+
 from app import config as configuration
+from app.can import CanBusError, CanSession
+from app.config_check import problems
+from app.contracts.faults import DEGRADED, FAULT
 from app.core import Pipeline, SourceError
-from app.supervisor.faults import DEGRADED, FAULT
+from app.supervisor.fifo_source import FifoReader
 from app.supervisor.health import HealthMonitor, HealthParams
 from app.supervisor.notify import Notifier
 from app.supervisor.stack import Stack
 from app.supervisor.status_file import STOPPED, write_status
+from app.tracks_file import TracksWriter
 
 log = logging.getLogger("headway")
 
@@ -73,8 +79,6 @@ class Service:
         port = self.cfg["mcu"]["port"]
         if not port:
             return None
-        from firmware_bridge.link import LinkConfig, LinkThread, McuLink
-
         m = self.cfg["mcu"]
         link = McuLink(port, LinkConfig(baudrate=m["baudrate"], heartbeat_period_s=m["heartbeat_s"],
                                         silence_timeout_s=m["silent_after_s"]))
@@ -90,8 +94,6 @@ class Service:
             pipe = stack.enter_context(Pipeline(configuration.core_sections(cfg)))
             can_session = None
             if cfg["can"]["enabled"]:
-                from app.can import CanBusError, CanSession
-
                 try:
                     can_session = self.can_session = stack.enter_context(CanSession.for_live(cfg))
                     if can_session.output.previous_log is not None:
@@ -104,8 +106,6 @@ class Service:
             fifo = None
             try:
                 if src["kind"] == "fifo":
-                    from app.supervisor.fifo_source import FifoReader
-
                     pipe.start({"kind": "push"})
                     cam = cfg["camera"]
                     fifo = FifoReader(src["path"], cam["width"], cam["height"], pipe.push).start()
@@ -136,8 +136,6 @@ class Service:
         last_state = None
         tracks = None
         if self.cfg["service"]["tracks_file"]:
-            from app.tracks_file import TracksWriter
-
             tracks = TracksWriter(open(self.cfg["service"]["tracks_file"], "a"))
         while not self.stop.is_set():
             r = pipe.pop(timeout_s=TICK_S)
@@ -205,12 +203,22 @@ class Service:
                 self._status_warned = True
 
 
-def main(args) -> int:
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM "
+                                   "(the service, in a terminal)")
+    s.add_argument("--config", help="configuration YAML (source:, camera:, can: sections)")
+    s.add_argument("--tracks", help="also write the tracks here (.jsonl)")
+    s.set_defaults(run=run)
+
+    s = subparsers.add_parser("service", help="the in-vehicle daemon systemd runs (systemd/headway.service)")
+    s.add_argument("--config", default="/etc/headway/config.yaml", help="configuration YAML")
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
     setup_logging()
     overrides = {"service": {"tracks_file": args.tracks}} if getattr(args, "tracks", None) else None
     cfg = configuration.load(args.config, overrides)  # a bad file raises before anything starts (exit 2)
-    from app.config_check import problems
-
     # the bus and the source are opened (and their failure reported) by run() itself
     found = problems(cfg, open_bus=False, open_source=False)
     if found:

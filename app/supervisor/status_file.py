@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from app.safe_yaml import short
-from app.supervisor.faults import STATES
+from app.contracts.faults import STATES
 
 DEFAULT_PATH = "/run/headway/status.json"
 # s; a status older than this is stale (the service rewrites it at service.status_rate_hz, 2 Hz by default,

@@ -39,11 +39,12 @@ import time
 from pathlib import Path
 from typing import Callable
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from app.train import proposals_onnx as po
-from app.train.cascade.samples import load_folders, read_gray
+from app.train.cascade.samples import iou, load_folders, read_gray
 
 HELD_OUT = 10          # image k (in the folders' order) is held out when k % HELD_OUT == HELD_OUT - 1
 MIN_BOX_PX = 2.0       # input px: lower boxes are neither vehicles nor background (ignored)
@@ -100,8 +101,6 @@ def augment(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator, rows: 
             cols: int = CROP_COLS):
     """The image and its boxes mirrored, zoomed and shifted, brightened, and cut to a window of `rows` x `cols`
     around its vehicles (module docstring): (image, the boxes at least half inside, the other boxes partly inside)."""
-    import cv2
-
     h, w = img.shape
     rows, cols = min(rows, h), min(cols, w)
     b = boxes.copy()
@@ -175,6 +174,7 @@ def batch_arrays(images, boxes, idx, rng, aug: bool):
 def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3, decay: float = 1e-5,
         width: int = po.WIDTH, blocks: int = po.BLOCKS, on_epoch: Callable[[int, dict, float, float], None] | None = None) -> dict:
     """Parameters (numpy, proposals_onnx's names) fitted by Adam on the focal and box losses (module docstring)."""
+    # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax
     import jax.numpy as jnp
 
@@ -231,10 +231,6 @@ def held_out_recall(path: str, images, boxes, scale: float, min_height_px: float
     """On the held-out images: the share of annotated boxes >= min_height_px (image px) that some peak of the
     written ONNX (by cv2.dnn, as the core runs it) covers at IoU >= 0.5, and peaks per image; a quick check of the
     fit after each epoch (the detector's figures come from the core: docs/proposals.md)."""
-    import cv2
-
-    from app.train.cascade.samples import iou
-
     net = cv2.dnn.readNetFromONNX(path)
     found = total = peaks = 0
     for img, bx in zip(images, boxes):
@@ -261,8 +257,6 @@ def train(folders: list[str], out: str, epochs: int = 5, seed: int = 0, input_wi
     # must be set before jax is first imported
     os.environ.setdefault("XLA_FLAGS", f"--xla_cpu_multi_thread_eigen={'true' if threads > 1 else 'false'} "
                                        f"intra_op_parallelism_threads={threads}")
-    import cv2
-
     cv2.setNumThreads(1)
     t0 = time.perf_counter()
     n_items = len(load_folders(folders))

@@ -22,6 +22,7 @@ and the image's box is that times the image's size over the input's.
 """
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 STRIDE = 4               # input px per output cell
@@ -45,8 +46,6 @@ def output_size(w_in: int, h_in: int) -> tuple[int, int]:
 
 def prepare(gray: np.ndarray, input_width: int = INPUT_WIDTH) -> np.ndarray:
     """(H_in, W_in) uint8: the image resized as the core resizes it."""
-    import cv2
-
     w, h = input_size(gray.shape[1], gray.shape[0], input_width)
     return cv2.resize(gray, (w, h), interpolation=cv2.INTER_AREA)
 
@@ -84,6 +83,7 @@ def blocks_of(params: dict) -> int:
 
 def forward_jax(p: dict, z):
     """(heat logits (n, 1, h, w), box (n, 4, h, w)) of the standardised input z (n, 1, H, W), in JAX."""
+    # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax.numpy as jnp
     from jax import lax
 
@@ -107,8 +107,6 @@ def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, mi
     """(n, 6) left, top, right, bottom (image px), heat, and the peak's index (row * w + column): the peaks of one
     image's heat map (h, w) at least `min_heat`, strongest first, at most top_k; box (4, h, w) the box output;
     scale_x, scale_y: image px per input px."""
-    import cv2
-
     h, w = heat.shape
     peak = (heat >= cv2.dilate(heat, np.ones((3, 3), np.uint8))) & (heat >= min_heat)
     i, j = np.nonzero(peak)
@@ -125,6 +123,7 @@ def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, mi
 def save_onnx(params: dict, path: str, doc: str = "") -> None:
     """Write the network as ONNX (opset 11): input `image` (1, 1, H, W) (any size: fully convolutional), outputs
     `heat` (1, 1, h, w) after the sigmoid and `box` (1, 4, h, w)."""
+    # onnx is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import onnx
     from onnx import TensorProto, helper, numpy_helper
 
@@ -167,8 +166,6 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
 
 def run_onnx(path: str, small: np.ndarray):
     """(heat (h, w), box (4, h, w)) of one resized image (H_in, W_in) uint8 by cv2.dnn, as the core runs it."""
-    import cv2
-
     net = cv2.dnn.readNetFromONNX(path)
     net.setInput(standardise(small), "image")
     heat, box = net.forward(["heat", "box"])

@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from app import config as configuration
+from app.core import Pipeline
 from app.train.cascade.samples import iou, load_folders, read_gray
 
 HOG_WIN = (64, 40)   # px: the cascade's aspect 1.5 (1.6 here: HOG needs multiples of 8), a 40 px box at 1:1
@@ -58,9 +60,6 @@ def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: di
     camera). Yields (image index k, gray image, boxes (n, 4) left, top, right, bottom, raw windows per box,
     label per box: 1 = vehicle (IoU >= 0.5 with an annotated box), -1 = other (IoU < 0.3 with every box),
     0 = left out, the image's horizon row, each box's largest IoU with an annotated box)."""
-    from app import config as configuration
-    from app.core import Pipeline
-
     cfg["pipeline"].update(detectors=["cascade"], tracker="kalman")
     cfg["cascade"]["model"] = cascade_xml
     cfg["cascade"]["verifier"] = "off"

@@ -33,12 +33,13 @@ import time
 from pathlib import Path
 from typing import Callable
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from app.train import verifier_onnx as vo
-from app.train.cascade.samples import load_folders
-from app.train.verifier import cascade_detections, geometry_features, iou
+from app.train.cascade.samples import load_folders, read_gray
+from app.train.verifier import box_features, cascade_detections, fit_mlp, geometry_features, hog, iou
 
 HELD_OUT = (15, 12)   # image i (in the training folders' order) is held out when i % 15 == 12
 KEEP = (0.8, 0.9, 0.95)   # shares of held-out vehicles at which the others passed are reported
@@ -112,6 +113,7 @@ def fit(crops, extra, y, channels=(8, 16, 32), hidden=64, epochs=6, lr=2e-3, dec
     are ~90 % of the samples and most are easy, so an epoch costs about neg_share of a full one."""
     if not 0 < neg_share <= 1:
         raise ValueError(f"neg_share={neg_share}: a share in (0, 1]")
+    # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax
     import jax.numpy as jnp
     from jax import lax
@@ -222,8 +224,6 @@ def predict(params: dict, crops: np.ndarray, extra: np.ndarray, chunk: int = 204
 def predict_onnx(path: str, crops: np.ndarray, extra: np.ndarray, chunk: int = 1024):
     """predict's probabilities and box output from the written ONNX by cv2.dnn (as the core runs it; ~9x faster
     than the numpy forward pass, which took ~1 min an epoch for the held-out crops). Without a box output, zeros."""
-    import cv2
-
     net = cv2.dnn.readNetFromONNX(path)
     has_box = "box" in net.getUnconnectedOutLayersNames()
     p, box = [np.zeros(0, np.float32)], [np.zeros((0, 4), np.float32)]
@@ -269,8 +269,6 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
     require_train_extra()
     # one thread (the machine is shared); must be set before jax is first imported
     os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
-    import cv2
-
     cv2.setNumThreads(1)   # the held-out crops judged by cv2.dnn after every epoch, on the same one core
     t0 = time.perf_counter()
     n_items = len(load_folders(folders)[::every])
@@ -319,9 +317,6 @@ def hog_baseline(folders: list[str], d: dict, held: np.ndarray, seed: int) -> np
     """The HOG verifier (verifier.py, its shipped recipe: IoU 0.3-0.5 left out, 64 hidden units, 12 epochs,
     decay 1e-4, mirrors) fitted on the same images less the held-out ones; its probabilities for the held-out
     samples with IoU >= 0.5 or < 0.3."""
-    from app.train.cascade.samples import read_gray
-    from app.train.verifier import box_features, fit_mlp, hog
-
     h, items = hog(), load_folders(folders)
     x = np.zeros((len(d["label"]), h.getDescriptorSize()), np.float32)
     xm = np.zeros_like(x)

@@ -25,6 +25,7 @@ order as ONNX's Flatten of NCHW.
 """
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 CROP_W, CROP_H = 48, 32   # px: the cascade's aspect 1.5; a 40 px box (the scored band's smallest) at ~1:1
@@ -59,8 +60,6 @@ def area_cells(ii: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray
 def crop_boxes(gray: np.ndarray, boxes, margin: float = MARGIN) -> np.ndarray:
     """(n, CROP_H, CROP_W) uint8: every box (left, top, right, bottom) with its margin, border replicated."""
     out = np.zeros((len(boxes), CROP_H, CROP_W), np.uint8)
-    import cv2
-
     ii = None
     for i, (l, t, r, b) in enumerate(np.asarray(boxes, float).reshape(-1, 4)):
         mx, my = margin * (r - l), margin * (b - t)
@@ -144,6 +143,7 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
     the file (cv::dnn exposes no other way to carry a number in the file).
     The extra features' standardisation is folded into the dense layer: W_e' = scale_e W_e,
     b' = b - (mean_e scale_e) . W_e."""
+    # onnx is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import onnx
     from onnx import TensorProto, helper, numpy_helper
 
@@ -199,6 +199,7 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
 
 def load_onnx(path: str) -> dict:
     """The parameters of a verifier ONNX written by `save_onnx` (standardisation folded: mean 0, scale 1)."""
+    # onnx is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import onnx
     from onnx import numpy_helper
 

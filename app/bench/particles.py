@@ -9,11 +9,13 @@ number of vehicles the filter then holds.
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Optional
 
 import numpy as np
 
 from app.core import Pipeline
+from app.sim import load_scenario, render
 
 # Patch boxes (l, t, r, b) at 640x480 in two rows, ~14 m and ~9 m ahead, each wider than the detector's
 # shortest vehicle at its row, far enough apart not to be joined, all well inside the road area (patches near
@@ -27,10 +29,6 @@ PATCHES = [_FAR[1], _NEAR[2], _FAR[2], _NEAR[1], _FAR[0], _NEAR[3], _FAR[3], _NE
 def particle_cost(max_n: int = 8, seconds: float = 12.0, warmup: int = 40, config: Optional[dict] = None) -> dict:
     """{N: {"n": frames, "median_ms", "p99_ms"}}: the particles stage time of the frames in which the filter
     held N confirmed vehicles, over runs with 1..max_n patches on `seconds` of empty road."""
-    import dataclasses
-
-    from app.sim import load_scenario, render
-
     sc = dataclasses.replace(load_scenario("empty_road"), duration_s=seconds)
     base = [(f.image, f.t_s, f.ego_speed_mps) for f in render(sc)]
     by_n: dict[int, list[float]] = {}

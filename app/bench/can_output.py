@@ -1,5 +1,5 @@
 """Cost of Headway's CAN output per frame set: pack (cantools, counter, checksum) and send on a
-python-can ``virtual`` bus, with and without a candump log. ``python -m app.can.bench``.
+python-can ``virtual`` bus, with and without a candump log. ``python -m app.bench.can_output``.
 
 A frame set is what one camera frame produces when every group is due: HW_FCW, HW_LEAD,
 HW_LEAD_TTC, HW_STATUS, HW_OBJECT_HEADER and two HW_OBJECT pages per object.
@@ -16,13 +16,12 @@ from types import SimpleNamespace
 import can
 
 from app import config as configuration
-from app.fcw_level import FcwLevel
-
-from .bus import CanOutput
-from .config_schema import defaults
-from .messages import ttc_of
-from .session import CanSession
-from .vehicle_input import VehicleInput
+from app.can.bus import CanOutput
+from app.can.config_schema import defaults
+from app.can.messages import ttc_of
+from app.can.session import CanSession
+from app.can.vehicle_input import VehicleInput
+from app.contracts.fcw_level import FcwLevel
 
 
 def fake_track(i: int) -> SimpleNamespace:

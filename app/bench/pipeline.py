@@ -12,6 +12,7 @@ import contextlib
 import json
 import os
 import platform
+import threading
 import time
 from pathlib import Path
 from typing import Optional, Sequence
@@ -19,8 +20,13 @@ from typing import Optional, Sequence
 import numpy as np
 
 from app import config as configuration
-from app.core import Pipeline
+from app.bench import particles
+from app.can import CanSession
+from app.core import EndOfStream, Pipeline, monotonic_s
+from app.detect_images import detector_config, image_entry, image_pipeline, operating_point, read_usable
 from app.recording import natural_key
+from app.sim import load_scenario, render
+from app.supervisor.stack import Stack
 
 
 def _stats(values: list[float]) -> dict:
@@ -31,8 +37,6 @@ def _stats(values: list[float]) -> dict:
 
 def run_bench(scenario: str = "dense_traffic", preset: Optional[str] = None, width: int = 640, height: int = 480,
               repeats: int = 3, config_path: Optional[str] = None) -> dict:
-    from app.sim import load_scenario, render
-
     sc = load_scenario(scenario)
     frames = [(f.image, f.t_s) for f in render(sc, camera_overrides={"width": width, "height": height,
                                                                        "cx": width / 2, "cy": height / 2})]
@@ -92,8 +96,6 @@ def run_image_bench(sources: Sequence[str], preset: Optional[str] = None, config
     core's whole stage) and "total" (read, the stage and the output entry: what one more image costs
     `headway detect`, its start-up not counted). Each image size's pipeline detects its first image once untimed
     first (loading the cascade and the verifier)."""
-    from app.detect_images import detector_config, image_entry, image_pipeline, operating_point, read_usable
-
     paths = image_paths(sources, limit)
     base = detector_config(config_path, preset)
     min_score = operating_point(base)
@@ -151,14 +153,6 @@ def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, co
     stack, which encodes and sends the CAN frames on a python-can `virtual` bus. Measured per frame:
     the capture stamp to the moment the CAN frames were handed to the bus, and the supervisor's own CPU
     time per frame (vehicle inputs, FCW, CAN encoding)."""
-    import threading
-    import time
-
-    from app.can import CanSession
-    from app.core import monotonic_s
-    from app.sim import load_scenario, render
-    from app.supervisor.stack import Stack
-
     sc = load_scenario(scenario)
     images = [f.image for f in render(sc)]
     cfg = configuration.load(config_path, {"pipeline": {"preset": preset}} if preset else None)
@@ -183,8 +177,6 @@ def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, co
 
         cam = threading.Thread(target=camera, daemon=True)
         cam.start()
-        from app.core import EndOfStream
-
         while True:
             try:
                 r = pipe.pop(timeout_s=2.0)
@@ -239,7 +231,27 @@ def pinned_to_one_core():
         os.sched_setaffinity(0, before)
 
 
-def main(args) -> int:
+def add_parser(subparsers) -> None:
+    s = subparsers.add_parser("bench", help="per-stage median and p99 ms per frame")
+    s.add_argument("--scenario", default="dense_traffic", help="scenario whose frames are timed")
+    s.add_argument("--preset", help="pipeline preset (default: the configuration's); with --images, the preset whose "
+                                    "detection stage is timed, as `headway detect --preset`")
+    s.add_argument("--width", type=int, default=640)
+    s.add_argument("--height", type=int, default=480)
+    s.add_argument("--repeats", type=int, default=3, help="passes over the scenario (with --images: over the images)")
+    s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    s.add_argument("--latency", action="store_true",
+                   help="measure capture-to-CAN latency and the supervisor's CPU per frame through the live loop")
+    s.add_argument("--seconds", type=float, default=10.0, help="length of the --latency run")
+    s.add_argument("--images", nargs="+", metavar="PATH",
+                   help="time `headway detect` instead, per image and part (reading and decoding, lanes, the cascade's "
+                        "scan, its verifier, the shadows), on these image files or folders of images")
+    s.add_argument("--limit", type=int, default=100, help="with --images: the first this many images (0 = all)")
+    s.set_defaults(run=run)
+
+
+def run(args) -> int:
     if args.latency:
         report = run_latency_bench(args.scenario, args.seconds, args.config, args.preset)
         print(json.dumps(report, indent=2) if args.json else format_latency(report))
@@ -253,12 +265,11 @@ def main(args) -> int:
     with pinned_to_one_core() as core:
         report = run_bench(args.scenario, args.preset, args.width, args.height, args.repeats, args.config)
         if report["preset"] == "parallax" and (args.width, args.height) == (640, 480):
-            from app import bench_particles  # the joint particle filter's cost against the vehicles it holds
-
-            report["particles_by_vehicles"] = bench_particles.particle_cost()
+            # the joint particle filter's cost against the vehicles it holds
+            report["particles_by_vehicles"] = particles.particle_cost()
     report["machine"] += f", pinned to core {core}" if core is not None else ", not pinned to a core"
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     if "particles_by_vehicles" in report and not args.json:
-        print("\nparallax: joint particle filter against N (synthetic patches, app/bench_particles.py)\n")
-        print(bench_particles.format_table(report["particles_by_vehicles"]))
+        print("\nparallax: joint particle filter against N (synthetic patches, app/bench/particles.py)\n")
+        print(particles.format_table(report["particles_by_vehicles"]))
     return 0

@@ -1,7 +1,7 @@
 """The fleet's benchmark: drives per minute with 1 and 2 workers, and the overhead per drive against
 `headway replay` alone (docs/PERFORMANCE.md, "Fleet replay").
 
-    .venv/bin/python -m app.fleet.bench [--scenarios a,b,...] [--data ../shared/data]
+    .venv/bin/python -m app.bench.fleet [--scenarios a,b,...] [--data ../shared/data]
 
 Drives: shipped scenarios (rendered as they replay) and, when ../shared/data has them, TME tme08 and
 Udacity's test video. Each drive is first replayed alone, one after the other: in this process
@@ -22,6 +22,9 @@ from pathlib import Path
 
 import yaml
 
+from app.fleet.run import run_fleet
+from app.replay import replay
+
 DEFAULT_SCENARIOS = "steady_following,cut_in,stopped_lead_72kmh,adjacent_passing,empty_road,lane_change"
 
 
@@ -35,9 +38,6 @@ def _drives(scenarios: list[str], data: Path) -> list[dict]:
 
 
 def run(scenarios: list[str], data: Path, tmp: Path) -> dict:
-    from app.fleet.run import run_fleet
-    from app.replay import replay
-
     entries = _drives(scenarios, data)
     manifest = tmp / "bench.yaml"
     manifest.write_text(yaml.safe_dump({"drives": entries}))
@@ -74,7 +74,7 @@ def run(scenarios: list[str], data: Path, tmp: Path) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m app.fleet.bench", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m app.bench.fleet", description=__doc__.split("\n\n")[0])
     p.add_argument("--scenarios", default=DEFAULT_SCENARIOS, help="comma-separated shipped scenarios")
     p.add_argument("--data", default="../shared/data", help="real data folder (tme08, Udacity test video)")
     a = p.parse_args(argv)

@@ -7,7 +7,7 @@ held: wall time ("track") and the thread's CPU time ("track_cpu"), which a loade
 The features per vehicle are set by phd_features.max_per_vehicle (corners looked for per box) and
 gmphd.max_components (the cap). Pinned to one core, as `headway bench`.
 
-    python -m app.bench_phd [--features 12,24,40] [--json]
+    python -m app.bench.phd [--features 12,24,40] [--json]
 """
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ from typing import Optional
 import numpy as np
 
 from app.core import Pipeline
+from app.sim import load_scenario, render
+from app.sim.frames import scenario_camera
 
 SCENARIOS = ("dense_traffic", "adjacent_passing", "steady_following", "lane_change", "cut_in", "many_vehicles")
 
@@ -49,8 +51,6 @@ vehicles:
 
 
 def _scenario(name: str):
-    from app.sim import load_scenario
-
     if name != "many_vehicles":
         return load_scenario(name)
     with tempfile.TemporaryDirectory() as d:
@@ -61,9 +61,6 @@ def _scenario(name: str):
 
 def phd_cost(features: int, cap: int, scenarios=SCENARIOS, max_n: int = 9) -> dict:
     """{N: {"n": frames, "median_ms", "p99_ms" (wall), "cpu_median_ms", "cpu_p99_ms" (the thread's CPU time)}}."""
-    from app.sim import render
-    from app.sim.frames import scenario_camera
-
     by_n: dict[int, list[tuple[float, float]]] = {}
     for name in scenarios:
         sc = _scenario(name)

@@ -1,4 +1,4 @@
-"""A soak run of the service on a real clip: `python -m app.soak CLIP --minutes 15 --out soak.json`.
+"""A soak run of the service on a real clip: `python -m app.bench.soak CLIP --minutes 15 --out soak.json`.
 
 The service (`headway service`, a subprocess, exactly as systemd starts it) reads the clip's frames
 through its FIFO source at the clip's own frame rate, looping, for the given time, with CAN on the
@@ -19,6 +19,8 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+
+import can
 
 from app.recording import open_recording
 
@@ -99,8 +101,6 @@ def soak(clip: str, minutes: float, every_s: float, workdir: Path, fps: float | 
         final = json.loads((workdir / "status.json").read_text())
     except (OSError, ValueError):
         final = {}
-    import can
-
     lines = (workdir / "out.log").read_text().splitlines()
     parsed = sum(1 for _ in can.LogReader(str(workdir / "out.log")))
     after = [s for s in samples if s["t_s"] >= 60.0] or samples  # after a minute of warm-up
