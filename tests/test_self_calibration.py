@@ -21,6 +21,15 @@ def test_converges_from_a_wrong_camera_within_10_s(sign):
     assert r["range_n_after"] > 100 and r["range_median_rel_error_after"] <= 0.05, r
 
 
+@pytest.mark.parametrize("sign", [1, -1])
+def test_the_default_trackers_range_follows_the_estimated_height(sign):
+    """The phd tracker ranges its vehicles itself (its UKF): it takes the estimated camera as the geometry stage does."""
+    r = synthetic("calibration_drive", {"pitch_deg": 2.0 * sign, "yaw_deg": 2.0 * sign, "height_rel": 0.15 * sign},
+                  preset="default")
+    assert r["converged_s"] is not None and r["converged_s"] <= 10.0, r
+    assert r["range_n_after"] > 100 and r["range_median_rel_error_after"] <= 0.05, r
+
+
 def test_switched_off_keeps_the_configured_camera():
     r = synthetic("calibration_drive", enabled=False)
     assert r["converged_s"] is None

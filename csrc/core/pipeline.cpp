@@ -115,6 +115,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
             kinematics_.set_camera(cam);
             lead_.set_camera(cam);
             if (parts_.road) parts_.road->set_camera(cam);
+            if (parts_.tracker) parts_.tracker->set_camera(cam);
             set_lane_search();
         }
         out.calib_active = e.active;
@@ -202,7 +203,10 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
 
 void Pipeline::reset() {
     lanes_.reset();
-    if (parts_.tracker) parts_.tracker->reset();
+    if (parts_.tracker) {
+        parts_.tracker->reset();
+        parts_.tracker->set_camera(cfg_.camera);
+    }
     for (auto &d : parts_.detectors.parts) d->reset();
     if (parts_.road) {
         parts_.road->reset();

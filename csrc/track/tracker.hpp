@@ -36,6 +36,9 @@ public:
     virtual void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
                       StageTimes &times, bool &full_detection) = 0;
     virtual void reset() = 0;
+    // The camera as self-calibration has it (height, pitch, yaw), given after every frame while it runs. A
+    // tracker that ranges its vehicles itself takes it; the detectors keep the configured camera.
+    virtual void set_camera(const CameraParams &) {}
 };
 
 } // namespace hw

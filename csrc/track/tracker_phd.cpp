@@ -45,6 +45,9 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "points is steadier than one box edge");
     m.add("detection_sigma_px", detection_sigma_px, 0.01, 100.0,
           "px; 1-sigma of a detection's contact point (bottom centre of its box) as a UKF measurement");
+    m.add("detection_gate_sigma", detection_gate_sigma, 0.0, 100.0,
+          "a paired detection whose contact row lies farther than this many sigmas from the vehicle's predicted one "
+          "confirms the vehicle but does not measure it (a box reaching into the road's shadow); 0 = no gate");
     m.add("anchor_gain", anchor_gain, 0.0, 1.0,
           "share of a matched detection's box (width, contact point) taken into the vehicle's box and its "
           "features' offsets: the detector keeps the feature cloud's scale from drifting");
@@ -88,6 +91,12 @@ void PhdTracker::reset() {
     next_id_ = 1;
     frame_ = 0;
     started_ = false;
+}
+
+void PhdTracker::set_camera(const CameraParams &camera) {
+    horizon_.set_camera(camera);
+    for (Vehicle &v : vehicles_) v.ukf->set_camera(camera);
+    cam_ = camera;
 }
 
 namespace {
@@ -313,14 +322,19 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         used[size_t(best)] = true;
         const Hypothesis &d = dets[size_t(best)];
         const cv::Point2d dc(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
-        v.ukf->update(dc, p_.detection_sigma_px, horizon);
-        // Re-anchor: the box and each feature's offset move towards the detected box.
-        const double g = p_.anchor_gain;
-        v.width = (1.0 - g) * v.width + g * d.box.width;
-        v.contact = (1.0 - g) * v.contact + g * dc;
-        v.height.take(d, ctx.gray.cols, g, p_.height);
-        for (GmComponent &c : v.phd.components())
-            c.tag = (1.0 - g) * c.tag + g * tag_of(c.m, dc, horizon);
+        // A contact row the vehicle's state cannot explain (past detection_gate_sigma) is a box that took in
+        // something else: the detection confirms the vehicle but does not measure or re-anchor it.
+        const double gate = p_.detection_gate_sigma;
+        if (!(gate > 0.0 && v.ukf->contact_row_sigmas(dc, p_.detection_sigma_px, horizon) > gate)) {
+            v.ukf->update(dc, p_.detection_sigma_px, horizon);
+            // Re-anchor: the box and each feature's offset move towards the detected box.
+            const double g = p_.anchor_gain;
+            v.width = (1.0 - g) * v.width + g * d.box.width;
+            v.contact = (1.0 - g) * v.contact + g * dc;
+            v.height.take(d, ctx.gray.cols, g, p_.height);
+            for (GmComponent &c : v.phd.components())
+                c.tag = (1.0 - g) * c.tag + g * tag_of(c.m, dc, horizon);
+        }
         v.hits++;
         v.detection_misses = 0;
         v.confirmed = v.confirmed || v.hits >= p_.confirm_hits;

@@ -30,7 +30,9 @@
 //      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left). A paired
 //      detection re-measures its vehicle's contact point (UKF update), pulls its width and features' offsets
 //      towards the detected box, and counts as a hit (confirmation); an unexplained confident detection starts a
-//      vehicle.
+//      vehicle. A paired detection whose contact row is farther than detection_gate_sigma from the one the UKF
+//      predicts (in sigmas of the row's innovation) is a box that took in something else (the road's shadow
+//      under the vehicle, a neighbour): it counts as a hit but neither measures nor re-anchors the vehicle.
 //   6. A vehicle ends when the PHD weight inside its box falls under end_weight (eq. 12), when the
 //      detector has missed it max_detection_misses times in a row, or when it leaves the image. A confirmed
 //      vehicle whose weight falls under end_weight first coasts for up to coast_frames frames: a sudden change
@@ -71,6 +73,8 @@ struct PhdTrackerParams {
     double expansion_min_width_px = 40.0;  // px; narrower (far) vehicles: no expansion observation
     double contact_sigma_px = 0.8;     // px; 1-sigma of the features' contact point (UKF R)
     double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
+    double detection_gate_sigma = 6.0;  // sigmas; a paired detection's contact row farther from the vehicle's predicted
+                                        // one: a hit, not a measurement (0 = no gate)
     double anchor_gain = 0.5;          // share of a matched detection's box taken into width and offsets
     AssociationParams association;     // detections <-> vehicles: Hungarian on IoU, confident ones first
     double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
@@ -99,6 +103,8 @@ public:
     void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
+    // Self-calibration's camera: the vehicles' range (UKF states rescaled to its height) and the horizon's limits.
+    void set_camera(const CameraParams &camera) override;
 
 private:
     struct Vehicle {

@@ -66,15 +66,27 @@ void VehicleUkf::predict(double dt) {
     f_.predict(transition, dt, process_noise(dt, p_.accel_sigma_lateral_mps2, p_.accel_sigma_range_mps2));
 }
 
-bool VehicleUkf::update(const cv::Point2d &uv, double sigma_px, double horizon_row) {
-    if (!std::isfinite(uv.x) || !std::isfinite(uv.y) || !(sigma_px > 0.0)) return false;
-    const CameraParams &cam = cam_;
-    const auto h = [&](const Ukf::Vec &x) {
+Ukf::Observation VehicleUkf::contact_observation(double horizon_row) const {
+    const CameraParams cam = cam_;
+    return [cam, horizon_row](const Ukf::Vec &x) {
         const cv::Point2d p = project_road_point(cam, x(0), x(1), horizon_row);
         return Ukf::Vec(Eigen::Vector2d(p.x, p.y));
     };
+}
+
+bool VehicleUkf::update(const cv::Point2d &uv, double sigma_px, double horizon_row) {
+    if (!std::isfinite(uv.x) || !std::isfinite(uv.y) || !(sigma_px > 0.0)) return false;
     const Ukf::Mat R = Eigen::Matrix2d::Identity() * sigma_px * sigma_px;
-    return f_.update(h, Eigen::Vector2d(uv.x, uv.y), R);
+    return f_.update(contact_observation(horizon_row), Eigen::Vector2d(uv.x, uv.y), R);
+}
+
+double VehicleUkf::contact_row_sigmas(const cv::Point2d &uv, double sigma_px, double horizon_row) const {
+    if (!std::isfinite(uv.x) || !std::isfinite(uv.y) || !(sigma_px > 0.0)) return NAN;
+    const Ukf::Mat R = Eigen::Matrix2d::Identity() * sigma_px * sigma_px;
+    Ukf::Vec nu;
+    Ukf::Mat S;
+    if (!f_.innovation(contact_observation(horizon_row), Eigen::Vector2d(uv.x, uv.y), R, nu, S)) return NAN;
+    return S(1, 1) > 0.0 ? std::abs(nu(1)) / std::sqrt(S(1, 1)) : NAN;
 }
 
 bool VehicleUkf::update_expansion(double e_per_s, double sigma_per_s) {
@@ -82,6 +94,17 @@ bool VehicleUkf::update_expansion(double e_per_s, double sigma_per_s) {
     const auto h = [](const Ukf::Vec &x) { return Ukf::Vec::Constant(1, x(1) > 0.1 ? -x(3) / x(1) : NAN); };
     const Ukf::Mat R = Ukf::Mat::Constant(1, 1, sigma_per_s * sigma_per_s);
     return f_.update(h, Ukf::Vec::Constant(1, e_per_s), R);
+}
+
+void VehicleUkf::set_camera(const CameraParams &cam) {
+    const double k = cam.height_m / cam_.height_m;
+    if (std::isfinite(k) && k > 0.0 && k != 1.0) {
+        Ukf::Vec &x = f_.x();
+        x(0) = cam.lateral_m + k * (x(0) - cam_.lateral_m);
+        x.tail(3) *= k;
+        f_.P() *= k * k;
+    }
+    cam_ = cam;
 }
 
 cv::Point2d VehicleUkf::predicted_contact(double horizon_row) const {

@@ -41,8 +41,16 @@ public:
     void predict(double dt);
     // The contact point (u, v) measured with 1-sigma `sigma_px`; false if it was not usable.
     bool update(const cv::Point2d &uv, double sigma_px, double horizon_row);
+    // How far the row of a contact point (u, v) measured with 1-sigma `sigma_px` lies from the row the state
+    // predicts, in sigmas of the row's innovation (state and measurement); NaN if it cannot be computed. The row
+    // carries the range; the column (lateral) is left out: a box cut by the image's side moves its centre.
+    double contact_row_sigmas(const cv::Point2d &uv, double sigma_px, double horizon_row) const;
     // The expansion rate e = (s - 1) / dt measured with 1-sigma `sigma_per_s`; false if not usable.
     bool update_expansion(double e_per_s, double sigma_per_s);
+    // The camera changed (self-calibration's estimate). The same pixels put every road point height'/height as far
+    // from the camera's foot, so the distances, speeds and their covariance are rescaled by that ratio; a changed
+    // pitch or yaw acts through the next observations.
+    void set_camera(const CameraParams &cam);
     // The contact point the state predicts.
     cv::Point2d predicted_contact(double horizon_row) const;
 
@@ -58,6 +66,8 @@ public:
     static Ukf::Mat process_noise(double dt, double sigma_x, double sigma_z);
 
 private:
+    Ukf::Observation contact_observation(double horizon_row) const;  // eq. 16-18: (X, Z) -> (u, v)
+
     VehicleUkfParams p_;
     CameraParams cam_;
     Ukf f_;
