@@ -217,7 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the preset whose detection stage runs (default: the configuration's, `default`)")
     s.add_argument("--min-score", type=float, default=None,
                    help="write only detections scoring at least this (0-1); default: the preset's operating point "
-                        "(precision 0.85 on held-out training images: docs/cascade.md; thesis: every detection); 0 "
+                        "(precision 0.85 on held-out training images: docs/detection.md; thesis: every detection); 0 "
                         "writes every detection")
 
     s = sub.add_parser("run", help="run on the live camera of the configuration until SIGINT/SIGTERM "
@@ -265,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
     s.add_argument("--out", help="report folder (default reports/eval-PIPELINE; with several presets "
-                                 "reports/eval-A-B-...)")
+                                 "reports/eval-A-B-...), or FILE.md: the whole results document (docs/RESULTS.md)")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--workers", type=int, help="run the synthetic and FCW scenarios on a local Dask cluster of N "
                                                "worker processes (docs/fleet.md)")
@@ -306,7 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="boxes wider than this (width / height) are not positives (default 3: long side views)")
     t.add_argument("--boost", choices=["gentle", "discrete"], default="gentle",
                    help="gentle: Gentle AdaBoost, real-valued stump leaves (default, the shipped model); discrete: "
-                        "Discrete AdaBoost as in paper 004, leaves +-alpha (docs/cascade.md compares them)")
+                        "Discrete AdaBoost as in paper 004, leaves +-alpha (docs/decisions.md compares them)")
     t.add_argument("--scan-band", metavar="ROW,HEIGHT_M[,MIN_M,MAX_M]",
                    help="negatives only from the rows the cascade stage scans for each window size: the camera's "
                         "horizon row (px) and height (m), and the lowest and tallest vehicle (default 1.0,4.5 m); "
@@ -349,7 +349,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--neg-share", type=float, default=1.0,
                    help="CNN: share of the plain others (IoU < 0.3, ~90 %% of the samples) each epoch sees, drawn "
                         "afresh and weighted up so the loss is the same; 1 = all (default); 0.3 makes an epoch "
-                        "~2.4x faster (docs/cascade.md, 'Session 13')")
+                        "~2.4x faster (docs/detection.md)")
     t.add_argument("--decay", type=float, default=1e-4, help="L2 weight decay (default 1e-4)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")

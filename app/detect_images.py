@@ -27,7 +27,7 @@ class DetectError(RuntimeError):
 
 # The score a detection must reach to be written, per preset: the lowest threshold (0.01 apart) at which precision
 # (boxes >= 40 px, IoU >= 0.5) reaches 0.85 on 800 training images the verifier never saw (TuSimple 0602, 0612, ...
-# and 0606, 0616, ...; docs/cascade.md, "The operating point of `headway detect`"), not on the validation split. The
+# and 0606, 0616, ...; docs/detection.md, "Operating points of `headway detect`"), not on the validation split. The
 # thesis detector reaches no such precision at any score: every detection is written; so for a composition of
 # one's own (pipeline.detectors).
 OPERATING_POINT = {"default": 0.79, "paper004": 0.77}

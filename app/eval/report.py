@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -264,6 +265,15 @@ def presets_of(arg: str) -> list[str]:
     return presets
 
 
+def _write_document(path: str, presets: list[str], parts: tuple, args, scenarios, sections: list[str],
+                    started: float) -> None:
+    from app.eval import results_doc
+
+    cmd = results_doc.command(presets, parts, PARTS, path, args.data, args.config, scenarios)
+    Path(path).write_text(results_doc.document(cmd, sections, time.monotonic() - started))
+    print(f"document: {Path(path).resolve()}")
+
+
 def main(args) -> int:
     parts = tuple(args.parts.split(",")) if args.parts else PARTS
     unknown = set(parts) - set(PARTS)
@@ -273,18 +283,27 @@ def main(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers {args.workers}: need at least one worker")
     scenarios = args.scenarios.split(",") if args.scenarios else None
-    out = Path(args.out or f"reports/eval-{'-'.join(presets)}")
+    from app.eval import results_doc
+
+    # --out FILE.md: the whole document (docs/RESULTS.md); the report folders go to the default place
+    doc = args.out if results_doc.is_document(args.out) else None
+    started = time.monotonic()
+    out = Path(args.out if args.out and not doc else f"reports/eval-{'-'.join(presets)}")
     if len(presets) == 1:
         report = run(presets[0], str(out), parts, args.data, args.config, scenarios, workers=args.workers,
                      scheduler=args.scheduler)
         print(markdown(report))
         print(f"\nreport: {out.resolve()}/report.json, report.md, examples/")
+        if doc:
+            _write_document(doc, presets, parts, args, scenarios, [markdown(report)], started)
         return 0
     from app.eval import compare
 
     reports = [run(p, str(out / p), parts, args.data, args.config, scenarios, workers=args.workers,
                    scheduler=args.scheduler) for p in presets]
-    text = compare.markdown(reports, folders=presets)
+    text = compare.markdown(reports, folders=[str(out / p) for p in presets] if doc else presets)
+    if doc:
+        _write_document(doc, presets, parts, args, scenarios, [text] + [markdown(r) for r in reports], started)
     (out / "compare.md").write_text(text)
     (out / "compare.json").write_text(json.dumps({"presets": presets, "parts": list(parts),
                                                   "reports": [f"{p}/report.json" for p in presets]}, indent=1))

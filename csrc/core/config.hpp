@@ -80,8 +80,8 @@ struct Config {
     HomographyParams homography;      //   road homography (DLT + Kalman)
     ParallaxSection parallax;         //   aligned-difference detector and its road band
     ParticleParams particles;         //   joint particle filter
-    CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
-    ProposalsParams proposals;        // detector part proposals: the learned first stage (docs/proposals.md)
+    CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/detection.md)
+    ProposalsParams proposals;        // detector part proposals: the learned first stage (docs/detection.md)
     FuseParams fuse;                  // several detector parts: their hypotheses fused into one list
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
     VehicleHeightParams vehicle_height;  // a tracked vehicle's height (trucks); handed to kalman and phd by from_json

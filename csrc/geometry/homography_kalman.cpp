@@ -11,7 +11,7 @@ void HomographyKalmanParams::bind(ParamMap &m) {
           "frame in pixels the filter follows; camera shake of 0.15-0.4 deg changes H by 1e-3..1e-2 per frame. "
           "The paper's Q = 1e-6 with R = 1e-3 (gain ~0.03, a 30-frame average) lags the shake: on the synthetic "
           "road shaken by 0.4 deg 2.93 gray levels of road residual and 92 % accepted against 2.67 and 94 % for "
-          "q = r = 1e-5 (docs/parallax.md)");
+          "q = r = 1e-5 (docs/tracking.md)");
     m.add("r", r, 1e-12, 1.0,
           "measurement noise variance of each entry of a DLT homography (road-band coordinates); our measurements "
           "(pre-warped LK, ~50 points) err by ~3e-3 (median 2-norm), far less than the paper's sparse ones");

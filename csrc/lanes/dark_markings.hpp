@@ -41,7 +41,7 @@ struct DarkLineParams {
               "0.025 / 0.108 with curve_single_above_road 0); the 12 clips (lane tracking) unchanged; the clips' 240 "
               "frames each alone 0.853 / 0.261 / 0.272 against 0.850 / 0.260 / 0.272 at 512x288 (a pavement seam one "
               "lane out taken in a few frames of 0531/...793), 0.830 / 0.267 / 0.315 against 0.826 / 0.266 / 0.315 "
-              "at 1280x720; docs/RESULTS.md, lanes, the lanes10 round");
+              "at 1280x720; headway eval --parts lanes)");
         m.add("dark_width_tol", width_tol, 0.0, 1.0,
               "ego-lane widths; the dark line is searched 1 +- this ego-lane widths out from the ego boundary (on the "
               "flat road the image spacing of two lines at any row is their spacing in metres times one scale, so this "

@@ -11,7 +11,7 @@
 // the road: a bright bar there is the vehicle). Smoothed over frames (dash gaps, a vehicle passing over
 // the line), the lane model is `certain` when both ego boundaries' support is at least `evidence_min`;
 // the detector's road prior and the lead selection believe only a certain model (else they use the
-// camera and the ego path from the yaw rate: issue 13, the lead without lanes).
+// camera and the ego path from the yaw rate: docs/ARCHITECTURE.md, the lead without lanes).
 #pragma once
 
 #include "base/params.hpp"
@@ -50,7 +50,7 @@ struct LaneEvidenceParams {
               "the texture inside: on an unmarked road in congestion the asphalt between two dark vehicles (or a "
               "vehicle and a shadow) passes as a bar 1-5 m wide, and such bars line up (606 of the 614 points "
               "supporting the ego pair on the frames believed were wider than this). 0.45 as lanes.marking_max_m. "
-              "Measured (docs/RESULTS.md, lanes, lanes6 round): the synthetic unmarked road (congestion_no_markings) "
+              "Measured (headway eval --parts synthetic,lanes): the synthetic unmarked road (congestion_no_markings) "
               "believed on 0 of 330 frames with 0.15-0.45, 1 with 0.6, 2 with 1.0, 25 with 0; painted scenarios "
               "believed on every frame and TuSimple's lane clips 0.930 / 0.097 / 0.090 for every value; the certainty "
               "on the six real recordings unchanged. Outer boundaries (lanes.outer_lanes) count bars of any width");
@@ -80,9 +80,9 @@ struct LaneEvidenceParams {
               "clips with lanes.cross_inner_edges: 0.930 / 0.097 / 0.090 (accuracy / FP / FN) against 0.930 / 0.118 / "
               "0.090 with 0, the same for 0.5-0.9 (0313-1/60's shoulder edge beyond the solid right edge line no "
               "longer reported), 0.4 loses a labelled lane; without cross_inner_edges no change (0.864 / 0.208 / 0.208). "
-              "Applied to single images too since the sample7 round (it was only in lane tracking): TuSimple's 10-image "
+              "Applied to single images and lane tracking: TuSimple's 10-image "
               "sample 0.831 / 0.158 / 0.242 against 0.831 / 0.175 / 0.242 (0313-2/520's right shoulder edge no longer "
-              "reported), the clips unchanged; docs/RESULTS.md, lanes, lanes5 and sample7 rounds");
+              "reported), the clips unchanged (headway eval --parts lanes)");
     }
 };
 

@@ -75,7 +75,7 @@ struct LaneParams {
               "and lines through such points are lines on vehicles; true removes the line across the car of clip "
               "0313-1/180 and, with the bent boundaries, keeps the unmarked congestion scenario's lead (0.914 of the "
               "frames, 0.813 without); false (default): with the one hood line of every stage the pair measured "
-              "lane clips 0.839 / 0.326 / 0.326 against 0.836 / 0.306 / 0.312 without (docs/RESULTS.md, lanes)");
+              "lane clips 0.839 / 0.326 / 0.326 against 0.836 / 0.306 / 0.312 without (headway eval --parts lanes)");
         m.add("vehicle_mask_frac", vehicle_mask_frac, 0.05, 1.0,
               "fraction of a vehicle box's height, from its top, inside which marking points are dropped; 0.75 keeps "
               "the bottom quarter (wheels, the road at the contact row): a far car ahead in the ego lane covers the "

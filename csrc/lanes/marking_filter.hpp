@@ -69,16 +69,16 @@ struct MarkingFilterParams {
               "a marking's bar may contain inner edges weaker than its own two edges, if it stays brighter than "
               "both sides everywhere and is at most cross_max_m wide (worn or textured paint, common on concrete; "
               "without this the bar ends at the first inner edge and fails the contrast test). TuSimple's lane clips "
-              "0.930 / 0.097 / 0.090 (accuracy / FP / FN, issue 13's bar) and the 10-image sample 0.831 / 0.175 / "
-              "0.242, against 0.864 / 0.208 / 0.208 and 0.832 / 0.158 / 0.217 without. On by default since the lanes6 "
-              "round: the synthetic unmarked road it made believed (25 of 330 frames of congestion_no_markings) was "
+              "0.930 / 0.097 / 0.090 (accuracy / FP / FN) and the 10-image sample 0.831 / 0.175 / "
+              "0.242, against 0.864 / 0.208 / 0.208 and 0.832 / 0.158 / 0.217 without. On by default: the "
+              "synthetic unmarked road it made believed (25 of 330 frames of congestion_no_markings) was "
               "believed on the gaps between dark vehicles, wide bars that lanes.evidence_max_width_m no longer counts "
-              "as paint (0 frames); docs/RESULTS.md, lanes, lanes4-lanes6 rounds");
+              "as paint (0 frames); headway eval --parts synthetic,lanes");
         m.add("cross_max_m", cross_max_m, 0.01, 2.0,
               "m; with cross_inner_edges, the widest bar that may contain inner edges: one worn painted line "
               "(0.10-0.15 m plus blur); a wider bright patch with texture inside (concrete between two seams) is "
               "not paint; 0.20 tuned on TuSimple's lane clips and lane sample (0.12-0.27 m tried: 0.18 and below "
-              "lose clip accuracy with straight boundaries, 0.27 the sample; docs/RESULTS.md)");
+              "lose clip accuracy with straight boundaries, 0.27 the sample; headway eval --parts lanes)");
         m.add("row_width_single", row_width_single,
               "one image alone (the \"lanes\" stage, single-image detection): a bar is at most 1.2 marking_max_m (or "
               "cross_max_m) x px/m wide along its row plus 2 px of blur times the slant factor sqrt(1 + k^2): a stripe W "
@@ -87,7 +87,7 @@ struct MarkingFilterParams {
               "factor, which let the road between a concrete seam and a truck's shadow (0.4-0.5 m) pass as a marking "
               "on 0313-1/14900. TuSimple's 10-image sample 0.891 / 0.025 / 0.108 (accuracy / FP / FN) against 0.871 / "
               "0.058 / 0.133; in lane tracking too the 12 clips read 0.911 / 0.139 / 0.132 (0.932 / 0.118 / 0.118 with "
-              "dots_in_tracking) against 0.930 / 0.097 / 0.090 (docs/RESULTS.md, lanes, the lanes9 round)");
+              "dots_in_tracking) against 0.930 / 0.097 / 0.090 (headway eval --parts lanes)");
     }
 };
 

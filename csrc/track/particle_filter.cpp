@@ -77,7 +77,7 @@ void ParticleParams::bind(ParamMap &m) {
           "resampled by its own factor of the likelihood (and the hypothesised vehicle with its particles' mark), so "
           "that how well the other vehicles fit does not decide which of a vehicle's particles survive; on "
           "overtaking_from_side it confirms the entering truck and cars sooner and more evenly over seeds "
-          "(docs/parallax.md, Entries)");
+          "(docs/tracking.md, Entries)");
 }
 
 JointParticleFilter::JointParticleFilter(const ParticleParams &p, const CameraParams &cam)

@@ -87,7 +87,7 @@ void KalmanBoxParams::bind(ParamMap &m) {
           "h), so a side that jumped to another edge (real video: boxes that grew 60 -> 130 px in 8 frames, tme08) "
           "or a template sliding down with the road's texture breaks the ratio; the measurement is then not taken. "
           "thesis: 17 synthetic scenarios MOTA 0.893 -> 0.933, tme08's silver car 29 -> 47 of 50 frames; 0.15 gained "
-          "more but cost two synthetic leads their tight edges; 100 = off (docs/RESULTS.md, session 8)");
+          "more but cost two synthetic leads their tight edges; 100 = off (docs/tracking.md)");
     m.add("max_dt_s", max_dt_s, 0.01, 100.0,
           "s; a gap between frames longer than this drops all tracks (the predictions are void)");
 }

@@ -338,7 +338,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
             explained = explained || box_iou(vb, b) >= 0.2f || vb.contains(foot);
         }
         // A learned detection scoring under birth_min_appearance may follow a vehicle but not found one: the
-        // verifier's low-probability groups are mostly not vehicles (docs/cascade.md), and each would become a track.
+        // verifier's low-probability groups are mostly not vehicles (docs/detection.md), and each would become a track.
         // Its score is the verifier's probability, raised where a cue (a shadow edge) confirmed it
         // (detect/fuse_hypotheses.hpp).
         const bool doubted = std::isfinite(dets[i].appearance) && dets[i].score < p_.birth_min_appearance;
