@@ -74,12 +74,8 @@ struct CascadeParams {
               "path of the OpenCV cascade XML; empty = the model shipped with Headway "
               "(app/models/vehicle_cascade.xml, recipe in docs/detection.md)");
         m.add("verifier", verifier, nullptr,
-              "path of the verifier judging every cascade detection: *.onnx = a small CNN on the box's crop, read by "
-              "cv::dnn and run by its own forward pass (verifier_dnn; `headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
-              "through a one-hidden-layer network; empty = the "
-              "model shipped with Headway (app/models/vehicle_verifier.onnx, a CNN of 16/32/64 channels; recipe in "
-              "docs/detection.md); off = the cascade's neighbour count alone as confidence. The same verifier judges "
-              "single images and a tracked pipeline's detections");
+              "verifier of every cascade detection: *.onnx = a CNN on the box's crop, *.yml(.gz) = HOG + one hidden "
+              "layer; empty = app/models/vehicle_verifier.onnx; off = the window count as confidence");
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
               "m; lowest vehicle box on a flat road; with the camera height it bounds how far below the "
@@ -104,17 +100,11 @@ struct CascadeParams {
               "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
               "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
         m.add("verifier_dnn", verifier_dnn,
-              "true = the CNN verifier is run by cv::dnn, the reference, instead of their "
-              "own forward pass (detect/verifier_net.hpp: the trainer's architecture in AVX2 loops with Winograd "
-              "convolutions, plain loops without AVX2, compared with cv::dnn when the file is loaded; answers within 1e-5 "
-              "on real crops). Measured side by side with cv::dnn (docs/PERFORMANCE.md): the cascade stage at 640x480 "
-              "35.0 -> 18.6 ms median, `headway detect` 88 -> 43 ms CPU per 1280x720 JPEG. For "
-              "tests and comparison; a network of another form (channel counts not multiples of 8) is run by cv::dnn "
-              "either way");
+              "true = run the CNN verifier by cv::dnn (the reference) instead of the core's own forward pass, with "
+              "the same answers within 1e-5");
         m.add("group_iou", group_iou, 0.05, 0.95,
-              "IoU; raw windows overlapping a group's strongest window at least this much belong to it; with the CNN "
-              "verifier 0.65 (more, tighter groups judged) measured better at high precision (docs/detection.md), but the "
-              "neighbour count as confidence (verifier off) needs the looser groups");
+              "IoU; raw windows overlapping a group's strongest window at least this much join the group "
+              "(docs/detection.md)");
         m.add("min_neighbors", min_neighbors, 1, 100, "raw windows; groups with fewer are dropped");
         m.add("neighbors_half", neighbors_half, 0.5, 100.0,
               "raw windows; a group of n windows has confidence n / (n + neighbors_half)");
@@ -125,38 +115,23 @@ struct CascadeParams {
               "groups kept and verified, those with the highest last-stage sum; 0 = all (fewer save verifier time "
               "but lose vehicles, docs/detection.md)");
         m.add("refine_boxes", refine_boxes,
-              "true = a verifier with a box output (a CNN trained with one, docs/detection.md) moves each group's box onto "
-              "the vehicle before the suppression, so that two groups on one vehicle merge and a group beside it becomes "
-              "a well placed box (reported on single images and to a tracker alike); false = the group's mean box as it is (verifiers "
-              "without a box output never move it). TuSimple validation, boxes >= "
-              "40 px, with the shipped verifier and rejudge_refined: recall 0.690 at precision 0.845; without it no "
-              "score reaches precision 0.8 (the network leaves IoU 0.3-0.5 boxes out of its classification, so "
-              "misplaced groups score high until moved)");
+              "true = a verifier with a box output moves each group's box onto the vehicle before the suppression "
+              "(docs/detection.md); false = the group's mean box");
         m.add("rejudge_refined", rejudge_refined,
-              "true = a moved box (refine_boxes) is judged again on its new crop and keeps the lower of the two "
-              "probabilities: the box output was trained only on boxes near a vehicle, so where the first judgement "
-              "was wrong (an empty stretch of road at 9 m judged 0.95 on project_video_cut.mp4) the moved box is an "
-              "extrapolation (there 400 px wide) that a second look refuses; a second verifier pass. TuSimple "
-              "validation, boxes >= 40 px: recall 0.690 at precision 0.845 against 0.675 at 0.861 without");
+              "true = a moved box (refine_boxes) is judged again on its new crop and keeps the lower probability "
+              "(docs/detection.md)");
         m.add("rejudge_min_p", rejudge_min_p, 0.0, 1.0,
-              "probability; with rejudge_refined only the moved boxes the first look gives at least this are judged "
-              "again: the second look can only lower a probability, and the score curve's useful points lie at 0.9 "
-              "and above (TuSimple validation: best recall at precision 0.8 at score 0.9); 0 = every moved box, at "
-              "twice the verifier's cost (~23 ms more CPU on a 1280x720 image of ~200 groups)");
+              "probability; with rejudge_refined only the moved boxes the first look scores at least this are "
+              "judged again; 0 = every moved box");
         m.add("rejudge_move", rejudge_move, 0.0, 1.0,
               "share of the second look's box offsets applied to a moved box (0 = keep the first look's box, 1 = "
               "the whole second step; docs/detection.md)");
         m.add("verify_mirrored", verify_mirrored,
-              "true = the CNN verifier also judges the mirror image of each crop it believes (mirror_min_p) and "
-              "averages the two answers (probability and box offsets): a vehicle from behind is nearly symmetric and "
-              "the network was trained on crops mirrored at random. Held-out training images (docs/detection.md, "
-              "verify_mirrored), best recall at precision 0.85 with rejudge_move 0.5: fused 0.664 against 0.655 without, cascade "
-              "0.669 against 0.654. A HOG verifier judges the crop as it is");
+              "true = the CNN verifier also judges the mirror image of each believed crop (mirror_min_p) and "
+              "averages the two answers (docs/detection.md)");
         m.add("mirror_min_p", mirror_min_p, 0.0, 1.0,
-              "probability; with verify_mirrored only the crops the plain look gives at least this are judged "
-              "mirrored too: a box below it keeps its plain answer, whose mean with its mirror's could not reach "
-              "(mirror_min_p + 1) / 2, so every score from there up is what mirroring every box gives (0.5: the "
-              "scores from 0.75, where every operating point lies), at the cost of the believed boxes only");
+              "probability; with verify_mirrored only the crops the plain look scores at least this are judged "
+              "mirrored too");
         m.add("nms_iou", nms_iou, 0.05, 1.0,
               "IoU; after scoring, a detection overlapping a more confident one at least this much is dropped (a "
               "second group on the same vehicle); 0.3 measured best at high precision on the TuSimple validation "

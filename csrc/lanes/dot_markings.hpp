@@ -42,15 +42,11 @@ struct DotMarkingParams {
 
     void bind(ParamMap &m) {
         m.add("dots_enabled", enabled,
-              "look for Botts' dots (rows of raised dots marking a lane line) among the bars the marking filter "
-              "sets aside as too narrow or alone on their row, and keep those lined up toward the horizon as "
-              "marking points, in single images (the \"lanes\" stage, single-image detection); TuSimple's 10-image "
-              "lane sample 0.871 / 0.058 / 0.133 (accuracy / FP / FN) against 0.829 / 0.100 / 0.183 without; one "
-              "512x288 image 0.64 ms against 0.46 (headway eval --parts lanes)");
+              "look for Botts' dots among the bars the marking filter sets aside (too narrow, alone on their row) "
+              "and keep those lined up toward the horizon, in single images (docs/lanes.md)");
         m.add("dots_in_tracking", in_tracking,
-              "with dots_enabled, look for Botts' dots in lane tracking (video) too; false (default): TuSimple's 12 "
-              "lane clips read 0.928 / 0.118 / 0.111 with it, above the bar FP <= 0.10, against 0.930 / 0.097 / 0.090 "
-              "without (a line next to a car turned into it; headway eval --parts lanes)");
+              "with dots_enabled, look for Botts' dots in lane tracking (video) too; off: a line next to a car "
+              "turned into one on TuSimple's clips (docs/lanes.md)");
         m.add("dot_m", dot_m, 0.01, 1.0,
               "m; a Botts' dot's diameter (0.10 m, 4 in); a candidate bar may be 1.5 times this wide on the "
               "flat-road model at its row plus 2 px of blur");

@@ -26,10 +26,8 @@ struct VehicleHeightParams {
 
     void bind(ParamMap &m) {
         m.add("tall_aspect", tall_aspect, 0.5, 10.0,
-              "height / width above which a vehicle is a truck or a bus (cars measure 0.8-1.0, trucks 1.4-1.6); "
-              "a tracked vehicle that tall keeps its measured height against detections whose height the "
-              "verification only guessed (no top found: verify.aspect_ratio, a car's shape), and is matched to "
-              "them as if they were as tall as it; 10 = never (detections keep their guessed height)");
+              "height / width above which a vehicle is a truck or bus: a tracked one that tall keeps its measured "
+              "height against guessed detection heights; 10 = never (docs/tracking.md)");
         m.add("tall_hits", tall_hits, 1, 100,
               "detections in a row whose measured top says taller than tall_aspect (guessed tops skipped) before a "
               "vehicle is taken as tall: a near car's top search sometimes climbs onto what stands behind it, once");
