@@ -60,7 +60,7 @@ def object_of(src: Path) -> Path:
 
 
 def is_stale(src: Path, obj: Path) -> bool:
-    """An object is stale if missing or older than its source or any header it included last time."""
+    """An object is stale if missing or older than its source or any header it included when it was built."""
     if not obj.exists():
         return True
     t = obj.stat().st_mtime

@@ -281,14 +281,14 @@ def error_line(message: object, path: Optional[Union[str, Path]] = None, limit: 
     return where + (text if len(text) <= room else text[:room - 3] + "...")
 
 
-# The Haar cascade trained by `headway train cascade` (recipe and log in docs/cascade.md).
+# The Haar cascade trained by `headway train cascade` (recipe and log in docs/detection.md).
 SHIPPED_CASCADE = Path(__file__).resolve().parent / "models" / "vehicle_cascade.xml"
-# Its second stage, trained by `headway train verifier` on the cascade's detections (docs/cascade.md).
+# Its second stage, trained by `headway train verifier` on the cascade's detections (docs/detection.md).
 # A small CNN on the box's crop (ONNX, run by cv::dnn), better than the HOG network on the TuSimple validation
-# split (docs/cascade.md); the HOG network stays shipped as the alternative (cascade.verifier: its path).
+# split (docs/detection.md); the HOG network stays shipped as the alternative (cascade.verifier: its path).
 SHIPPED_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.onnx"
 SHIPPED_HOG_VERIFIER = Path(__file__).resolve().parent / "models" / "vehicle_verifier.yml.gz"
-# The learned first stage (detector part proposals), trained by `headway train proposals` (docs/proposals.md).
+# The learned first stage (detector part proposals), trained by `headway train proposals` (docs/detection.md).
 SHIPPED_PROPOSALS = Path(__file__).resolve().parent / "models" / "vehicle_proposals.onnx"
 
 

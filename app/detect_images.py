@@ -28,7 +28,7 @@ class DetectError(RuntimeError):
 
 # The score a detection must reach to be written, per preset: the lowest threshold (0.01 apart) at which precision
 # (boxes >= 40 px, IoU >= 0.5) reaches 0.85 on 800 training images the verifier never saw (TuSimple 0602, 0612, ...
-# and 0606, 0616, ...; docs/cascade.md, "The operating point of `headway detect`"), not on the validation split. The
+# and 0606, 0616, ...; docs/detection.md, "Operating points of `headway detect`"), not on the validation split. The
 # thesis detector reaches no such precision at any score: every detection is written; so for a composition of
 # one's own (pipeline.detectors).
 OPERATING_POINT = {"default": 0.79, "paper004": 0.77}
@@ -111,7 +111,7 @@ def add_parser(subparsers) -> None:
                    help=f"the preset whose detection stage runs (default: the configuration's, `{configuration.DEFAULT_PRESET}`)")
     s.add_argument("--min-score", type=float, default=None,
                    help="write only detections scoring at least this (0-1); default: the preset's operating point "
-                        "(precision 0.85 on held-out training images: docs/cascade.md; thesis: every detection); 0 "
+                        "(precision 0.85 on held-out training images: docs/detection.md; thesis: every detection); 0 "
                         "writes every detection")
     s.set_defaults(run=run)
 

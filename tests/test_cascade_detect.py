@@ -1,5 +1,5 @@
 """The shipped vehicle cascade (app/models/vehicle_cascade.xml, trained by `headway train cascade`,
-recipe in docs/cascade.md) as the detection stage alone (pipeline.detectors [cascade]: Pipeline.run_stage
+recipe in docs/detection.md) as the detection stage alone (pipeline.detectors [cascade]: Pipeline.run_stage
 "detect", preset paper004's detection): it loads in OpenCV, scans only where a vehicle can stand, and is measured
 on the real TuSimple validation images (0001-0600) by the project's one scoring code (app/eval/tusimple_boxes.py:
 IoU >= 0.5, boxes >= 40 px)."""
@@ -15,7 +15,7 @@ from app import config as configuration
 from app.core import Pipeline
 from tests.conftest import cascade_alone, data_path
 
-# Floors on the 600 validation images with the shipped models and defaults (docs/cascade.md: the CNN verifier with
+# Floors on the 600 validation images with the shipped models and defaults (docs/detection.md: the CNN verifier with
 # its box output, every group verified, nms_iou 0.3), boxes >= 40 px: every detection kept (measured: recall 0.886,
 # precision 0.122), and the best curve point at score >= 0.95. They catch a regression; the bar of recall at
 # precision 0.80 is tested separately (measured: 0.827 at precision 0.816, score >= 0.5).
@@ -70,7 +70,7 @@ def test_cascade_score_curve_floor(cascade_scores):
 
 def test_cascade_alone_reaches_recall_0_60_at_precision_0_80(cascade_scores):
     """The bar for the cascade alone: recall >= 0.60 at precision >= 0.80 (boxes >= 40 px), reached by the verifier's
-    box output with the second look at the moved boxes (cascade.rejudge_refined; docs/cascade.md)."""
+    box output with the second look at the moved boxes (cascade.rejudge_refined; docs/detection.md)."""
     best = cascade_scores["best_at_precision_0.8"]
     assert best is not None and best["recall"] >= 0.60
 

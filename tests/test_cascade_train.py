@@ -204,7 +204,7 @@ def test_training_resumes_from_a_written_cascade(tiny_cascade, tmp_path):
 
 
 def test_positives_of_one_view_only(tmp_path):
-    """--min-aspect / --max-aspect keep only the boxes of one shape (a cascade per view, docs/cascade.md): the
+    """--min-aspect / --max-aspect keep only the boxes of one shape (a cascade per view, docs/decisions.md): the
     synthetic vehicles are 1.5 times as wide as high."""
     from app.train.cascade.samples import load_folders, positives
 
@@ -221,7 +221,7 @@ def test_positives_of_one_view_only(tmp_path):
 
 
 def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
-    """Any window the trainer takes (`--window 24x24`, docs/cascade.md "Window size and aspect"): the core's cascade
+    """Any window the trainer takes (`--window 24x24`, docs/decisions.md "Cascade window size"): the core's cascade
     (the detection stage with pipeline.detectors [cascade]) reads the window from the XML, so a square model gives
     square boxes whose smallest height is the model's own, and the core's scanner finds exactly the windows OpenCV's
     finds (every raw group kept, on rendered road frames where the tiny model fires often)."""

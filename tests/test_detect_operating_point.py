@@ -1,6 +1,6 @@
 """`headway detect`: single images go through the default preset's detection stage (the learned detector with the
 shadow detector's cues), and only detections at the preset's operating point are written. The operating point was
-chosen on held-out training images (app/detect_images.py OPERATING_POINT, docs/cascade.md "The operating point of
+chosen on held-out training images (app/detect_images.py OPERATING_POINT, docs/detection.md "Operating points of
 `headway detect`"); here the shipped models are measured at it on the validation split (0001-0600) by the
 project's one scoring code (IoU >= 0.5, boxes >= 40 px)."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ from app.detect_images import OPERATING_POINT
 from tests.conftest import data_path
 from tests.test_cli import headway
 
-# Measured on the 600 validation images with the shipped models (docs/cascade.md): default at 0.79 recall 0.806,
+# Measured on the 600 validation images with the shipped models (docs/detection.md): default at 0.79 recall 0.806,
 # precision 0.880 (`headway eval --pipeline default --parts tusimple`).
 DEFAULT_AT_OPERATING_POINT = {"recall": 0.806, "precision": 0.880}
 

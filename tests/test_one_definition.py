@@ -169,7 +169,7 @@ def test_the_sim_camera_module_writes_no_number_of_its_own_for_a_default():
 
 # ---- shared physical constants -----------------------------------------------------------------------
 
-# Each physical constant that several stages use is one key, in the section named here (issue 11): the
+# Each physical constant that several stages use is one key, in the section named here: the
 # hood line in the camera section, lane and vehicle widths in the road section.
 SHARED_KEYS = {
     "hood_frac": "camera",
@@ -205,7 +205,7 @@ def test_each_shared_constant_is_one_key_of_the_core():
                                           ("lead", "lane_width_m"), ("self_calibration", "lane_width_m"),
                                           ("parallax", "vehicle_width_m"), ("lead", "max_lane_width_m")])
 def test_the_check_catches_a_second_definition(section, key):
-    """The definitions before issue 11 finished: each one, added back, is found."""
+    """Each second definition of a shared key, added back, is found."""
     schema = core_schema()
     schema.setdefault(section, {})[key] = {"default": 0.0, "type": "float"}
     assert [f for f in second_definitions(schema) if f.startswith(f"{section}.{key} ")], (section, key)
@@ -278,7 +278,7 @@ def test_no_fcw_level_or_severity_is_written_outside_its_one_definition():
     assert not found, "written again outside app/contracts/fcw_level.py / app/contracts/faults.py:\n" + "\n".join(found)
 
 
-# Lines of the code before issue 11 (each wrote a level or a severity again), and lines that are not.
+# Lines that write a level or a severity again, and lines that do not.
 BEFORE = [
     "NONE, PREWARNING, WARNING = 0, 1, 2",
     'LEVEL_NAMES = {NONE: "none", PREWARNING: "prewarning", WARNING: "warning"}',

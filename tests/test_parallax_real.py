@@ -44,7 +44,7 @@ def test_udacity_black_car_ahead_is_tracked_continuously():
     """test_video: the black car ahead, visible in all 38 frames (app/eval/data/visible_throughout.json),
     carries one confirmed track from frame 5 on without a break or an id switch. Measured: 33 of 38 frames at
     IoU >= 0.3 (27-31 at 0.5 across the last changes), 1 fragment, 0 id switches. (The white car beside it and
-    the vehicles of tme08 and the other clips are not tracked: docs/parallax.md, "Real drives".)"""
+    the vehicles of tme08 and the other clips are not tracked: docs/tracking.md, "Real drives".)"""
     frames, fps, cfg = udacity_parallax("test_video.mp4")
     vehicles = [v for v in road_motion.visible_throughout("test_video.mp4") if v["name"] == "black car ahead"]
     res = road_motion.identity(frames, cfg, fps, vehicles)["black car ahead"]["iou0.3"]

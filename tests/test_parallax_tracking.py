@@ -74,9 +74,8 @@ def test_entries_do_not_hang_on_the_particle_seed(tmp_path):
     """overtaking_from_side, the eval's confirm_delay_frames (half visible to the first confirmed track at IoU
     0.5) for particle seeds 3, 4 and 8. With the paper's joint resampling the truck took 17, 30 and 22 frames and
     car 3 5, 24 and 11: each particle was kept for how well the vehicles already held fitted, and the new vehicle's
-    particles collapsed away from its measurement. Resampled per vehicle (the default): truck 4, 4, 4, car 3 9, 3, 8
-    and car 1 5, 4, 7 when it was introduced (seeds 1-10: truck 3-4, car 3 3-11, car 1 3-7); on the final build of
-    that round truck 4, 3, 4, car 3 4, 4, 3, car 1 2, 2, 2."""
+    particles collapsed away from its measurement. Resampled per vehicle (the default): truck 4, 3, 4, car 3 4, 4,
+    3, car 1 2, 2, 2."""
     from app.eval.synthetic import evaluate_scenario
 
     for seed in (3, 4, 8):

@@ -62,7 +62,7 @@ def test_lead_followed_with_metre_level_range(name):
     rows, visible = _lead_errors(name, "shadow_phd")
     assert len(rows) >= 0.9 * visible, f"{name}: lead tracked in {len(rows)} of {visible} frames"
     err = np.abs([r[0] for r in rows])
-    # measured: 1.88 / 0.99 / 0.58 m (thesis preset 1.91 / 1.21 / 0.63 m); docs/phd.md
+    # measured: 1.88 / 0.99 / 0.58 m (thesis preset 1.91 / 1.21 / 0.63 m); docs/tracking.md
     assert err.mean() <= 2.5, f"{name}: mean absolute range error {err.mean():.2f} m"
     assert len({r[2] for r in rows}) == 1, f"{name}: the lead changed id"
 
@@ -82,7 +82,7 @@ def test_range_rate_steadier_than_the_box_tracker(name):
 def test_lead_range_and_rate_beat_the_box_tracker():
     # The feature cloud's purpose: its features' tags (offsets in units of the contact's depth below
     # the horizon) carry the contact row without the box width, and its expansion observes the range rate
-    # without the bottom edge's pixel offset (docs/phd.md). Measured on the leads (phd against thesis):
+    # without the bottom edge's pixel offset (docs/tracking.md). Measured on the leads (phd against thesis):
     # range 0.99/1.21, 0.58/0.63, 1.00/1.11, 0.73/1.15, 0.97/1.21, 1.88/1.91 m; range rate 0.98/0.92,
     # 0.61/0.85, 0.38/0.77, 0.52/1.24, 1.05/0.78, 0.13/0.85 m/s (worse on stopped_lead_72kmh and slower_lead).
     names = ("stopped_lead_72kmh", "lead_braking_0p3g", "stopped_lead_50kmh", "stopped_lead_100kmh", "slower_lead",

@@ -1,4 +1,4 @@
-"""The smaller faults of issue 14: detect writes the good images and lists the bad, a tiny image is said
+"""Smaller faults: detect writes the good images and lists the bad, a tiny image is said
 to be one, `headway status` on a stale or malformed file, --fps on the command line."""
 from __future__ import annotations
 

@@ -150,7 +150,7 @@ def test_tusimple_detection_by_height_band(tusimple_scores):
 
 @pytest.mark.xfail(strict=True, reason=(
     "not reached by shadow + vertical edges: recall 0.31 at precision 0.70 for boxes >= 40 px (no score "
-    "threshold gives recall above 0.01 at precision 0.8; session 7); the annotations box whole vehicles (flank "
+    "threshold gives recall above 0.01 at precision 0.8); the annotations box whole vehicles (flank "
     "included, oncoming lanes, shoulders) while the method finds rear faces standing on a shadow in the "
     "road area. A COCO CNN (NanoDet-m, app/eval/cnn_reference.py) clears the bar on the same images: "
     "0.77 at 0.91"))

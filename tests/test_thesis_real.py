@@ -30,7 +30,7 @@ def _tracked_frames(tme08, extra: dict) -> dict:
 def test_the_silver_car_ahead_is_tracked_when_boxes_keep_their_width_per_depth(tme08):
     """tme08 (50 frames), measured: the silver car ahead right on 47 frames (29 without the check). The dark car
     ahead left stayed on 13 (11) with it: its detections were 85-100 px wide against its 54 (the check at 0.15
-    kept it on 31 frames but cost the synthetic leads their tight edges; docs/RESULTS.md, session 8), which the
+    kept it on 31 frames but cost the synthetic leads their tight edges; docs/tracking.md), which the
     shadow rule of the next test mends."""
     on, off = _tracked_frames(tme08, {}), _tracked_frames(tme08, OFF)
     assert on["silver car ahead right"] >= 45, on

@@ -118,7 +118,7 @@ def test_pinhole_ukf_beats_the_flat_road_inversion_in_range_rate(z0, sigma):
 
 def test_expansion_observation_removes_the_rate_bias_of_a_low_contact_row():
     """The phd tracker's second UKF observation: the feature cloud's image expansion e = (s - 1)/dt =
-    -(dZ/dt)/Z. A contact row b px low (the synthetic suite's box bottoms sit ~0.9 px low: docs/phd.md)
+    -(dZ/dt)/Z. A contact row b px low (the synthetic suite's box bottoms sit ~0.9 px low: docs/tracking.md)
     puts the range short by Z^2 b / (fy h) and biases the rate by 2 Z (dZ/dt) b / (fy h) (the derivative);
     with the expansion the rate is e Z, short only by the range's share Z b / (fy h): half the bias."""
     Q = _q(1.5, 1.5)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -15,6 +16,7 @@ from app.annotate import annotate
 from app.bench.pipeline import run_bench
 from app.eval import (compare, fcw_scenarios, lane_clips, lanes_sample, range_clip, real_video_fcw, road_motion,
                       synthetic, tusimple_boxes)
+from app.eval import results_doc
 from app.eval.compare import figure as _f
 from app.fleet.engine import map_ordered
 from app.output_files import check_outputs, folder_outputs
@@ -243,6 +245,13 @@ def presets_of(arg: str) -> list[str]:
     return presets
 
 
+def _write_document(path: str, presets: list[str], parts: tuple, args, scenarios, sections: list[str],
+                    started: float) -> None:
+    cmd = results_doc.command(presets, parts, PARTS, path, args.data, args.config, scenarios)
+    Path(path).write_text(results_doc.document(cmd, sections, time.monotonic() - started))
+    print(f"document: {Path(path).resolve()}")
+
+
 def add_parser(subparsers) -> None:
     s = subparsers.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
     s.add_argument("--pipeline", default=configuration.DEFAULT_PRESET,
@@ -254,7 +263,7 @@ def add_parser(subparsers) -> None:
     s.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     s.add_argument("--data", default="../shared/data", help="real data folder (default ../shared/data)")
     s.add_argument("--out", help="report folder (default reports/eval-PIPELINE; with several presets "
-                                 "reports/eval-A-B-...)")
+                                 "reports/eval-A-B-...), or FILE.md: the whole results document (docs/RESULTS.md)")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--workers", type=int, help="run the synthetic and FCW scenarios on a local Dask cluster of N "
                                                "worker processes (docs/fleet.md)")
@@ -271,19 +280,28 @@ def run(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers {args.workers}: need at least one worker")
     scenarios = args.scenarios.split(",") if args.scenarios else None
-    out = Path(args.out or f"reports/eval-{'-'.join(presets)}")
+    # --out FILE.md: the whole document (docs/RESULTS.md); the report folders go to the default place
+    doc = args.out if results_doc.is_document(args.out) else None
+    started = time.monotonic()
+    out = Path(args.out if args.out and not doc else f"reports/eval-{'-'.join(presets)}")
     written = RUN_FILES if len(presets) == 1 else \
         COMPARE_FILES + tuple(presets) + tuple(f"{p}/{name}" for p in presets for name in RUN_FILES)
     check_outputs(folder_outputs("--out", str(out), written), {"--config": args.config, "--data": args.data})
+    if doc:
+        check_outputs({"--out": doc}, {"--config": args.config, "--data": args.data})
     if len(presets) == 1:
         report = evaluate(presets[0], str(out), parts, args.data, args.config, scenarios, workers=args.workers,
                      scheduler=args.scheduler)
         print(markdown(report))
         print(f"\nreport: {out.resolve()}/report.json, report.md, examples/")
+        if doc:
+            _write_document(doc, presets, parts, args, scenarios, [markdown(report)], started)
         return 0
     reports = [evaluate(p, str(out / p), parts, args.data, args.config, scenarios, workers=args.workers,
                    scheduler=args.scheduler) for p in presets]
-    text = compare.markdown(reports, folders=presets)
+    text = compare.markdown(reports, folders=[str(out / p) for p in presets] if doc else presets)
+    if doc:
+        _write_document(doc, presets, parts, args, scenarios, [text] + [markdown(r) for r in reports], started)
     (out / "compare.md").write_text(text)
     (out / "compare.json").write_text(json.dumps({"presets": presets, "parts": list(parts),
                                                   "reports": [f"{p}/report.json" for p in presets]}, indent=1))

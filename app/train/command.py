@@ -73,7 +73,7 @@ def add_parser(subparsers) -> None:
                    help="boxes wider than this (width / height) are not positives (default 3: long side views)")
     t.add_argument("--boost", choices=["gentle", "discrete"], default="gentle",
                    help="gentle: Gentle AdaBoost, real-valued stump leaves (default, the shipped model); discrete: "
-                        "Discrete AdaBoost as in paper 004, leaves +-alpha (docs/cascade.md compares them)")
+                        "Discrete AdaBoost as in paper 004, leaves +-alpha (docs/decisions.md compares them)")
     t.add_argument("--scan-band", metavar="ROW,HEIGHT_M[,MIN_M,MAX_M]", type=scan_band, default=(),
                    help="negatives only from the rows the cascade stage scans for each window size: the camera's "
                         "horizon row (px) and height (m), and the lowest and tallest vehicle (default 1.0,4.5 m); "
@@ -118,7 +118,7 @@ def add_parser(subparsers) -> None:
     t.add_argument("--neg-share", type=float, default=1.0,
                    help="CNN: share of the plain others (IoU < 0.3, ~90 %% of the samples) each epoch sees, drawn "
                         "afresh and weighted up so the loss is the same; 1 = all (default); 0.3 makes an epoch "
-                        "~2.4x faster (docs/cascade.md, 'Session 13')")
+                        "~2.4x faster (docs/detection.md)")
     t.add_argument("--decay", type=float, default=1e-4, help="L2 weight decay (default 1e-4)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--config", help="configuration YAML with the images' camera (default: the TuSimple camera)")

@@ -230,7 +230,7 @@ def finish(p) -> dict:
 def held_out_recall(path: str, images, boxes, scale: float, min_height_px: float = 40.0, min_heat: float = 0.05):
     """On the held-out images: the share of annotated boxes >= min_height_px (image px) that some peak of the
     written ONNX (by cv2.dnn, as the core runs it) covers at IoU >= 0.5, and peaks per image; a quick check of the
-    fit after each epoch (the detector's figures come from the core: docs/proposals.md)."""
+    fit after each epoch (the detector's figures come from the core: docs/detection.md)."""
     net = cv2.dnn.readNetFromONNX(path)
     found = total = peaks = 0
     for img, bx in zip(images, boxes):

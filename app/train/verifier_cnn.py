@@ -8,7 +8,7 @@ is not: the verifier learns to tell a well placed box (what the scoring counts) 
 which would otherwise win the suppression of overlapping detections. Each is cropped as the core crops it
 (verifier_onnx.crop_boxes) and mirrored at random while training.
 
-Box output (session 5): for every detection with IoU >= REGRESS_IOU (0.3) with an annotated box, the
+Box output: for every detection with IoU >= REGRESS_IOU (0.3) with an annotated box, the
 target is that box (the one it overlaps most) as verifier_onnx.offsets of the detection's box; with
 `near="ignore"` the detections at IoU 0.3-0.5 are left out of the classification (they are neither: once
 refined they may be well placed) but still teach the box output. Samples come from the core without the

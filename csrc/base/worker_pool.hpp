@@ -2,7 +2,7 @@
 // worker_pool.hpp - a stage's own threads: its items shared between the calling thread and workers that sleep
 // between calls, each worker kept off the core the caller runs on.
 //
-// Why not OpenCV's parallel_for_ (TBB) (measured, docs/PERFORMANCE.md, session 21): between two camera frames the
+// Why not OpenCV's parallel_for_ (TBB) (measured, docs/decisions.md): between two camera frames the
 // cores idle, and a worker woken then is placed by the kernel on the waker's own core (wake-affine), where it
 // shares the caller's core instead of using the idle one. A 10 ms job in 50 pieces, every 30 ms: 8.5 ms on one
 // thread, 9.8 ms with a woken worker left where the kernel puts it, 4.9-5.1 ms with the worker kept off the

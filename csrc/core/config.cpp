@@ -36,7 +36,7 @@ template <class Fn> void for_each_section(Config &c, Fn &&fn) {
     fn("vehicle_height", c.vehicle_height);
 }
 
-// Keys that moved to one shared definition (issue 11): {old section, old key, new "section.key"}. A
+// Keys that moved to one shared definition: {old section, old key, new "section.key"}. A
 // configuration that still uses one gets an error naming the new key, never a silent default.
 struct MovedKey {
     const char *section, *key, *to;

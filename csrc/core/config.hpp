@@ -45,9 +45,8 @@ struct PipelineParams {
               "named composition of detector and tracker parts: default (learned detector with shadow cues, phd tracker), "
               "thesis, parallax, paper004 (the seed papers' methods), none (lanes only); docs/ARCHITECTURE.md, Presets");
         m.add("detectors", detectors, detector_choices(),
-              "detector parts that replace the preset's: a list, or names separated by commas, e.g. [shadow, parallax]; "
-              "empty: the preset's. A part that needs the road's motion (parallax) makes the road-motion stage run; "
-              "two or more parts have their hypotheses fused, learned detections first (section fuse)");
+              "detector parts that replace the preset's, e.g. [shadow, parallax]; empty: the preset's; two or more "
+              "are fused, learned detections first (docs/ARCHITECTURE.md)");
         m.add("tracker", tracker, tracker_choices(),
               "tracker part that replaces the preset's (kalman, particles, phd, none); empty: the preset's");
         m.add("queue_capacity", queue_capacity, 1, 1024,
@@ -80,8 +79,8 @@ struct Config {
     HomographyParams homography;      //   road homography (DLT + Kalman)
     ParallaxSection parallax;         //   aligned-difference detector and its road band
     ParticleParams particles;         //   joint particle filter
-    CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/cascade.md)
-    ProposalsParams proposals;        // detector part proposals: the learned first stage (docs/proposals.md)
+    CascadeParams cascade;            // cascade stage: the trained Haar cascade (docs/detection.md)
+    ProposalsParams proposals;        // detector part proposals: the learned first stage (docs/detection.md)
     FuseParams fuse;                  // several detector parts: their hypotheses fused into one list
     PhdTrackerParams phd;             // tracker part phd (paper 004); its units in the next three sections
     VehicleHeightParams vehicle_height;  // a tracked vehicle's height (trucks); handed to kalman and phd by from_json

@@ -1,4 +1,4 @@
-// cascade_detector.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/cascade.md).
+// cascade_detector.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/detection.md).
 //
 // The shipped OpenCV cascade XML (trained by `headway train cascade`) is run by HaarCascade
 // (haar_cascade.hpp: OpenCV's evaluation and scan, window for window, faster) only where a vehicle can stand. The
@@ -72,14 +72,10 @@ struct CascadeParams {
     void bind(ParamMap &m) {
         m.add("model", model, nullptr,
               "path of the OpenCV cascade XML; empty = the model shipped with Headway "
-              "(app/models/vehicle_cascade.xml, recipe in docs/cascade.md)");
+              "(app/models/vehicle_cascade.xml, recipe in docs/detection.md)");
         m.add("verifier", verifier, nullptr,
-              "path of the verifier judging every cascade detection: *.onnx = a small CNN on the box's crop, read by "
-              "cv::dnn and run by its own forward pass (verifier_dnn; `headway train verifier --out X.onnx`), *.yml / *.yml.gz = HOG + neighbours + implied height "
-              "through a one-hidden-layer network; empty = the "
-              "model shipped with Headway (app/models/vehicle_verifier.onnx, a CNN of 16/32/64 channels; recipe in "
-              "docs/cascade.md); off = the cascade's neighbour count alone as confidence. The same verifier judges "
-              "single images and a tracked pipeline's detections");
+              "verifier of every cascade detection: *.onnx = a CNN on the box's crop, *.yml(.gz) = HOG + one hidden "
+              "layer; empty = app/models/vehicle_verifier.onnx; off = the window count as confidence");
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
               "m; lowest vehicle box on a flat road; with the camera height it bounds how far below the "
@@ -95,11 +91,8 @@ struct CascadeParams {
               "20 px): smaller vehicles are not wanted, and the smallest sizes are the costliest to scan");
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
         m.add("threads", threads, 1, 16,
-              "threads the stage runs on, at most the cores the process may use: the window sizes and the verifier "
-              "network's crops shared among the caller and the stage's own workers, kept off the caller's core, with "
-              "the same windows, groups and probabilities as one thread; fused's capture-to-CAN p99 in the live loop "
-              "11-18 ms with 2 against 14-26 with 1 (docs/PERFORMANCE.md, sessions 20-21); 1 = the calling thread only, "
-              "as when pinned to one core");
+              "threads the stage runs on (window sizes and verifier crops shared, the same results as one thread), "
+              "at most the cores the process may use; 1 = the calling thread only (docs/detection.md)");
         m.add("scan_lanes", scan_lanes, 0, 8,
               "windows the own scanner evaluates at once: 0 = the widest this CPU has (8 with AVX2, else 4), 4 = "
               "SSE2, 8 = AVX2; the same detections either way (for tests and CPUs without AVX2)");
@@ -107,17 +100,11 @@ struct CascadeParams {
               "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
               "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
         m.add("verifier_dnn", verifier_dnn,
-              "true = the CNN verifier is run by cv::dnn, the reference, instead of their "
-              "own forward pass (detect/verifier_net.hpp: the trainer's architecture in AVX2 loops with Winograd "
-              "convolutions, plain loops without AVX2, compared with cv::dnn when the file is loaded; answers within 1e-5 "
-              "on real crops). Measured side by side with cv::dnn (docs/PERFORMANCE.md): the cascade stage at 640x480 "
-              "35.0 -> 18.6 ms median, `headway detect` 88 -> 43 ms CPU per 1280x720 JPEG. For "
-              "tests and comparison; a network of another form (channel counts not multiples of 8) is run by cv::dnn "
-              "either way");
+              "true = run the CNN verifier by cv::dnn (the reference) instead of the core's own forward pass, with "
+              "the same answers within 1e-5");
         m.add("group_iou", group_iou, 0.05, 0.95,
-              "IoU; raw windows overlapping a group's strongest window at least this much belong to it; with the CNN "
-              "verifier 0.65 (more, tighter groups judged) measured better at high precision (docs/cascade.md), but the "
-              "neighbour count as confidence (verifier off) needs the looser groups");
+              "IoU; raw windows overlapping a group's strongest window at least this much join the group "
+              "(docs/detection.md)");
         m.add("min_neighbors", min_neighbors, 1, 100, "raw windows; groups with fewer are dropped");
         m.add("neighbors_half", neighbors_half, 0.5, 100.0,
               "raw windows; a group of n windows has confidence n / (n + neighbors_half)");
@@ -125,76 +112,39 @@ struct CascadeParams {
               "raw windows; groups of fewer are not judged by the verifier and keep the confidence n / (n + "
               "neighbors_half); 0 = every group verified");
         m.add("max_groups", max_groups, 0, 10000,
-              "groups; only this many are kept and verified: those whose strongest raw window has the highest "
-              "last-stage sum (the order they are grouped in); 0 = all. The CNN verifier costs ~0.12 ms a group; with "
-              "session 3's verifier (trained on the first 64 groups of each training image) 96 measured as good as all at high "
-              "precision on held-out training images and saves ~5 ms a 1280x720 frame, but the cascade preset then warned once on "
-              "project_video_cut.mp4 (2.56 s; docs/cascade.md), so it is off by default");
+              "groups kept and verified, those with the highest last-stage sum; 0 = all (fewer save verifier time "
+              "but lose vehicles, docs/detection.md)");
         m.add("refine_boxes", refine_boxes,
-              "true = a verifier with a box output (a CNN trained with one, docs/cascade.md) moves each group's box onto "
-              "the vehicle before the suppression, so that two groups on one vehicle merge and a group beside it becomes "
-              "a well placed box (reported on single images and to a tracker alike); false = the group's mean box as it is (verifiers "
-              "without a box output never move it). TuSimple validation, boxes >= "
-              "40 px, with the shipped verifier and rejudge_refined: recall 0.690 at precision 0.845; without it no "
-              "score reaches precision 0.8 (the network leaves IoU 0.3-0.5 boxes out of its classification, so "
-              "misplaced groups score high until moved)");
+              "true = a verifier with a box output moves each group's box onto the vehicle before the suppression "
+              "(docs/detection.md); false = the group's mean box");
         m.add("rejudge_refined", rejudge_refined,
-              "true = a moved box (refine_boxes) is judged again on its new crop and keeps the lower of the two "
-              "probabilities: the box output was trained only on boxes near a vehicle, so where the first judgement "
-              "was wrong (an empty stretch of road at 9 m judged 0.95 on project_video_cut.mp4) the moved box is an "
-              "extrapolation (there 400 px wide) that a second look refuses; a second verifier pass. TuSimple "
-              "validation, boxes >= 40 px: recall 0.690 at precision 0.845 against 0.675 at 0.861 without");
+              "true = a moved box (refine_boxes) is judged again on its new crop and keeps the lower probability "
+              "(docs/detection.md)");
         m.add("rejudge_min_p", rejudge_min_p, 0.0, 1.0,
-              "probability; with rejudge_refined only the moved boxes the first look gives at least this are judged "
-              "again: the second look can only lower a probability, and the score curve's useful points lie at 0.9 "
-              "and above (TuSimple validation: best recall at precision 0.8 at score 0.9); 0 = every moved box, at "
-              "twice the verifier's cost (~23 ms more CPU on a 1280x720 image of ~200 groups)");
+              "probability; with rejudge_refined only the moved boxes the first look scores at least this are "
+              "judged again; 0 = every moved box");
         m.add("rejudge_move", rejudge_move, 0.0, 1.0,
-              "share; with rejudge_refined the second look's box output moves each box again by this share of its "
-              "offsets (0 = the box stays where the first look put it, 1 = the whole second step): the output learned "
-              "one step from a group's box, and on a moved box its offsets are a second, noisier estimate of what is "
-              "left. Held-out training images (docs/cascade.md, session 10), fused, best recall at precision 0.85, "
-              "with verify_mirrored: 0 0.655, 0.25 0.660, 0.5 0.664, 0.75 0.658, 1 0.653");
+              "share of the second look's box offsets applied to a moved box (0 = keep the first look's box, 1 = "
+              "the whole second step; docs/detection.md)");
         m.add("verify_mirrored", verify_mirrored,
-              "true = the CNN verifier also judges the mirror image of each crop it believes (mirror_min_p) and "
-              "averages the two answers (probability and box offsets): a vehicle from behind is nearly symmetric and "
-              "the network was trained on crops mirrored at random. Held-out training images (docs/cascade.md, "
-              "verify_mirrored), best recall at precision 0.85 with rejudge_move 0.5: fused 0.664 against 0.655 without, cascade "
-              "0.669 against 0.654. A HOG verifier judges the crop as it is");
+              "true = the CNN verifier also judges the mirror image of each believed crop (mirror_min_p) and "
+              "averages the two answers (docs/detection.md)");
         m.add("mirror_min_p", mirror_min_p, 0.0, 1.0,
-              "probability; with verify_mirrored only the crops the plain look gives at least this are judged "
-              "mirrored too: a box below it keeps its plain answer, whose mean with its mirror's could not reach "
-              "(mirror_min_p + 1) / 2, so every score from there up is what mirroring every box gives (0.5: the "
-              "scores from 0.75, where every operating point lies), at the cost of the believed boxes only");
+              "probability; with verify_mirrored only the crops the plain look scores at least this are judged "
+              "mirrored too");
         m.add("nms_iou", nms_iou, 0.05, 1.0,
               "IoU; after scoring, a detection overlapping a more confident one at least this much is dropped (a "
               "second group on the same vehicle); 0.3 measured best at high precision on the TuSimple validation "
-              "split (docs/cascade.md); 1 = keep all");
+              "split (docs/detection.md); 1 = keep all");
         m.add("tracked_slices", tracked_slices, 1, 32,
-              "full detections; in a tracked pipeline the scan is cut into this many blocks of window sizes "
-              "(contiguous sizes holding about equal numbers of windows, smallest first) and each full detection "
-              "scans and verifies the next block: no frame pays the whole scan, and each size is scanned once every "
-              "tracked_slices full detections. Measured (docs/PERFORMANCE.md, session 19): with 16 the fused bench's "
-              "p99 falls from 18-25 to 5.8-7.7 ms at 640x480 and the synthetic suite, FCW cases and the seven real "
-              "vehicles score as with 1, but the far car ahead on solidWhiteRight.mp4 (45-54 m) is lost from 2 slices "
-              "up (tracked 181 frames with 1, 98 with 2, 32 with 3, none with 4 or more), and with the cascade alone "
-              "(preset cascade) so is steady_following's lead. 1 = every size on every full detection (the "
-              "default). Single images (`headway detect`, the evaluation's TuSimple images) always scan every size; "
-              "see tracked_far_m for the far vehicles");
+              "in a tracked pipeline the scan is cut into this many blocks of window sizes, one per full detection "
+              "(more lose far cars, docs/detection.md); 1 = every size every time; single images scan all");
         m.add("tracked_far_m", tracked_far_m, 0.0, 1000.0,
-              "m; with tracked_slices > 1, the window sizes of a car (1.5 m high) farther than this, fy 1.5 / "
-              "tracked_far_m px and smaller, are scanned on every full detection, and only the larger sizes are cut "
-              "into tracked_slices blocks: the far vehicles the cascade alone finds keep being scanned as often as "
-              "without slices, the near ones (which the shadows and parallax find on every detection too) less often. "
-              "0 = every size in the blocks (docs/PERFORMANCE.md, session 21)");
+              "m; with tracked_slices > 1, the window sizes of a car farther than this are scanned on every full "
+              "detection and only the nearer sizes are sliced; 0 = every size sliced");
         m.add("border_frac", border_frac, 0.0, 0.5,
-              "share of a window's width that may lie beyond the image's left or right border (black there); at most "
-              "half, as the scan reaches past the road area's sides: a vehicle the border cuts (passing, or being "
-              "passed, close by) is found by the windows reaching past it, and every box is cut to the image, as "
-              "annotations box it. Held-out training images (docs/cascade.md, session 12), fused with the verifier "
-              "trained on these groups (its 4-epoch run), best recall at precision 0.85: 0.759 at 0.5, 0.743 at 0.35; "
-              "0 = inside the "
-              "image only (until session 12)");
+              "share of a window's width that may lie beyond the image's left or right border, so that a vehicle "
+              "the border cuts is found (docs/detection.md); 0 = inside the image only");
     }
 };
 

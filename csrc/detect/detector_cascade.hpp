@@ -1,5 +1,5 @@
 // detector_cascade.hpp - detector part "cascade" (paper 004): the project's trained Haar cascade
-// (cascade_detector.hpp, docs/cascade.md) over the road area, each detection a hypothesis with the
+// (cascade_detector.hpp, docs/detection.md) over the road area, each detection a hypothesis with the
 // cascade's score (its confidence: the grouped windows' n / (n + neighbors_half), or the verifier's
 // probability) as score and appearance, and the strongest window's last-stage sum as strength. Works on
 // one image; needs no road motion. Loading the model happens when the part is built. Tracked with

@@ -69,28 +69,19 @@ void ParallaxSection::bind(ParamMap &m) {
           "share of the image height above the horizon kept in the road band (the rows features and differences "
           "are taken from); the band holds the roofs of near vehicles, the sky above is of no use");
     m.add("road_range_m", road_range_m, 0.0, 1000.0,
-          "m; the lane model's road area is continued toward the vanishing point up to this range for the detector "
-          "(the lanes stage ends it where markings are measured, 60 m: on TME tme08 the vehicles ahead at 60-75 m "
-          "stood just beyond it and were never measured); 0 keeps the lane model's area");
+          "m; the lane model's road area is continued toward the vanishing point up to this range for the "
+          "detector; 0 keeps the lane model's area (docs/tracking.md)");
     m.add("road_lanes_each_side", road_lanes_each_side, 0.0, 4.0,
-          "lane widths; the detector's road area reaches at least this far beyond the ego lane's boundaries (the "
-          "ego lane's width at each row), where the lane model's area is narrower: it covers the ego and adjacent "
-          "lanes only, and an adjacent boundary found on a car's side or a gore area cut it further (Udacity "
-          "test_small1, test_video: the cars one and two lanes to the right were outside it and never measured); "
-          "2 scans as far as the thesis preset's detector (test_small2's car: 77 of 100 frames tracked, 0 without); "
-          "it also takes in what stands beside the road, and road the homography extrapolates to (synthetic suite, "
-          "particle seeds 1/2/3: MOTA 0.583/0.566/0.541 against 0.586/0.575/0.597 with 0, precision 0.83-0.87 "
-          "against 0.87-0.88; overpass_shadow 0.37-0.54 against 0.60-0.63); 0 keeps the lane model's area");
+          "lane widths; the detector's road area reaches at least this far beyond the ego lane's boundaries "
+          "where the lane model's area is narrower; 0 = the lane model's area (docs/tracking.md)");
     m.add("exclude_vehicle_corners", exclude_vehicle_corners,
           "corners inside the boxes of confirmed vehicles are not used for the homography: they are not on the road");
     m.add("search_max_speed_mps", search_max_speed_mps, 1.0, 100.0,
           "m/s; without a prediction the travel since the previous frame is searched up to this speed");
     m.add("search_steps", search_steps, 2, 1000, "travels tried in that search (0 .. max speed * dt)");
     m.add("long_gap", long_gap, 0, 10,
-          "frames; besides the previous frame, the frame is compared with the one this many frames back "
-          "(homographies chained) and its regions are added where the short difference has none: a vehicle "
-          "keeping its distance 50 m ahead shows ~0.3 px of parallax per frame at 30 fps, long_gap times more "
-          "here (the paper ran at 5-10 fps); 0 or 1 disables (saves one warp per frame)");
+          "frames; the frame is also compared with the one this many frames back and those regions added where "
+          "the short difference has none (far vehicles at 30 fps; docs/tracking.md)");
     m.add("long_gap_min_range_m", long_gap_min_range_m, 0.0, 1000.0,
           "m; the long-gap difference covers only the road beyond this range (the band's upper rows), 0 = the whole "
           "band; 20 saves ~0.8 ms per 640x480 frame but cost 0.06 MOTA on the synthetic suite (0.27 against 0.34), "

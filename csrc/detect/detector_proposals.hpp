@@ -1,4 +1,4 @@
-// detector_proposals.hpp - detector part "proposals": the learned first stage (docs/proposals.md).
+// detector_proposals.hpp - detector part "proposals": the learned first stage (docs/detection.md).
 //
 // A small convolutional network run once on the reduced image (proposal_net.hpp) gives the vehicles' centres as
 // peaks of an objectness map, each with its box. Each peak's box is checked against the flat road like every other
@@ -44,7 +44,7 @@ struct ProposalsParams {
     void bind(ParamMap &m) {
         m.add("model", model, nullptr,
               "path of the proposal network (ONNX, `headway train proposals --out X.onnx`); empty = the model shipped "
-              "with Headway (app/models/vehicle_proposals.onnx, recipe in docs/proposals.md)");
+              "with Headway (app/models/vehicle_proposals.onnx, recipe in docs/detection.md)");
         m.add("verifier", verifier, nullptr,
               "path of the CNN verifier judging the candidates (as cascade.verifier: `headway train verifier --out "
               "X.onnx`); empty = the shipped app/models/vehicle_verifier.onnx; off = none (score = the peak's heat)");

@@ -15,7 +15,7 @@
 // *first* stage rejects the next position is skipped (OpenCV's `x += yStep`). With step 2 these are exactly the
 // windows OpenCV's detectMultiScale scans at scale 1.
 //
-// Why not cv::CascadeClassifier (measured, docs/cascade.md "Session 3"): the same windows cost 4x less here.
+// Why not cv::CascadeClassifier (measured, docs/decisions.md): the same windows cost 4x less here.
 // OpenCV picks each stump's leaf by a branch on a comparison that goes either way from window to window, and
 // evaluates one window at a time; here the leaf is selected without a branch and four (SSE2) or eight (AVX2, where the CPU
 // has it) consecutive windows of a row are evaluated together, from the integral split into column planes so

@@ -52,10 +52,8 @@ void LaneFeatureParams::bind(ParamMap &m) {
           "count; Harris corners at most (strongest first); bounds the Lucas-Kanade cost; 50 leave the DLT "
           "over-determined several times over");
     m.add("harris_quality", harris_quality, 1e-6, 1.0,
-          "fraction of the strongest Harris response a corner must reach; tiny because the response grows with the "
-          "fourth power of contrast: a near dash end outshines the asphalt grain beside the markings by 10^4 or more, "
-          "and those weaker road corners spread the points the DLT needs (1e-5: twice the points, 0.3% instead of "
-          "0.7% median error of the measured homography on the synthetic road)");
+          "fraction of the strongest Harris response a corner must reach; tiny, as the response grows with the "
+          "fourth power of contrast (docs/tracking.md)");
     m.add("harris_k", harris_k, 0.01, 0.25, "Harris detector free parameter (det - k trace^2)");
     m.add("min_corner_distance_px", min_corner_distance_px, 1, 100, "px; corners closer than this are one");
     m.add("lk_window_px", lk_window_px, 5, 101,

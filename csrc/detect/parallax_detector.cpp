@@ -25,14 +25,11 @@ void ParallaxParams::bind(ParamMap &m) {
           "a cell is hot above this many times the median |difference| of the road cells (the alignment residual "
           "of this frame: texture, noise, shake the homography missed)");
     m.add("edge_slack_px", edge_slack_px, 0.0, 10.0,
-          "px at the difference's level; a cell is hot only if its mean |difference| exceeds this times its mean "
-          "gradient, i.e. it shows more displacement than interpolation blur and the last alignment error leave at "
-          "edges (markings, dash ends); a vehicle's parallax near the camera is several pixels; 0 disables");
+          "px at the difference's level; a cell is hot only if its mean |difference| exceeds this times its "
+          "mean gradient (more than interpolation blur at edges); 0 disables");
     m.add("photometric", photometric,
-          "take the smooth brightness change between the aligned frames out of the difference (a quadratic surface "
-          "fitted to the road's signed difference, see photometric.hpp): vignetting and the road's sheen toward a low "
-          "sun make a road point look 8-10 gray levels brighter far ahead than near (TME tme08), which raised the "
-          "hot-cell threshold above most vehicles' parallax");
+          "take the smooth brightness change between the aligned frames out of the difference (a quadratic "
+          "surface; vignetting, a low sun's sheen; docs/tracking.md)");
     m.add("photometric_trim", photometric_trim, 1.0, 100.0,
           "robust sigmas (1.4826 MAD) beyond which a road cell is left out of the brightness fit (vehicles, moving "
           "shadows)");
@@ -65,11 +62,8 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("min_aspect", min_aspect, 0.1, 5.0,
           "box height / width reported at least (a region whose upper edges showed no parallax)");
     m.add("find_top", find_top,
-          "take a region's top from the current frame, where its side edges stop going up under a roof line "
-          "(vehicle_top.hpp), when that is higher than top_min_aspect widths: the difference misses the flat back of "
-          "a truck, and the road band ends band_above_horizon above the horizon, below the roof of a near truck "
-          "(overtaking_from_side truck 2 was confirmed with its box half as tall as the truck, IoU 0.35, for 20 "
-          "frames); false: the height from the region alone");
+          "take a region's top from the current frame's side edges under a roof line when that is higher than "
+          "top_min_aspect widths (a truck's flat back shows no parallax; docs/tracking.md)");
     m.add("top_min_aspect", top_min_aspect, 0.1, 5.0,
           "height / width (between the sides found); a top found lower than this is not trusted and the region's "
           "height is kept (cars' upper sides fade into the rear window; as the thesis preset's top_min_aspect)");
@@ -81,9 +75,8 @@ void ParallaxParams::bind(ParamMap &m) {
           "preset's top_keep_frac)");
     m.add("top_max_gap", top_max_gap, 0, 50, "px; gaps in the side edges bridged going up (seams, a window frame)");
     m.add("top_snap_frac", top_snap_frac, 0.0, 1.0,
-          "region widths; each side is first moved to the strongest vertical edge within this distance on the lower "
-          "body (the difference's sides are blurred by half a cell and widened by the cast shadow); a side within a "
-          "cell of the image's side is cut by it and not followed, the other side alone gives the top");
+          "region widths; each side is first moved to the strongest vertical edge within this distance on the "
+          "lower body before the top is searched");
     m.add("join_gap_cells", join_gap_cells, 0, 100,
           "cells; hot clusters this far beside a region's columns still join it (the difference of one vehicle is "
           "broken at its wheels and plate)");
@@ -96,10 +89,8 @@ void ParallaxParams::bind(ParamMap &m) {
     m.add("refine_up_frac", refine_up_frac, 0.0, 2.0,
           "expected widths above the lowest hot row searched for the shadow step that is the vehicle's bottom");
     m.add("refine_down_frac", refine_down_frac, 0.0, 2.0,
-          "expected widths below it: a vehicle standing still on the road shows no parallax at its contact zone; "
-          "the search stops bottom_margin_px above the road area's bottom (the bonnet's edge is a strong step: on "
-          "Udacity test_video the near shoulder's and the solid line's residuals took it for their bottom, became "
-          "near 'vehicles' and held the particle filter's one transitory period while the car ahead waited)");
+          "expected widths; how far below a region the search for its vehicle's bottom edge goes (a vehicle "
+          "standing still shows no parallax at its contact zone; docs/tracking.md)");
     m.add("refine_min_step", refine_min_step, 0.0, 255.0,
           "gray levels; weakest dark-above / bright-below step taken as the bottom; otherwise the hot row stays");
     m.add("bottom_margin_px", bottom_margin_px, 0.0, 1000.0,

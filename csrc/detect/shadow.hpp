@@ -72,48 +72,35 @@ struct ShadowParams {
         m.add("min_step_gray", min_step_gray, 0.0, 100.0,
               "gray levels; floor of the step threshold on very dark roads (sensor noise)");
         m.add("dark_rel", dark_rel, 0.1, 1.0,
-              "fraction of the local road gray level; the pixel above a shadow edge must be darker than "
-              "this (a shadow is darker than the road, the top end of a lane marking is not); the gap "
-              "under a vehicle is darker than half the road, which also rejects most tar seams and "
-              "the shade of roadside objects (TuSimple: 0.5 raised precision from 0.63 to 0.74 at "
-              "equal recall)");
+              "fraction of the local road gray level; the pixel above a shadow edge must be darker than this (a "
+              "shadow is darker than the road, a marking's end is not; docs/detection.md)");
         m.add("level_bands", level_bands, 1, 64,
               "row bands in which the road gray level is measured; the level changes with range");
         m.add("level_columns", level_columns, 1, 16,
               "cells across the road per band; shaded and sunlit lanes get their own level");
         m.add("band_dark_frac", band_dark_frac, 0.0, 1.01,
-              "share of dark pixels just above the edge, over half a vehicle width beyond each end; "
-              "when both sides reach it the edge is a piece of a shadow across the road (an overpass "
-              "broken by lane markings), not a vehicle's; above 1 switches the check off");
+              "share of dark pixels just above the edge over half a vehicle width beyond each end; when both reach "
+              "it the edge is part of a shadow across the road; above 1 = off");
         m.add("reduce_height_ratio", reduce_height_ratio, 0.0, 3.0,
               "vehicle widths; an edge this far above a lower, overlapping edge is part of the same "
               "vehicle (bumper, window) and is dropped, leaving one bottom edge per vehicle");
         m.add("beside_rel", beside_rel, 0.0, 1.0,
-              "fraction of the road gray level; a stretch at one end of a shadow edge with lit road just "
-              "above its dark band (gray within this fraction of the road level) is shadow cast beside the "
-              "vehicle by a low sun, not under it, and is cut off, so that the verification looks for the "
-              "vehicle's side there and not at the lane marking where the cast shadow ends (tme08's dark "
-              "car: tracked on 48 of 50 frames, 13 with 0); 0 switches it off");
+              "fraction of the road gray level; a stretch at an edge's end with lit road just above its dark band "
+              "is a low sun's shadow beside the vehicle and is cut off; 0 = off (docs/detection.md)");
         m.add("beside_rows_frac", beside_rows_frac, 0.01, 1.0,
               "expected vehicle widths; rows above a shadow column's dark band whose mean gray tells lit road "
               "from a vehicle's body (at least 2 rows)");
         m.add("beside_min_frac", beside_min_frac, 0.0, 1.0,
-              "expected vehicle widths; shortest lit stretch cut off an end: a low sun's shadow reaches half a "
-              "car past its side (tme08), a few pixels of lit road are blur or a road-gray bumper (0.15 cut "
-              "into tme08's silver car, then tracked on 40 of 50 frames against 47)");
+              "expected vehicle widths; shortest lit stretch cut off an edge's end (a few pixels of lit road are "
+              "blur; docs/detection.md)");
         m.add("beside_rest_frac", beside_rest_frac, 0.0, 2.0,
-              "expected vehicle widths; an edge is cut only when at least this much of it remains under the "
-              "vehicle (verify.shadow_min_ratio: a vehicle's own shadow is at least half its width); a "
-              "shorter rest is a far piece of road shade that the cut would make a vehicle of");
+              "expected vehicle widths; an edge is cut only when at least this much of it remains under the vehicle");
         m.add("beside_max_ratio", beside_max_ratio, 0.5, 10.0,
-              "expected vehicle widths; an edge wider than this is left whole: more than one vehicle's shadow "
-              "cast past its side (a long shadow, or one run into the shade along the road's edge), whose "
-              "vehicle the verification searches inside it at the expected width (verify.shadow_max_ratio)");
+              "expected vehicle widths; an edge wider than this is left whole (more than one vehicle's shadow), for "
+              "the verification to search inside it");
         m.add("beside_reach", beside_reach, 0.0, 2.0,
-              "expected vehicle widths; with one end of an edge cut (its vehicle's shaded side), the edge "
-              "reaches at least this far from that end towards the sun, whose light enters under the "
-              "vehicle's sunny side and starts the shadow inside it; 0.8 leaves the verification's margin to "
-              "find that side from a small car's width on (tme08: 0.7-0.9 the same, 1.0 reached a van beside)");
+              "expected vehicle widths; with one end cut, the edge still reaches at least this far from it towards "
+              "the sun (the shadow starts inside the vehicle's sunny side)");
         m.add("max_hypotheses", max_hypotheses, 1, 1000,
               "hypotheses per frame, strongest first; bounds the cost of verification");
     }

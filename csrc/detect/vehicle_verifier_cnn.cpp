@@ -23,7 +23,7 @@ CnnVerifier::CnnVerifier(const std::string &path, bool mirrored, double mirror_m
     // the network's own forward pass (verifier_net.hpp), read before cv::dnn's first run fuses its layers; used once it
     // agrees with cv::dnn (below)
     std::unique_ptr<VerifierNet> own = dnn ? nullptr : VerifierNet::from_dnn(net_, kCropH, kCropW);
-    // outputs: "p" alone (session 3's form) or "p", "box" and "margin"; anything else is not a verifier network
+    // outputs: "p" alone (a network without a box output) or "p", "box" and "margin"; anything else is not a verifier network
     std::vector<cv::String> names = net_.getUnconnectedOutLayersNames();
     std::sort(names.begin(), names.end());
     const std::string form = "inputs crop (N, 1, " + std::to_string(kCropH) + ", " + std::to_string(kCropW) +
@@ -74,7 +74,7 @@ namespace {
 // between whole pixels, so each cell corner's integral is an exact bilinear read of ii: the cost is per cell, not per
 // source pixel (the groups of a frame overlap: their crops span ~2.4 M source pixels of a 0.9 M pixel image).
 // OpenCV's own arithmetic (float weights, partial pixels under 1e-3 dropped) differs by one grey level on ~0.1 % of
-// the pixels (docs/cascade.md, session 11).
+// the pixels (docs/detection.md).
 template <int W, int H>
 void area_cells(const cv::Mat &ii, int x0, int y0, int x1, int y1, cv::Mat &out) {
     const double sx = double(x1 - x0) / W, sy = double(y1 - y0) / H;
@@ -166,7 +166,7 @@ void CnnVerifier::forward(const cv::Mat &crops, const cv::Mat &extra, float *p, 
         return;
     }
     // kChunk boxes at a time: a frame's ~100 crops at once spill the layers' outputs out of the cache (measured 7.0
-    // against 8.1 ms for ~112 crops, docs/cascade.md session 11); each box's answer is its own either way
+    // against 8.1 ms for ~112 crops, docs/decisions.md); each box's answer is its own either way
     for (int k0 = 0; k0 < n; k0 += kChunk) {
         const int m = std::min(kChunk, n - k0);
         const int szm[4] = {m, 1, kCropH, kCropW};

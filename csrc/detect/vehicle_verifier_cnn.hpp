@@ -12,8 +12,8 @@
 //   (floor(v + 0.5)), the part outside the image filled by replicating the border, resized to kCropW x kCropH
 //   (INTER_AREA), standardised by its own mean and standard deviation, z = (c - mean) / (std + 1);
 // - extra (N, 2): log(1 + n) of the n raw cascade windows grouped, and implied_vehicle_height.
-// Outputs: p (N, 1), the probability that the box holds a vehicle, and, in a network trained with it (session
-// 5), box (N, 4): offsets d that move the box's edges onto the vehicle's,
+// Outputs: p (N, 1), the probability that the box holds a vehicle, and, in a network trained with it,
+// box (N, 4): offsets d that move the box's edges onto the vehicle's,
 //     l' = l + d0 w,   t' = t + d1 h,   r' = r + d2 w,   b' = b + d3 h    (w, h: the box's width and height)
 // (verifier_onnx.refine), with margin (N, 1): the crop margin it was trained with, a constant read once by the
 // probe (it replaces kMargin for that file). All the boxes of a frame go through the network in one batch.
@@ -22,7 +22,7 @@
 // mirror_min_p also goes through the network, and the two answers are averaged, p = (p + p_m) / 2, the offsets with
 // the mirror's left and right swapped and negated, d = (d0 - dm2, d1 + dm1, d2 - dm0, d3 + dm3) / 2. A vehicle seen
 // from behind is nearly symmetric and the network was trained on crops mirrored at random, so the two are two
-// estimates of the same answer; their mean ranks the boxes better (docs/cascade.md, session 10). A box below
+// estimates of the same answer; their mean ranks the boxes better (docs/detection.md). A box below
 // mirror_min_p keeps its plain answer: its mean could not reach (mirror_min_p + 1) / 2, so every score from there up
 // is the one mirroring every box gives, for the cost of mirroring the few believed boxes.
 #pragma once

@@ -4,8 +4,8 @@
 //     a1 = maxpool2(relu(conv3x3(z, c1)))   a2 = maxpool2(relu(conv3x3(a1, c2)))   a3 = maxpool2(relu(conv3x3(a2, c3)))
 //     h  = relu(W_f flatten(a3) + W_e extra + b_h),   p = sigmoid(w_o . h + b_o),   d = W_d h + b_d (optional)
 // with convolutions padded by one pixel and 2x2 pools of stride 2. cv::dnn runs these tiny layers (1 input channel,
-// 8-64 output channels, 48 x 32 maps) at a few GMAC/s: session 3's 8/16/32 network, ~1 M multiply-adds a crop, took
-// ~0.2 ms a crop, half of a tracked frame's cascade stage (docs/PERFORMANCE.md, session 13). Here each crop's maps
+// 8-64 output channels, 48 x 32 maps) at a few GMAC/s: an 8/16/32 network, ~1 M multiply-adds a crop, took
+// ~0.2 ms a crop, half of a tracked frame's cascade stage (docs/decisions.md). Here each crop's maps
 // stay in the cache (a conv computes two rows, pools them and writes the next layer's padded input), and the output
 // channels are the SIMD lanes: six output pixels at a time, every input value broadcast once against 8 or 16 output
 // channels' weights, with AVX2 + FMA where the CPU has them (runtime dispatch, as haar_cascade.cpp; the objects carry

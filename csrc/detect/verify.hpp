@@ -69,10 +69,8 @@ struct VerifyParams {
               "going up; lower follows faint upper sides further, higher stops at the first weak row");
         m.add("top_max_gap", top.max_gap, 0, 50, "rows; gaps in the side edges bridged going up (seams)");
         m.add("road_texture_max", road_texture_max, 0.0, 10.0,
-              "mean gradient magnitude / gray level of the strip just under the bottom edge, at most: "
-              "a vehicle's shadow lies on smooth asphalt, whereas the dark bands under guardrails, "
-              "vegetation and gravel beside the road lie on texture (TuSimple: 90 % of true vehicles "
-              "below 0.19, half of the false ones above 0.18); 10 switches the check off");
+              "mean gradient magnitude / gray level of the strip under the bottom edge, at most: a vehicle's shadow "
+              "lies on smooth asphalt, guardrails' and verges' on texture (docs/detection.md)");
         m.add("nms_iou", nms_iou, 0.0, 1.0,
               "IoU; of two overlapping detections the lower-scoring one is dropped");
     }

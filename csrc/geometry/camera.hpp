@@ -44,9 +44,8 @@ struct CameraParams {
         m.add("p2", p2, -1.0, 1.0, "tangential distortion coefficient p2");
         m.add("k3", k3, -1000.0, 1000.0, "radial distortion r^6 coefficient");
         m.add("hood_frac", hood_frac, 0.0, 0.5,
-              "share of the image height at the bottom taken by the car's own bonnet (the hood line); those rows "
-              "are not scanned for lane markings or shadows, and give no road features or differences (the bonnet "
-              "moves with the camera, not with the road); e.g. 0.08 for TuSimple's 1280x720 clips; 0 for none");
+              "share of the image height at the bottom taken by the car's own bonnet: those rows give no lane "
+              "markings, shadows, road features or differences; e.g. 0.08 for TuSimple's clips; 0 = none");
     }
 
     bool has_distortion() const { return k1 != 0.0 || k2 != 0.0 || k3 != 0.0 || p1 != 0.0 || p2 != 0.0; }

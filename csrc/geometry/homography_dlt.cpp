@@ -14,9 +14,8 @@ void DltParams::bind(ParamMap &m) {
           "count; correspondences needed for a homography measurement; 8 leaves the DLT over-determined "
           "twice over, so one bad point shows in the residual");
     m.add("point_gate_px", point_gate_px, 0.0, 10000.0,
-          "px; a correspondence farther than this from where the predicted homography puts it is dropped before the "
-          "DLT (a corner matched to the wrong dash, a corner on a vehicle); 3 px is about three times what shake "
-          "changes between frames on the synthetic road; 0 disables");
+          "px; a correspondence farther than this from where the predicted homography puts it is dropped before "
+          "the DLT (a wrong dash, a vehicle's corner); 0 disables");
     m.add("min_row_span_px", min_row_span_px, 0.0, 10000.0,
           "px; the used points must spread over this many rows; points in a thin band near the horizon fix the "
           "homography poorly (the paper's warning)");

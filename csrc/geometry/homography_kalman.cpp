@@ -6,20 +6,14 @@ namespace hw {
 
 void HomographyKalmanParams::bind(ParamMap &m) {
     m.add("q", q, 0.0, 1.0,
-          "process noise variance of each of the nine entries of H in road-band coordinates (see "
-          "geometry/homography_kalman.hpp); its square root times half the image width is roughly the change per "
-          "frame in pixels the filter follows; camera shake of 0.15-0.4 deg changes H by 1e-3..1e-2 per frame. "
-          "The paper's Q = 1e-6 with R = 1e-3 (gain ~0.03, a 30-frame average) lags the shake: on the synthetic "
-          "road shaken by 0.4 deg 2.93 gray levels of road residual and 92 % accepted against 2.67 and 94 % for "
-          "q = r = 1e-5 (docs/parallax.md)");
+          "process noise variance of each of the nine entries of H in road-band coordinates; the paper's filter "
+          "is q 1e-6 with r 1e-3 (docs/tracking.md)");
     m.add("r", r, 1e-12, 1.0,
           "measurement noise variance of each entry of a DLT homography (road-band coordinates); our measurements "
           "(pre-warped LK, ~50 points) err by ~3e-3 (median 2-norm), far less than the paper's sparse ones");
     m.add("gate", gate, 1e-6, 10.0,
-          "t_a: a measured H is accepted only if the 2-norm of H_meas - H_pred (road-band coordinates) is below "
-          "this; the norm is about the largest disagreement on the road in half image widths, so 0.05 is ~16 px at "
-          "640 px: more than shake (0.4 deg) and braking change between frames, less than a fit to the wrong points "
-          "(a dash matched to the next one gives 0.1-0.4)");
+          "t_a; a measured H is accepted only if the 2-norm of H_meas - H_pred (road-band coordinates) is below "
+          "this; 0.05 is ~16 px at 640 px (docs/tracking.md)");
     m.add("max_coast_frames", max_coast_frames, 0, 100000,
           "frames; after this many frames without an accepted measurement the filter is lost and starts again from "
           "two agreeing measurements (the alignment of a stale prediction is worse than none)");

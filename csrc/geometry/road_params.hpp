@@ -21,11 +21,8 @@ struct RoadParams {
 
     void bind(ParamMap &m) {
         m.add("lane_width_m", lane_width_m, 2.0, 5.0,
-              "m; nominal lane width: the width the lane model expects, the metres the lane model's pixel width "
-              "stands for (expected vehicle width at a row), the ego corridor and lane index without a lane model, "
-              "and the width self-calibration takes the camera height from; 3.6 m is a motorway lane (3.25-3.75 m "
-              "elsewhere: a few per cent of height bias). Range 2-5 m: a lane narrower than 2 m carries no car "
-              "(1.8 m wide), one wider than 5 m is two lanes with a marking missing");
+              "m; nominal lane width: the lane model's expected width, its pixel-to-metre scale, the ego corridor "
+              "without lanes, and self-calibration's height reference (docs/calibration.md)");
         m.add("min_lane_width_m", min_lane_width_m, 1.0, 10.0,
               "m; a lane model whose ego lane is narrower than this at its lower end (flat road, current horizon) "
               "is uncertain: lines found on vehicles or seams of an unmarked road; lead selection then uses the "
@@ -35,9 +32,7 @@ struct RoadParams {
               "sides, seams) made a 4.2-4.8 m \"lane\" holding the adjacent cars in congestion_no_markings");
         m.add("vehicle_width_m", vehicle_width_m, 0.5, 5.0,
               "m; nominal rear width of a vehicle; with the lane width it gives the expected width in pixels at "
-              "each row (shadow and cascade scan, verification, the parallax detector's regions) and converts the "
-              "Kalman tracker's accelerations to pixels; 1.8 m is a typical passenger car (the thesis sizes ROIs "
-              "for cars)");
+              "each row for the detectors and trackers");
     }
 };
 

@@ -26,9 +26,9 @@ void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("enabled", enabled, "estimate the camera's pitch, yaw and height from the lanes while driving; "
                               "false = the camera section is used as configured");
     m.add("from_scratch", from_scratch,
-          "pitch and yaw not known: found from the lanes over pitch_min_deg..pitch_max_deg and +-yaw_max_abs_deg (the "
-          "lanes search there too), the configured values a starting point only, the limits around the converged "
-          "estimate (headway calibrate --from-video sets it)");
+          "pitch and yaw not known: found from the lanes over pitch_min_deg..pitch_max_deg and "
+          "+-yaw_max_abs_deg, the limits then around the converged estimate (headway calibrate --from-video "
+          "sets it)");
     m.add("prior_sigma_deg", prior_sigma_deg, 0.01, 30.0,
           "deg; 1-sigma trust in the configured pitch and yaw (the prior); a surveyed mounting can say 0.2");
     m.add("prior_sigma_height", prior_sigma_height, 0.001, 1.0,
@@ -78,29 +78,22 @@ void SelfCalibrationParams::bind(ParamMap &m) {
           "deg; 1-sigma of one frame's yaw from the road plane's motion (0.12 deg measured with the rest of the "
           "mounting right, biased by ~0.7 deg while pitch and height are 2 deg / 15 % off)");
     m.add("yaw_rate_smoothing_s", yaw_rate_smoothing_s, 0.0, 10.0,
-          "s; time constant of the low-pass on the yaw rate the curve gate tests: the road plane's motion measures the "
-          "camera's turn between frames, shake included (0.05 deg of yaw shake at 2.3 Hz is 0.01 rad/s, four times the "
-          "gate at 90 km/h); a bus yaw rate is smooth already");
+          "s; time constant of the low-pass on the yaw rate the curve gate tests (the road's motion carries the "
+          "camera's shake; a bus yaw rate is smooth already)");
     m.add("motion_pitch", motion_pitch,
-          "also measure the pitch from the road plane's motion, fitted with its tilt free (parallax preset, "
-          "homography.fit_tilt), once the estimate has converged; off by default: per frame it is better than the "
-          "lanes' (0.18 deg spread, 0.02 deg bias on calibration_drive) but on the synthetic crest and sag it is "
-          "biased as much (0.15-0.19 deg) and, weighted by that spread, pulled the pitch 0.11-0.13 deg off where "
-          "the lanes alone stay within 0.06-0.08 deg (docs/RESULTS.md)");
+          "also measure the pitch from the road plane's motion (homography.fit_tilt) once converged; off: on "
+          "crests and sags it is as biased as the lanes (docs/calibration.md)");
     m.add("motion_pitch_noise_deg", motion_pitch_noise_deg, 0.01, 30.0,
           "deg; 1-sigma of one frame's pitch from the road plane's tilt (0.18 deg measured, calibration_drive)");
     m.add("motion_height", motion_height,
-          "also measure the height from the road plane's motion once the estimate has converged: the CAN ego "
-          "speed's travel against the travel the tilt-free fit finds for the assumed height (parallax preset, needs "
-          "the speed); unlike the lane width it needs no assumed lane width (with road.lane_width_m 4 % off the lanes "
-          "alone leave the height 4.4 % off, with it 0.2-0.6 %, docs/RESULTS.md)");
+          "also measure the height from the road plane's motion once converged (parallax preset, needs the CAN "
+          "speed); needs no assumed lane width (docs/calibration.md)");
     m.add("motion_height_noise", motion_height_noise, 0.001, 1.0,
           "relative; 1-sigma of one frame's height from the road's motion (1.4 % measured on calibration_drive, "
           "0.2 % bias; the lanes' is 6 %)");
     m.add("converged_sigma_deg", converged_sigma_deg, 0.001, 30.0,
           "deg; the state says converged when the pitch's and the yaw's 1-sigma are at or below this (and the "
-          "height's below converged_sigma_height); 0.1 deg, half the 0.2 deg asked of the estimate, is reached "
-          "after ~25 frames of lanes (one frame: 0.5 deg)");
+          "height's below converged_sigma_height)");
     m.add("converged_sigma_height", converged_sigma_height, 0.0001, 1.0,
           "relative; the height's 1-sigma for the converged state; 1 %, a third of the 3 % asked, after ~40 "
           "frames of lanes (one frame: 6 %)");

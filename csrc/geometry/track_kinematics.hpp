@@ -52,17 +52,13 @@ struct KinematicsParams {
         m.add("scale_min_span_s", scale_min_span_s, 0.0, 10.0,
               "s; the scale fit needs at least this time span before it reports a TTC");
         m.add("scale_jump_closing_mps", scale_jump_closing_mps, 1.0, 1000.0,
-              "m/s; a box width that changes between two frames faster than a vehicle closing at this speed would "
-              "(plus scale_jump_px) is the box changing, not the vehicle, and restarts the scale-change fit (TME tme08: "
-              "a 20 % step on a car 51 m ahead read as TTC 1.9 s; the range said 8 m/s of closing); 40 m/s = 144 km/h");
+              "m/s; a box width changing between two frames faster than a vehicle closing at this speed would (plus "
+              "scale_jump_px) restarts the scale-change fit (docs/tracking.md)");
         m.add("scale_jump_px", scale_jump_px, 0.0, 100.0,
               "px; edge noise of the box width allowed on top of scale_jump_closing_mps before the scale fit restarts");
         m.add("scale_rate_fusion", scale_rate_fusion,
-              "the box's scale change also measures the range rate (dZ/dt = -Z d(ln w)/dt) in the range filter; "
-              "it does not move with the horizon row (TuSimple train_clip1: rate -1.5 m/s with it, -4.6 without, "
-              "true -1.2), but the 12-frame fit reads a changing rate late (synthetic lead braking at 0.3 g: "
-              "warned 0.34 s later) and it trusts the box width, which creeps on real roads (TME tme08: a false "
-              "warning at TTC 2.9 s); both measured with a variant that floored the fit's error; off by default");
+              "the box's scale change also measures the range rate (dZ/dt = -Z d(ln w)/dt) in the range filter "
+              "(docs/tracking.md)");
     }
 };
 

@@ -33,36 +33,21 @@ struct DarkLineParams {
 
     void bind(ParamMap &m) {
         m.add("dark_adjacent", enabled,
-              "one image alone (the \"lanes\" stage, single-image detection), an ego pair found and the adjacent "
-              "boundary on one side missing: look for it as a narrow dark line one lane width out on the road's curve "
-              "(a concrete joint with Botts' dots on it reads darker than the road at 512x288: 0313-2/37400's left "
-              "adjacent line), the marking filter run on the inverted image. TuSimple's 10-image sample 0.938 / 0 / "
-              "0.050 (accuracy / FP / FN) against 0.909 / 0 / 0.083 without (0.920 / 0.025 / 0.075 against 0.891 / "
-              "0.025 / 0.108 with curve_single_above_road 0); the 12 clips (lane tracking) unchanged; the clips' 240 "
-              "frames each alone 0.853 / 0.261 / 0.272 against 0.850 / 0.260 / 0.272 at 512x288 (a pavement seam one "
-              "lane out taken in a few frames of 0531/...793), 0.830 / 0.267 / 0.315 against 0.826 / 0.266 / 0.315 "
-              "at 1280x720; docs/RESULTS.md, lanes, the lanes10 round");
+              "one image alone, an ego pair found and one adjacent boundary missing: look for it as a narrow dark "
+              "line one lane width out (a concrete joint; docs/lanes.md)");
         m.add("dark_width_tol", width_tol, 0.0, 1.0,
-              "ego-lane widths; the dark line is searched 1 +- this ego-lane widths out from the ego boundary (on the "
-              "flat road the image spacing of two lines at any row is their spacing in metres times one scale, so this "
-              "is the adjacent lane's width against the ego lane's: lanes of one carriageway are built alike, 0.15 "
-              "allows 3.6 +- 0.55 m); 0.10-0.50 read the same on the sample; 0.25 took a pavement seam in 6 of the "
-              "clips' 240 frames alone against 3 (curve_single_above_road 0)");
+              "ego-lane widths; the dark line is searched 1 +- this ego-lane widths out from the ego boundary (0.15 "
+              "allows 3.6 +- 0.55 m lanes)");
         m.add("dark_min_rows", min_rows, 2, 1000,
-              "scanned rows; fewest rows holding a dark bar of a marking's width on the line for it to be a boundary; "
-              "12, as a boundary needs in the curve fit (curve_min_points). 8-14 read the same on the sample, 16 and "
-              "more find nothing; 4-7 also take 0313-1/8260's right adjacent dots (7 rows: 0.948 / 0 / 0.025) and, on "
-              "as many rows, a shoulder's edge beyond 0313-1/60's solid line (at 1280x720, dropped there by "
-              "solid_edge_min_rows) and a pavement seam in 0531/...793");
+              "scanned rows; fewest rows holding a dark bar of a marking's width on the line for it to be a "
+              "boundary (as curve_min_points)");
         m.add("dark_corridor_lanes", corridor_lanes, 0.01, 0.5,
               "lane widths; a dark bar belongs to the line within this distance of it (at least 1.5 px); half the "
               "curve fit's corridor (curve_corridor_lanes): the line has one unknown, its spacing; 0.03-0.10 read the "
               "same on the sample");
         m.add("dark_road_frac", road_frac, 0.0, 1.0,
-              "1; a dark bar lies on the road: both its sides (2 px beyond its edges) at least this share of the ego "
-              "lane's median gray on its row and at most its inverse; a vehicle's tyres, trim or the gaps between its "
-              "parts are dark bars between a body brighter or darker than the road (the car beside 0313-2/24720 gave "
-              "19 rows one lane out without it, 2 with it); 0 disables; 0.9 and above lose 37400's line");
+              "1; a dark bar lies on the road: both its sides at least this share of the ego lane's median gray on "
+              "its row and at most its inverse (not a vehicle's tyres or trim)");
     }
 };
 

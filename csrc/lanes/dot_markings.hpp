@@ -4,7 +4,7 @@
 // every 1-2 m in groups, instead of paint. At low resolution (512x288) a dot is a bright bar 1-3 px wide and
 // 1-2 rows tall with a dark shadow under it: the marking filter drops it, being narrower than a painted line
 // may be (marking_min_m) or alone on its row (min_run_rows), and loosening those bounds brings back as many
-// specks of texture (docs/RESULTS.md, lanes, the sample7 round). What tells a dot from a speck is not its
+// specks of texture (TuSimple's 10-image lane sample). What tells a dot from a speck is not its
 // own shape but its neighbours: the dots of a lane line lie on one image line through the vanishing point.
 // So: the short bars the marking filter set aside (marking_filter.hpp, short_bars) are joined row to row
 // into blobs; a blob a dot wide and short along the road (at range Z a length L spans L d^2 / (fy h) rows,
@@ -42,15 +42,11 @@ struct DotMarkingParams {
 
     void bind(ParamMap &m) {
         m.add("dots_enabled", enabled,
-              "look for Botts' dots (rows of raised dots marking a lane line) among the bars the marking filter "
-              "sets aside as too narrow or alone on their row, and keep those lined up toward the horizon as "
-              "marking points, in single images (the \"lanes\" stage, single-image detection); TuSimple's 10-image "
-              "lane sample 0.871 / 0.058 / 0.133 (accuracy / FP / FN) against 0.829 / 0.100 / 0.183 without; one "
-              "512x288 image 0.64 ms against 0.46 (docs/RESULTS.md, lanes, the dots round)");
+              "look for Botts' dots among the bars the marking filter sets aside (too narrow, alone on their row) "
+              "and keep those lined up toward the horizon, in single images (docs/lanes.md)");
         m.add("dots_in_tracking", in_tracking,
-              "with dots_enabled, look for Botts' dots in lane tracking (video) too; false (default): TuSimple's 12 "
-              "lane clips read 0.928 / 0.118 / 0.111 with it, off issue 13's bar, against 0.930 / 0.097 / 0.090 "
-              "without (a line next to a car turned into it; docs/RESULTS.md, lanes, the dots round)");
+              "with dots_enabled, look for Botts' dots in lane tracking (video) too; off: a line next to a car "
+              "turned into one on TuSimple's clips (docs/lanes.md)");
         m.add("dot_m", dot_m, 0.01, 1.0,
               "m; a Botts' dot's diameter (0.10 m, 4 in); a candidate bar may be 1.5 times this wide on the "
               "flat-road model at its row plus 2 px of blur");

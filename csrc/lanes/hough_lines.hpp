@@ -60,9 +60,8 @@ struct HoughLinesParams {
               "fraction of the image width (plus the horizon tolerance); farthest a line may pass from "
               "the expected vanishing point; 0.2 allows curves and a poorly known yaw");
         m.add("vp_line_tol_frac", vp_line_tol_frac, 0.001, 0.5,
-              "fraction of the image width; once the vanishing point is measured (consensus of the strong "
-              "lines, or tracked), the lines are searched again passing this close to it; 0.03 (19 px at "
-              "640) allows gentle curves and rejects vehicle edges and road-side structure");
+              "fraction of the image width; once the vanishing point is measured, the lines are searched again "
+              "passing this close to it (gentle curves in, vehicle edges out)");
         m.add("min_votes", min_votes, 2, 10000, "scanned rows; fewest rows supporting a line");
         m.add("min_votes_frac", min_votes_frac, 0.0, 1.0,
               "fraction of the scanned rows; fewest supporting rows relative to the band; 0.05 keeps "
@@ -70,18 +69,16 @@ struct HoughLinesParams {
         m.add("inlier_frac", inlier_frac, 0.0005, 0.1,
               "fraction of the image width; farthest a supporting point lies from its line (3.8 px at 640)");
         m.add("min_span_frac", min_span_frac, 0.0, 1.0,
-              "fraction of the scanned band height; the middle 80 % of a line's support must span at least "
-              "this much; a marking runs the whole band, the edges and lights of one vehicle do not (they "
-              "concentrate in its few rows even when stray points extend the line)");
+              "fraction of the scanned band height; the middle 80 % of a line's support must span at least this "
+              "much (a marking runs the whole band, one vehicle's edges do not)");
         m.add("group_angle_deg", group_angle_deg, 0.1, 30.0,
               "deg; lines closer in angle than this may belong to one marking (thesis grouping)");
         m.add("group_sep_m", group_sep_m, 0.05, 3.0,
               "m; lines closer laterally than this are one marking (both edges, double lines); well "
               "below a lane width");
         m.add("vp_anchor_points", vp_anchor_points, 0.0, 1000.0,
-              "points; in the search around a tracked vanishing point each line fit counts the vanishing "
-              "point as this many extra points: a line seen only on one short dash takes its direction "
-              "from it, a long marking (50+ points) hardly moves; 0 fits the points alone");
+              "points; around a tracked vanishing point each line fit counts the vanishing point as this many extra "
+              "points (a short dash takes its direction from it); 0 = the points alone");
         m.add("max_peaks_per_half", max_peaks_per_half, 1, 64,
               "count; Hough peaks examined in each half (thesis: two per half; more for adjacent lanes)");
     }

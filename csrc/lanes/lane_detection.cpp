@@ -131,7 +131,7 @@ LaneModel detect_lanes(const cv::Mat &gray, const LaneParams &p, const CameraPar
     // One image: outer boundaries need paint along the road in this frame, and nothing is reported beyond a
     // solid ego boundary (the carriageway's edge line), as over frames (lane_tracker.cpp): on TuSimple's 10-image
     // sample the right shoulder's edge beyond 0313-2/520's solid right line was a false lane (sample FP 0.175 ->
-    // 0.158, nothing else moved; docs/RESULTS.md, lane sample). The ego pair's evidence is judged over frames:
+    // 0.158, nothing else moved; headway eval --parts lanes). The ego pair's evidence is judged over frames:
     // one image has no confirmed vehicles to mask and no smoothing over dash gaps (a dashed line can miss two of
     // the three range bins), so a single image's model is believed.
     const float y_h = std::isfinite(out.vanishing_point.y) ? out.vanishing_point.y : hp.row;

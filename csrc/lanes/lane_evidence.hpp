@@ -11,7 +11,7 @@
 // the road: a bright bar there is the vehicle). Smoothed over frames (dash gaps, a vehicle passing over
 // the line), the lane model is `certain` when both ego boundaries' support is at least `evidence_min`;
 // the detector's road prior and the lead selection believe only a certain model (else they use the
-// camera and the ego path from the yaw rate: issue 13, the lead without lanes).
+// camera and the ego path from the yaw rate: docs/ARCHITECTURE.md, the lead without lanes).
 #pragma once
 
 #include "base/params.hpp"
@@ -43,17 +43,8 @@ struct LaneEvidenceParams {
         m.add("evidence_min_tolerance_px", min_tolerance_px, 0.5, 50.0,
               "px; the support tolerance is never narrower (far rows, marking-centre noise)");
         m.add("evidence_max_width_m", max_width_m, 0.0, 10.0,
-              "m across the road; a marking point counts as paint on a boundary (its support, so the lane model's "
-              "certainty, and the solid-edge rule) only if its bar is at most this wide (x 1.2 + 2 px for blur) at "
-              "its row on the lane model's road; 0 disables. The marking filter's own width test allows for any "
-              "horizon within lanes.horizon_tolerance_deg and for slant, and with lanes.cross_inner_edges it crosses "
-              "the texture inside: on an unmarked road in congestion the asphalt between two dark vehicles (or a "
-              "vehicle and a shadow) passes as a bar 1-5 m wide, and such bars line up (606 of the 614 points "
-              "supporting the ego pair on the frames believed were wider than this). 0.45 as lanes.marking_max_m. "
-              "Measured (docs/RESULTS.md, lanes, lanes6 round): the synthetic unmarked road (congestion_no_markings) "
-              "believed on 0 of 330 frames with 0.15-0.45, 1 with 0.6, 2 with 1.0, 25 with 0; painted scenarios "
-              "believed on every frame and TuSimple's lane clips 0.930 / 0.097 / 0.090 for every value; the certainty "
-              "on the six real recordings unchanged. Outer boundaries (lanes.outer_lanes) count bars of any width");
+              "m across the road; a marking point counts as paint on a boundary only if its bar is at most this "
+              "wide, so gaps between dark vehicles are not paint; 0 disables (docs/lanes.md)");
         m.add("evidence_far_m", far_m, 5.0, 500.0,
               "m; a boundary's support is counted from the near end of the scanned band out to this range; "
               "40 m holds a few dashes of any dashed line");
@@ -62,10 +53,8 @@ struct LaneEvidenceParams {
               "the share of bins holding a marking point on it outside the confirmed vehicles' boxes; 3: a "
               "vehicle rear or side spans one");
         m.add("evidence_min", min_support, 0.0, 1.0,
-              "share of bins; a boundary whose smoothed support is below this is not believed a painted marking, "
-              "and a lane model without two believed ego boundaries is uncertain: the detector's road prior and "
-              "the lead selection then ignore it (unmarked road: vehicle rears and barriers); 0 believes every "
-              "model");
+              "share of bins; a boundary whose smoothed support is below this is not believed painted; without two "
+              "believed ego boundaries the road prior and lead selection ignore the lanes; 0 = believe all");
         m.add("evidence_alpha", alpha, 0.01, 1.0,
               "1; smoothing gain per frame of a tracked boundary's support (dash gaps, a vehicle passing over "
               "the line); 0.2 takes about 5 frames to believe a new boundary");
@@ -73,16 +62,8 @@ struct LaneEvidenceParams {
               "share of bins; a boundary two lanes out (lanes.outer_lanes) is reported only with paint in at least "
               "this share of the range bins in its frame; 0.67 (two of three bins)");
         m.add("solid_edge_min_rows", solid_min_rows, 0.0, 1.0,
-              "share of the scanned rows out to evidence_far_m; an ego boundary with paint on at least this share is "
-              "a solid line, and a solid ego boundary is taken for the carriageway's edge line: no adjacent or outer "
-              "boundary is reported beyond it (what lies there is a shoulder's or pavement's edge, a barrier's foot); "
-              "lane lines are broken (dashes of 3 m every 12 m, a quarter of the rows); 0 disables. TuSimple's lane "
-              "clips with lanes.cross_inner_edges: 0.930 / 0.097 / 0.090 (accuracy / FP / FN) against 0.930 / 0.118 / "
-              "0.090 with 0, the same for 0.5-0.9 (0313-1/60's shoulder edge beyond the solid right edge line no "
-              "longer reported), 0.4 loses a labelled lane; without cross_inner_edges no change (0.864 / 0.208 / 0.208). "
-              "Applied to single images too since the sample7 round (it was only in lane tracking): TuSimple's 10-image "
-              "sample 0.831 / 0.158 / 0.242 against 0.831 / 0.175 / 0.242 (0313-2/520's right shoulder edge no longer "
-              "reported), the clips unchanged; docs/RESULTS.md, lanes, lanes5 and sample7 rounds");
+              "share of the scanned rows out to evidence_far_m; an ego boundary painted on at least this share is "
+              "the carriageway's solid edge: nothing beyond it is reported (docs/lanes.md)");
     }
 };
 

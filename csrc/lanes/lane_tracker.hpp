@@ -70,18 +70,11 @@ struct LaneParams {
               "1; smoothing gain of the tracked ego-lane width used to carry a hidden boundary");
         m.add("max_tracks", max_tracks, 2, 64, "count; markings tracked at most (ego, adjacent and spares)");
         m.add("reject_in_vehicles", reject_in_vehicles,
-              "drop the marking points inside the boxes of the vehicles confirmed in the previous frame (their upper "
-              "vehicle_mask_frac): a vehicle hides the road, so a bright bar there is its lights, plate, trim or side, "
-              "and lines through such points are lines on vehicles; true removes the line across the car of clip "
-              "0313-1/180 and, with the bent boundaries, keeps the unmarked congestion scenario's lead (0.914 of the "
-              "frames, 0.813 without); false (default): with the one hood line of every stage the pair measured "
-              "lane clips 0.839 / 0.326 / 0.326 against 0.836 / 0.306 / 0.312 without (docs/RESULTS.md, lanes)");
+              "drop the marking points inside the upper vehicle_mask_frac of the vehicles confirmed in the previous "
+              "frame (lights, plates, trim are not lane lines; docs/lanes.md)");
         m.add("vehicle_mask_frac", vehicle_mask_frac, 0.05, 1.0,
-              "fraction of a vehicle box's height, from its top, inside which marking points are dropped; 0.75 keeps "
-              "the bottom quarter (wheels, the road at the contact row): a far car ahead in the ego lane covers the "
-              "region where all boundaries meet, and masking its whole box lost a labelled boundary in clip "
-              "0531/...793 (lane clips 0.819 / 0.278 / 0.285 with 1.0, 0.839 / 0.257 / 0.257 with 0.75; the two "
-              "values tried)");
+              "fraction of a vehicle box's height, from its top, inside which reject_in_vehicles drops marking "
+              "points; 0.75 keeps the wheels' quarter (docs/lanes.md)");
     }
 };
 

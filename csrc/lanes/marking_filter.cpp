@@ -144,8 +144,8 @@ void find_marking_points(const cv::Mat &gray, const ScanBand &band, const Camera
         // The bound along the row of a bar on a line of slope k (slant = sqrt(1 + k^2)). A stripe W wide along the
         // road crosses a row over fx W / Z px whatever its slope (x = x_vp + fx X / Z, Z fixed by the row); only the
         // blur across a slanted edge is slant times longer along the row (row_width_single, one image alone). Lane
-        // tracking keeps the whole bound times slant, computed as before to the last bit (docs/RESULTS.md, lanes, the
-        // lanes9 round).
+        // tracking keeps the whole bound times slant, computed to the last bit as the slant-times bound
+        // (headway eval --parts lanes).
         const bool row_width = single_image && p.row_width_single;
         auto row_bound = [&](double width_m, float w_slanted, float slant) {
             return row_width ? (1.2f * float(width_m) * ppm_hi + 2.f * slant) / scale : w_slanted * slant;

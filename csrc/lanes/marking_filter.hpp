@@ -62,32 +62,17 @@ struct MarkingFilterParams {
               "scanned rows; 2: a point is kept only if the next or previous scanned row has a point where the "
               "marking would continue (markings are long, texture specks and noise are not); 1 keeps all");
         m.add("work_width_px", work_width_px, 64, 8192,
-              "px; rows of frames at least twice this wide are averaged over blocks of width/work_width "
-              "pixels before filtering: a 1280-wide marking then looks as at 640 (the thesis' 1-pixel "
-              "masks would see JPEG noise inside it) and the filter costs half");
+              "px; frames at least twice this wide are averaged over blocks of width/work_width pixels before the "
+              "marking filter (a 1280-wide marking then looks as at 640, at half the cost)");
         m.add("cross_inner_edges", cross_inner_edges,
-              "a marking's bar may contain inner edges weaker than its own two edges, if it stays brighter than "
-              "both sides everywhere and is at most cross_max_m wide (worn or textured paint, common on concrete; "
-              "without this the bar ends at the first inner edge and fails the contrast test). TuSimple's lane clips "
-              "0.930 / 0.097 / 0.090 (accuracy / FP / FN, issue 13's bar) and the 10-image sample 0.831 / 0.175 / "
-              "0.242, against 0.864 / 0.208 / 0.208 and 0.832 / 0.158 / 0.217 without. On by default since the lanes6 "
-              "round: the synthetic unmarked road it made believed (25 of 330 frames of congestion_no_markings) was "
-              "believed on the gaps between dark vehicles, wide bars that lanes.evidence_max_width_m no longer counts "
-              "as paint (0 frames); docs/RESULTS.md, lanes, lanes4-lanes6 rounds");
+              "a marking's bar may contain inner edges weaker than its own two edges if it stays brighter than both "
+              "sides and is at most cross_max_m wide (worn paint on concrete; docs/lanes.md)");
         m.add("cross_max_m", cross_max_m, 0.01, 2.0,
-              "m; with cross_inner_edges, the widest bar that may contain inner edges: one worn painted line "
-              "(0.10-0.15 m plus blur); a wider bright patch with texture inside (concrete between two seams) is "
-              "not paint; 0.20 tuned on TuSimple's lane clips and lane sample (0.12-0.27 m tried: 0.18 and below "
-              "lose clip accuracy with straight boundaries, 0.27 the sample; docs/RESULTS.md)");
+              "m; with cross_inner_edges, the widest bar that may contain inner edges: one worn painted line, not a "
+              "bright patch of concrete (docs/lanes.md)");
         m.add("row_width_single", row_width_single,
-              "one image alone (the \"lanes\" stage, single-image detection): a bar is at most 1.2 marking_max_m (or "
-              "cross_max_m) x px/m wide along its row plus 2 px of blur times the slant factor sqrt(1 + k^2): a stripe W "
-              "wide along the road crosses a row over fx W / Z px whatever its slope in the image, only the blur across "
-              "a slanted edge is longer along the row; false (and in lane tracking): the whole bound times the slant "
-              "factor, which let the road between a concrete seam and a truck's shadow (0.4-0.5 m) pass as a marking "
-              "on 0313-1/14900. TuSimple's 10-image sample 0.891 / 0.025 / 0.108 (accuracy / FP / FN) against 0.871 / "
-              "0.058 / 0.133; in lane tracking too the 12 clips read 0.911 / 0.139 / 0.132 (0.932 / 0.118 / 0.118 with "
-              "dots_in_tracking) against 0.930 / 0.097 / 0.090 (docs/RESULTS.md, lanes, the lanes9 round)");
+              "one image alone: a bar is at most 1.2 marking_max_m wide along its row plus 2 px of blur times the "
+              "slant factor, not the whole bound times slant (docs/lanes.md)");
     }
 };
 

@@ -39,15 +39,11 @@ void HomographyParams::bind(ParamMap &m) {
     dlt.bind(m);
     kalman.bind(m);
     m.add("road_model", road_model,
-          "the measured homography is the one of a camera rotating a little (pitch, yaw, roll) and moving along and "
-          "across the flat road of the camera model (five parameters, road_motion_fit.hpp), fitted to the "
-          "correspondences the DLT kept; false: the DLT itself (eight parameters, as the paper), which extrapolates "
-          "freely where the markings give no features");
+          "the measured homography is a camera rotating a little and moving over the flat road (five "
+          "parameters) fitted to the DLT's inliers; false = the DLT itself, as the paper (docs/tracking.md)");
     m.add("fit_tilt", fit_tilt,
-          "with road_model, fit the same correspondences once more with the road plane's tilt against the assumed "
-          "mounting free (a sixth parameter, continued from the five-parameter solution: 0.02 ms median on dense_traffic): self-calibration's pitch, and with the CAN speed its "
-          "height, from the road's motion (self_calibration.motion_pitch / motion_height); the homography the "
-          "filter and the parallax detector use stays the five-parameter one");
+          "with road_model, fit the correspondences again with the road plane's tilt free (a sixth parameter): "
+          "self-calibration's pitch and height from the road's motion (docs/calibration.md)");
 }
 
 RoadMotionStage::RoadMotionStage(const LaneFeatureParams &features, const HomographyParams &homography,

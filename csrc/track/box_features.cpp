@@ -12,7 +12,7 @@ namespace hw {
 void BoxFeatureParams::bind(ParamMap &m) {
     m.add("detector", detector, "shi_tomasi|harris|fast",
           "corner detector for a vehicle's features: shi_tomasi (min eigenvalue), harris, or fast; compared in "
-          "docs/phd.md");
+          "docs/tracking.md");
     m.add("max_per_vehicle", max_per_vehicle, 1, 500, "corners looked for in one box per search (the strongest)");
     m.add("quality", quality, 1e-4, 1.0,
           "fraction of the box's strongest corner response a Shi-Tomasi or Harris corner must reach");

@@ -43,7 +43,7 @@ std::vector<cv::Point2f> fast_corners_strongest_first(const cv::Mat &gray, int t
 // LK with the forward-backward check between consecutive frames. Only the region the points can reach is
 // looked at: the bounding box of the points plus `roi_margin_px` (the largest motion followed, plus the LK
 // window at the coarsest level), the same rectangle in both frames, and the pyramids of that rectangle
-// alone are built (the whole 640x480 frame's pyramid was most of the tracker's cost, docs/phd.md).
+// alone are built (the whole 640x480 frame's pyramid was most of the tracker's cost, docs/tracking.md).
 class PointFlow {
 public:
     explicit PointFlow(const BoxFeatureParams &p) : p_(p) {}

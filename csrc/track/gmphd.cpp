@@ -13,18 +13,16 @@ void GmPhdParams::bind(ParamMap &m) {
           "P_D (eq. 4); probability that a surviving feature is measured (LK tracked and consistent with the "
           "vehicle's motion); a missed component keeps (1 - P_D) of its weight");
     m.add("clutter_density", clutter_density, 1e-12, 1.0,
-          "kappa (eq. 4); clutter measurements per px^2 (about 5 spurious corners in a 100 x 100 px box); with "
-          "birth_weight 0.01 a new feature measured once weighs 0.23, measured twice 0.97: it needs two "
-          "consecutive frames to become stable (weight >= stable_weight)");
+          "kappa (eq. 4); clutter measurements per px^2 (about 5 spurious corners in a 100 x 100 px box); a new "
+          "feature needs two consecutive frames to become stable (docs/tracking.md)");
     m.add("meas_sigma_px", meas_sigma_px, 0.01, 50.0,
           "px; 1-sigma error of a measured feature position, R = sigma^2 I (eq. 5); LK is sub-pixel");
     m.add("process_sigma_px", process_sigma_px, 0.0, 50.0,
           "px; 1-sigma per frame of a feature's motion that the vehicle's image motion (shift and scale) does "
           "not explain, Q = sigma^2 I");
     m.add("birth_weight", birth_weight, 1e-6, 1.0,
-          "w_b (eq. 7); weight of a new feature; small, so that a feature seen in one frame only never becomes "
-          "stable and clutter adds little to the count (synthetic test: weight sum 20.2-20.5 for 20 features "
-          "with 5 clutter points a frame; 0.02 gave 20.7-21.0)");
+          "w_b (eq. 7); weight of a new feature, small so that a feature seen in one frame never becomes stable "
+          "and clutter adds little to the count (docs/tracking.md)");
     m.add("birth_sigma_px", birth_sigma_px, 0.01, 100.0, "px; 1-sigma of a new feature's position, P_b = sigma^2 I (eq. 7)");
     m.add("birth_accept_prob", birth_accept_prob, 0.0, 1.0,
           "P_clutter; each candidate birth is admitted with this probability (drawn at random, seeded per "

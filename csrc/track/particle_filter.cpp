@@ -21,10 +21,8 @@ void ParticleParams::bind(ParamMap &m) {
           "mixing coefficient of the uniform clutter term in the stationary state (measurements explained by "
           "noise rather than a vehicle)");
     m.add("a_u_transitory", a_u_transitory, 0.0, 1.0,
-          "clutter coefficient during a transitory period, raised so that only persistent, coherent measurements "
-          "make a new vehicle (paper III-B); 0.99 needs a few coherent frames (an overtaking car is still confirmed "
-          "2-8 frames after it is half visible) and kept the synthetic empty road and the guardrail beside a "
-          "shaken road free of vehicles for every seed tried, 0.97-0.98 not for all, 0.5 adopts artifacts");
+          "clutter coefficient during a transitory period, raised so that only persistent, coherent "
+          "measurements make a new vehicle (paper III-B; docs/tracking.md)");
     m.add("p_detect", p_detect, 0.0, 0.999,
           "detection probability: each vehicle no measurement supports multiplies a particle's weight by "
           "1 - p_detect; this is what lets unsupported hypotheses fade");
@@ -62,10 +60,8 @@ void ParticleParams::bind(ParamMap &m) {
     m.add("duplicate_frac", duplicate_frac, 0.0, 2.0,
           "vehicle widths; two vehicles whose estimates are this close follow one vehicle: the younger goes");
     m.add("border_frac", border_frac, 0.0, 10.0,
-          "vehicle widths; a hypothesis whose box reaches this near the image's left or right side is cut by it (the "
-          "difference region of an entering car stops a few pixels short of the side): its lateral speed "
-          "(max_lateral_mps) is only judged once it is in full view, because its visible part widens as it enters "
-          "and the mid-lower point slides with it");
+          "vehicle widths; a hypothesis whose box reaches this near the image's side has its lateral speed "
+          "judged only once it is in full view (an entering car; docs/tracking.md)");
     m.add("max_lateral_mps", max_lateral_mps, 0.1, 100.0,
           "m/s; a hypothesis whose image motion means moving sideways on the road faster than this is a chain of "
           "artifacts, not a vehicle (a lane change is ~2 m/s)");
@@ -73,11 +69,8 @@ void ParticleParams::bind(ParamMap &m) {
           "m/s; nor one whose range would change faster than this (two cars at 250 km/h head-on: 140)");
     m.add("seed", seed, 0, 2147483647, "random seed of the filter; runs are reproducible");
     m.add("resampling", resampling, "joint|per_vehicle",
-          "joint: the paper's, each particle resampled whole by its joint weight; per_vehicle: each vehicle's part "
-          "resampled by its own factor of the likelihood (and the hypothesised vehicle with its particles' mark), so "
-          "that how well the other vehicles fit does not decide which of a vehicle's particles survive; on "
-          "overtaking_from_side it confirms the entering truck and cars sooner and more evenly over seeds "
-          "(docs/parallax.md, Entries)");
+          "joint: the paper's, each particle resampled whole by its joint weight; per_vehicle: each vehicle's "
+          "part resampled by its own factor (docs/tracking.md)");
 }
 
 JointParticleFilter::JointParticleFilter(const ParticleParams &p, const CameraParams &cam)

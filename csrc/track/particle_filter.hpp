@@ -24,7 +24,7 @@
 // weight grows with N, the effective sample size falls, and a slot whose own evidence is weak (a new,
 // wide vehicle: its sigmas are ~25 px, so a pixel of error changes its log weight by little) is
 // resampled at random, collapsing onto a few ancestors with whatever velocity they had.
-// Measured on overtaking_from_side (docs/parallax.md, Entries): over the transitory steps the log
+// Measured on overtaking_from_side (tests/test_parallax_tracking.py): over the transitory steps the log
 // weight of the other vehicles spread more than the new vehicle's own in ~60 % of them, and the
 // effective sample size of the new vehicle's particles was 0.66 of their number under the joint
 // weights against 0.93 under its own; the new truck's particles then shrank to a 4 px cloud 20-35 px

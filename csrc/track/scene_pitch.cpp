@@ -10,8 +10,7 @@ namespace hw {
 void ScenePitchParams::bind(ParamMap &m) {
     m.add("enabled", enabled,
           "follow the car's pitch by the far scene's vertical motion around the horizon (corners outside the "
-          "vehicles, LK); false = the lane horizon alone. TME tme08: the cascade preset's one pre-warning came from "
-          "a 9 px pitch swing the lanes followed by 2 px (docs/RESULTS.md)");
+          "vehicles); false = the lane horizon alone (docs/decisions.md)");
     m.add("band_above_px", band_above_px, 0.0, 500.0,
           "px; rows above the horizon searched for far corners (trees, bridges, buildings); the car's forward "
           "motion moves a point (v - v_h) V dt / Z rows, little for far points near the horizon");
@@ -21,9 +20,8 @@ void ScenePitchParams::bind(ParamMap &m) {
     m.add("min_points", min_points, 1, 1000,
           "corners followed at least for a scene measurement; fewer (bare sky and road): the lane horizon");
     m.add("lane_gain", lane_gain, 0.0, 1.0,
-          "1/frame; gain g of the complementary filter towards the lane horizon: the slow part of the horizon "
-          "(load, long slopes) comes from the lanes, the fast part (pitch within a second) from the scene; 0.05 gave the "
-          "phd preset a pre-warning at the end of solidWhiteRight, 0.1 none (docs/RESULTS.md)");
+          "1/frame; gain of the complementary filter towards the lane horizon: the slow part of the horizon "
+          "from the lanes, the fast part from the scene (docs/tracking.md)");
     m.add("max_offset_px", max_offset_px, 0.0, 500.0,
           "px; the scene-followed horizon stays within this of the lane horizon (a bad frame cannot wreck range)");
 }

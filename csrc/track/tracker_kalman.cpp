@@ -10,10 +10,8 @@ namespace hw {
 
 void KalmanBoxParams::bind(ParamMap &m) {
     m.add("detect_every_n", detect_every_n, 1, 1000,
-          "frames; the full shadow + vertical-edge detector runs on every n-th frame to find new "
-          "vehicles, the frames between only search around the predictions (thesis: 10; on the "
-          "synthetic suite 3 tracked best: 99.2 % of vehicle-frames, 1 id switch, vs 98.2 % and 9 "
-          "switches at 10, and fewer false tracks than 1)");
+          "frames; the detection stage runs on every n-th frame, the frames between only search around the "
+          "predictions (thesis: 10; 3 measured best, docs/decisions.md)");
     m.add("accel_mps2", accel_mps2, 0.0, 50.0,
           "m/s^2; bound A of a vehicle's acceleration relative to the ego, converted to px/s^2 with the "
           "vehicle's image width; sets the Kalman process noise (bounded-acceleration model)");
@@ -69,11 +67,8 @@ void KalmanBoxParams::bind(ParamMap &m) {
     m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
           "IoU above which two tracks are the same vehicle; the one with fewer measurements goes");
     m.add("beside_overlap", beside_overlap, 0.0, 1.0,
-          "share of the narrower width; a new detection standing on a tracked vehicle's bottom row (beside_bottom_tol) "
-          "whose columns overlap that vehicle's by at least this much starts no track: two vehicles at one range stand "
-          "side by side and cannot overlap in the image, so it is a window beside the vehicle (synthetic, fused: a "
-          "cascade group half on the car and a parallax region agreeing on it, 30 frames of a ghost on "
-          "overpass_shadow); 1 = off");
+          "share of the narrower width; a new detection on a tracked vehicle's bottom row (beside_bottom_tol) "
+          "overlapping its columns this much starts no track (docs/tracking.md)");
     m.add("beside_bottom_tol", beside_bottom_tol, 0.0, 1.0,
           "vehicle widths (the narrower); bottom rows at most this far apart are one range for beside_overlap");
     m.add("min_width_ratio", min_width_ratio, 0.0, 1.0,
@@ -82,12 +77,8 @@ void KalmanBoxParams::bind(ParamMap &m) {
     m.add("max_width_ratio", max_width_ratio, 1.0, 10.0,
           "expected vehicle widths; a track wider than this is deleted");
     m.add("max_width_depth_change", max_width_depth_change, 0.0, 100.0,
-          "|measured width / depth below the horizon, against the vehicle's at its detections, - 1| at most for an ROI "
-          "or template measurement: on a flat road a vehicle's width and its bottom's depth grow together (w = W d / "
-          "h), so a side that jumped to another edge (real video: boxes that grew 60 -> 130 px in 8 frames, tme08) "
-          "or a template sliding down with the road's texture breaks the ratio; the measurement is then not taken. "
-          "thesis: 17 synthetic scenarios MOTA 0.893 -> 0.933, tme08's silver car 29 -> 47 of 50 frames; 0.15 gained "
-          "more but cost two synthetic leads their tight edges; 100 = off (docs/RESULTS.md, session 8)");
+          "|measured width / depth below the horizon, against the vehicle's at its detections, - 1| at most for "
+          "an ROI or template measurement; 100 = off (docs/tracking.md)");
     m.add("max_dt_s", max_dt_s, 0.01, 100.0,
           "s; a gap between frames longer than this drops all tracks (the predictions are void)");
 }

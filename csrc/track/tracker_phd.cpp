@@ -33,10 +33,8 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "least 1-sigma of the frame-to-frame scale of a vehicle's feature cloud, as a range-rate observation of "
           "the UKF (e = (s - 1)/dt = -(dZ/dt)/Z); 0 = the scale is not observed");
     m.add("expansion_independent_points", expansion_independent_points, 1, 1000,
-          "points whose scale errors are counted as independent, at most: the expansion's 1-sigma is the pair ratios' "
-          "spread (1.4826 MAD) over the square root of min(points, this); the road and background points that pass "
-          "the motion check bias the scale alike, and more points do not average that out (TME tme08: spread 0.010 "
-          "per frame against 0.002-0.006 on the synthetic suite)");
+          "points whose scale errors count as independent, at most: the expansion's 1-sigma is the pair ratios' "
+          "spread over sqrt(min(points, this)) (docs/tracking.md)");
     m.add("expansion_min_width_px", expansion_min_width_px, 0.0, 10000.0,
           "px; the cloud's expansion is observed only on a vehicle at least this wide: on a narrower (far) one the "
           "points of the road and background around it pass the motion check and bias the scale");
@@ -56,9 +54,8 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "IoU above which two vehicles are the same; the one with fewer detections goes");
     m.add("confirm_hits", confirm_hits, 1, 100, "detections (the first included) before a vehicle is confirmed");
     m.add("birth_min_appearance", birth_min_appearance, 0.0, 1.0,
-          "score under which a learned detection (the cascade verifier's probability, raised where a shadow edge "
-          "confirms it) starts no vehicle but may still re-anchor a tracked one; detections of other parts are not "
-          "affected; 0 = every detection may start one");
+          "score under which a learned detection starts no vehicle but may still re-anchor a tracked one; other "
+          "parts' detections are not affected; 0 = every detection may start one");
     m.add("birth_lanes_beside", birth_lanes_beside, 0, 4,
           "lanes; with a lane model, a detection starts a vehicle only if its bottom centre stands on the ego lane or "
           "at most this many ego-lane widths beside it (the roadside's bushes and signs start none); 4: as wide as the "
@@ -67,13 +64,11 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "detector runs in a row that may miss a confirmed vehicle before it is deleted (a tentative one: 1); "
           "at detect_every_n 3 the features alone carry a vehicle for 15 frames");
     m.add("coast_frames", coast_frames, 0, 1000,
-          "frames; a confirmed vehicle whose PHD weight falls under end_weight (eq. 12: every feature lost at once, "
-          "as when it drives into a shadow) is carried this long by its UKF's prediction while new corners in its "
-          "box become its features, before it ends; 0 = it ends at once (the paper's rule)");
+          "frames; a confirmed vehicle whose features are all lost at once (a shadow) is carried this long by "
+          "its UKF while new corners become its features; 0 = it ends at once (the paper)");
     m.add("coast_min_hits", coast_min_hits, 1, 1000,
-          "detections a vehicle needs (and one at the detector's last run) before it may coast (coast_frames): a "
-          "vehicle the detector has seen this often is a vehicle; a young track that loses its features is more "
-          "often none (the cascade preset's near false box on project_video_cut.mp4 coasted at 3 hits and pre-warned)");
+          "detections a vehicle needs (one at the detector's last run) before it may coast: a young track that "
+          "loses its features is more often no vehicle (docs/tracking.md)");
     m.add("coast_max_hidden", coast_max_hidden, 0.0, 1.0,
           "share of a vehicle's box that a nearer vehicle's box may cover while it coasts (coast_frames); more: it "
           "is being hidden, which explains its lost features, and it ends as without coasting");
@@ -352,7 +347,7 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
             explained = explained || box_iou(vb, b) >= 0.2f || vb.contains(foot);
         }
         // A learned detection scoring under birth_min_appearance may follow a vehicle but not found one: the
-        // verifier's low-probability groups are mostly not vehicles (docs/cascade.md), and each would become a track.
+        // verifier's low-probability groups are mostly not vehicles (docs/detection.md), and each would become a track.
         // Its score is the verifier's probability, raised where a cue (a shadow edge) confirmed it
         // (detect/fuse_hypotheses.hpp).
         const bool doubted = std::isfinite(dets[i].appearance) && dets[i].score < p_.birth_min_appearance;

@@ -14,8 +14,8 @@
 //      of the box) in units of the contact's depth below the horizon d = v_c - v_h (= fy h / Z), set when
 //      it is born and pulled towards each matched detection. A point H above the road has the tag
 //      (X/h, -H/h) at every range, so each stable feature (weight >= stable_weight) gives the contact
-//      alone: d = (v - v_h) / (1 + t_y), contact (u - t_x d, v_h + d); no box width enters (the box width
-//      was the old unit: a box 2-7 px too wide put the contact 0.5-1.3 px low, docs/phd.md). The
+//      alone: d = (v - v_h) / (1 + t_y), contact (u - t_x d, v_h + d); no box width enters (tags in box
+//      widths put the contact 0.5-1.3 px low for a box 2-7 px too wide, docs/decisions.md). The
 //      estimator fuses them: by weight (eq. 13), by inverse covariance determinant (eq. 14) or the
 //      heaviest one (eq. 15), each also by (1 + t_y)^2 (a row error is divided by 1 + t_y).
 //   4. The UKF (vehicle_ukf.hpp) predicts with constant velocity and updates with that contact point, and

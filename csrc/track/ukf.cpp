@@ -6,9 +6,8 @@ namespace hw {
 
 void UkfParams::bind(ParamMap &m) {
     m.add("alpha", alpha, 1e-4, 10.0,
-          "alpha; spread of the sigma points around the mean (lambda = alpha^2 (n + kappa) - n); 1 puts them at "
-          "sqrt(n) sigma, where the pinhole's curvature over the range uncertainty is felt; small values make "
-          "the weights of a 4-state filter huge and of both signs");
+          "alpha; spread of the sigma points around the mean (lambda = alpha^2 (n + kappa) - n); small values "
+          "make a 4-state filter's weights huge and of both signs");
     m.add("beta", beta, 0.0, 10.0, "beta; prior knowledge of the state distribution, 2 is optimal for a Gaussian");
     m.add("kappa", kappa, -3.0, 100.0, "kappa; secondary scaling of the sigma points (0: the usual choice for n = 4)");
 }

@@ -6,7 +6,7 @@
 // verification gives a car's aspect (verify.aspect_ratio, 0.8). For a car the guess is about right, and measured
 // tops are noisy (a near car's top search sometimes climbs onto what stands behind it: 1.0-1.6 widths on
 // successive runs for a car of 0.8, synthetic dense_traffic). For a truck (1.4-1.6 widths) the guess halves its box,
-// and a track whose box the guesses keep halving loses the truck (synthetic cut_in; docs/RESULTS.md, session 8).
+// and a track whose box the guesses keep halving loses the truck (synthetic cut_in; docs/tracking.md).
 // So: a vehicle whose measured tops said taller than tall_aspect tall_hits times in a row (guessed tops skipped,
 // and boxes the image's side cuts: a car half out of the image is as tall as ever and half as wide) is tall; a tall vehicle's aspect takes only measured tops, and it is matched to a guessed detection as if that
 // detection were as tall as it (same bottom and sides). Configuration section "vehicle_height", handed to both
@@ -26,10 +26,8 @@ struct VehicleHeightParams {
 
     void bind(ParamMap &m) {
         m.add("tall_aspect", tall_aspect, 0.5, 10.0,
-              "height / width above which a vehicle is a truck or a bus (cars measure 0.8-1.0, trucks 1.4-1.6); "
-              "a tracked vehicle that tall keeps its measured height against detections whose height the "
-              "verification only guessed (no top found: verify.aspect_ratio, a car's shape), and is matched to "
-              "them as if they were as tall as it; 10 = never (the rule before session 8)");
+              "height / width above which a vehicle is a truck or bus: a tracked one that tall keeps its measured "
+              "height against guessed detection heights; 10 = never (docs/tracking.md)");
         m.add("tall_hits", tall_hits, 1, 100,
               "detections in a row whose measured top says taller than tall_aspect (guessed tops skipped) before a "
               "vehicle is taken as tall: a near car's top search sometimes climbs onto what stands behind it, once");

@@ -9,10 +9,7 @@ namespace hw {
 void VehicleUkfParams::bind(ParamMap &m) {
     sigma.bind(m);
     m.add("accel_sigma_range_mps2", accel_sigma_range_mps2, 0.01, 50.0,
-          "m/s^2; white-acceleration process noise along the range (Q of eq. 20); synthetic suite to 60 m "
-          "(docs/phd.md): range-rate error 0.57 m/s at 1.5 and at 2.5, but at 2.0-2.5 a lead followed at 50 m "
-          "never gets its rate sigma under 2 m/s (no rate reported); a lead revealed while the ego brakes at "
-          "4.5 m/s^2 has 2.1 m/s of rate error at 1.5, 0.5 at 2.5");
+          "m/s^2; white-acceleration process noise along the range (Q of eq. 20; docs/tracking.md)");
     m.add("accel_sigma_lateral_mps2", accel_sigma_lateral_mps2, 0.01, 50.0,
           "m/s^2; white-acceleration process noise across (lane changes)");
     m.add("init_rate_sigma_mps", init_rate_sigma_mps, 0.1, 100.0,

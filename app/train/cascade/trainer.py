@@ -38,7 +38,7 @@ class TrainParams:
     seed: int = 0
     max_minutes: float = 55.0       # no new stage starts after this (the whole run fits in an hour)
     resume: str = ""                # cascade XML written by this trainer: its stages are kept, more are added
-    booster: str = "gentle"         # gentle (OpenCV's default, shipped) or discrete (paper 004); docs/cascade.md
+    booster: str = "gentle"         # gentle (OpenCV's default, shipped) or discrete (paper 004); docs/decisions.md
     # negatives only from the rows a flat-road detector scans for each window size: (horizon row px,
     # camera height m[, lowest, tallest vehicle m]); () = anywhere in the image (samples.ScanBand)
     scan_band: tuple = ()
