@@ -250,6 +250,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--latency", action="store_true",
                    help="measure capture-to-CAN latency and the supervisor's CPU per frame through the live loop")
     s.add_argument("--seconds", type=float, default=10.0, help="length of the --latency run")
+    s.add_argument("--fps", type=float, default=None,
+                   help="also feed the frames at this camera rate and report each frame's latency and the detection's "
+                        "age (default: the configuration's source.fps; 0: back to back only)")
     s.add_argument("--images", nargs="+", metavar="PATH",
                    help="time `headway detect` instead, per image and part (reading and decoding, lanes, the cascade's "
                         "scan, its verifier, the shadows), on these image files or folders of images")
