@@ -157,9 +157,11 @@ class FrameResult:
     # the lane model is believed (both ego boundaries have paint along the road, lanes.evidence_min): the road
     # prior and the lead selection use only such a model
     lanes_certain: bool = False
-    # the detection stage's vehicles when it ran this frame (full_detection), strongest first: (left, top, right,
-    # bottom, score); what the tracker was given, and what `headway detect` writes for one image
+    # the detection stage's vehicles the tracker took this frame (full_detection), strongest first: (left, top,
+    # right, bottom, score), found on frame `detections_frame`: this one, or phd.detect_lag frames earlier when the
+    # detection ran on its worker thread; what `headway detect` writes for that frame's image alone
     detections: list[tuple[float, float, float, float, float]] = field(default_factory=list)
+    detections_frame: Optional[int] = None
 
     @property
     def lead_id(self) -> Optional[int]:
@@ -209,6 +211,7 @@ def _result(r: Any) -> FrameResult:
         tracks=tracks,
         detections=[(float(d.left), float(d.top), float(d.right), float(d.bottom), float(d.confidence))
                     for d in (r.detections[i] for i in range(r.n_detections))],
+        detections_frame=int(r.detections_frame) if r.full_detection else None,
         lanes=lanes,
         vanishing_point=vp,
         lane_width_m=_opt(r.lane_width_m),

@@ -102,6 +102,25 @@ def test_bench_reports_median_and_p99_per_stage():
     stages = rep["stages"]["all"]
     assert {"lanes", "total"} <= set(stages) and rep["frame_size"] == "640x480"
     assert all(s["p99_ms"] >= s["median_ms"] > 0 for s in stages.values())
+    # at the configuration's camera rate (30 fps) too: a detection every 3rd frame, 10 a second
+    paced = rep["at_camera_rate"]
+    assert paced["fps"] == 30.0 and {"lanes", "total"} <= set(paced["stages"]["all"])
+    assert paced["detections_per_s"] == pytest.approx(10.0, abs=0.5)
+    assert paced["detection_age"]["median_ms"] > 0
+
+
+def test_bench_at_the_camera_rate_reports_the_lagged_detections_age(tmp_path):
+    """With the detection on its worker thread, taken 2 frames after its frame (phd.detect_lag 2), the bench at 30 fps
+    reports the frame thread's wait for it, and its age when taken: at least the 2 frame periods of the lag."""
+    cfg = tmp_path / "lag.yaml"
+    cfg.write_text("phd: {detect_lag: 2}\n")
+    r = headway("bench", "--scenario", "steady_following", "--repeats", "1", "--fps", "30", "--config", str(cfg),
+                "--json")
+    assert r.returncode == 0, r.stderr
+    paced = json.loads(r.stdout)["at_camera_rate"]
+    assert {"detect_wait", "bg_detect", "bg_detect_cpu"} <= set(paced["stages"]["full_detection"])
+    assert paced["detection_age"]["median_ms"] >= 2000.0 / 30.0
+    assert paced["detections_per_s"] == pytest.approx(10.0, abs=0.5)
 
 
 def test_image_bench_times_headway_detect_part_by_part(tmp_path):

@@ -11,11 +11,14 @@ from app.core import ConfigError, Pipeline, core_schema
 from tests.thesis_scenes import config, frames
 
 
-def _run(name: str, pipeline: dict, n: int, cascade: dict | None = None) -> list:
+def _run(name: str, pipeline: dict, n: int, keys: dict | None = None) -> list:
+    """The first n frames of the scenario through the composition, `keys` ({section: {key: value}}) set."""
     cfg = config(name)
     cfg["pipeline"] = pipeline
+    for section, values in (keys or {}).items():
+        cfg[section] = {**cfg.get(section, {}), **values}
     # the core alone has no default model (app/config.py fills it)
-    cfg["cascade"] = {"model": str(SHIPPED_CASCADE), **(cascade or {})}
+    cfg["cascade"] = {**cfg.get("cascade", {}), "model": str(SHIPPED_CASCADE)}
     with Pipeline(cfg) as p:
         return [p.process(f.image, f.t_s) for f in frames(name)[:n]]
 
@@ -40,8 +43,7 @@ def test_a_preset_is_its_composition(preset, detectors, tracker):
     by_name = _run("steady_following", {"preset": preset}, 40)
     keys = configuration.presets()[preset]["keys"]
     assert set(keys) <= {"cascade", "phd", "fuse"}
-    by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40,
-                    keys.get("cascade"))
+    by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40, keys)
     assert _boxes(by_name) == _boxes(by_parts)
     assert [r.stages.keys() for r in by_name] == [r.stages.keys() for r in by_parts]
 

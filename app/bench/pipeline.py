@@ -1,8 +1,11 @@
 """`headway bench`: per-stage median and p99 milliseconds per frame, measured on rendered frames.
 
 Frames are rendered first (not timed), then fed through ``process()`` - the per-frame code of the
-real-time loop. Frames with a full detection and tracking-only frames are reported apart, because
-the thesis pipeline's cost depends on which kind a frame is.
+real-time loop - twice: as fast as possible (the work per frame), and at the camera's frame rate (``--fps``,
+the configuration's ``source.fps`` unless given), as a camera delivers them: the latency a frame sees from its
+arrival to its result, with the detection on its worker thread using the time between frames (phd.detect_lag).
+Frames whose tracker took a full detection and tracking-only frames are reported apart, because the cost
+depends on which kind a frame is.
 
 `headway bench --images DIR`: what `headway detect` spends on each image, part by part (run_image_bench).
 """
@@ -35,29 +38,66 @@ def _stats(values: list[float]) -> dict:
             "mean_ms": float(a.mean())}
 
 
-def run_bench(scenario: str = "dense_traffic", preset: Optional[str] = None, width: int = 640, height: int = 480,
-              repeats: int = 3, config_path: Optional[str] = None) -> dict:
-    sc = load_scenario(scenario)
-    frames = [(f.image, f.t_s) for f in render(sc, camera_overrides={"width": width, "height": height,
-                                                                       "cx": width / 2, "cy": height / 2})]
-    cfg = configuration.load(config_path, {"pipeline": {"preset": preset}} if preset else None)
-    cfg["camera"].update(width=width, height=height, cx=width / 2, cy=height / 2)
+def _feed(cfg: dict, frames: list, repeats: int, fps: Optional[float]) -> tuple[dict, list[float]]:
+    """Every frame through a new pipeline per repeat: back to back (fps None), or each at its slot of a camera
+    running at fps (a frame late for its slot is fed at once). Returns the stage times by kind of frame, and for
+    each frame whose tracker took a full detection the detection's age then (ms from the arrival of the frame it
+    was found on to the result that took it)."""
+    from app.core import monotonic_s
+
     per_kind: dict[str, dict[str, list[float]]] = {"all": {}, "full_detection": {}, "tracking_only": {}}
+    ages_ms: list[float] = []
     for _ in range(repeats):
+        arrived: dict[int, float] = {}
         with Pipeline(configuration.core_sections(cfg)) as p:
-            for img, t in frames:
+            t_start = monotonic_s()
+            for i, (img, t) in enumerate(frames):
+                if fps:
+                    time.sleep(max(0.0, t_start + i / fps - monotonic_s()))
+                arrived[i] = monotonic_s()
                 r = p.process(img, t)
                 kind = "full_detection" if r.full_detection else "tracking_only"
                 for bucket in ("all", kind):
                     for name, ms in list(r.stages.items()) + [("total", r.total_ms)]:
                         per_kind[bucket].setdefault(name, []).append(ms)
-    return {
+                if r.full_detection and r.detections_frame in arrived:
+                    ages_ms.append(1000.0 * (r.t_done_s - arrived[r.detections_frame]))
+    return per_kind, ages_ms
+
+
+def run_bench(scenario: str = "dense_traffic", preset: Optional[str] = None, width: int = 640, height: int = 480,
+              repeats: int = 3, config_path: Optional[str] = None, fps: Optional[float] = None) -> dict:
+    """The as-fast-as-possible figures ("stages"), and with fps > 0 (None: the configuration's source.fps) the
+    figures at that camera rate ("at_camera_rate": stages, the detection's age at fusion and how many detections
+    a second the tracker took)."""
+    sc = load_scenario(scenario)
+    frames = [(f.image, f.t_s) for f in render(sc, camera_overrides={"width": width, "height": height,
+                                                                       "cx": width / 2, "cy": height / 2})]
+    cfg = configuration.load(config_path, {"pipeline": {"preset": preset}} if preset else None)
+    cfg["camera"].update(width=width, height=height, cx=width / 2, cy=height / 2)
+    if fps is None:
+        fps = float(cfg["source"]["fps"])
+    if fps < 0:
+        raise BenchError(f"--fps {fps}: a camera rate is positive (frames/s), or 0 for back to back only")
+    report = {
         "scenario": scenario, "preset": cfg["pipeline"]["preset"], "frame_size": f"{width}x{height}",
         "frames": len(frames) * repeats, "machine": f"{platform.processor() or platform.machine()}, "
                                                      f"{os.cpu_count()} cores",
-        "stages": {bucket: {name: _stats(v) for name, v in stages.items()} for bucket, stages in per_kind.items()
-                   if stages},
     }
+    per_kind, _ = _feed(cfg, frames, repeats, None)
+    report["stages"] = {bucket: {name: _stats(v) for name, v in stages.items()} for bucket, stages in per_kind.items()
+                        if stages}
+    if fps:
+        paced, ages_ms = _feed(cfg, frames, repeats, fps)
+        n_full = len(paced["full_detection"].get("total", []))
+        report["at_camera_rate"] = {
+            "fps": fps,
+            "stages": {bucket: {name: _stats(v) for name, v in stages.items()} for bucket, stages in paced.items()
+                       if stages},
+            "detection_age": _stats(ages_ms) if ages_ms else None,
+            "detections_per_s": n_full / (len(frames) * repeats / fps),
+        }
+    return report
 
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
@@ -191,26 +231,42 @@ def run_latency_bench(scenario: str = "dense_traffic", seconds: float = 10.0, co
         stop.set()
         cam.join()
         dropped = pipe.health()["results_dropped"]
-    return {"scenario": scenario, "preset": cfg["pipeline"]["preset"], "frames": len(latencies), "dropped": dropped,
+    return {"scenario": scenario, "preset": cfg["pipeline"]["preset"], "fps": sc.fps, "frames": len(latencies),
+            "dropped": dropped,
             "capture_to_can": _stats(latencies), "supervisor_cpu_per_frame": _stats(cpu_ms)}
 
 
 def format_latency(report: dict) -> str:
     c, s = report["capture_to_can"], report["supervisor_cpu_per_frame"]
     return (f"capture-to-CAN latency, preset {report['preset']}, over {report['frames']} frames ({report['scenario']}, "
-            f"30 fps pushed through the real-time loop, CAN on a virtual bus, {report['dropped']} dropped):\n"
+            f"{report['fps']:g} fps pushed through the real-time loop, CAN on a virtual bus, {report['dropped']} "
+            f"dropped):\n"
             f"| measure | median ms | p99 ms |\n| --- | ---: | ---: |\n"
             f"| capture to CAN frames handed to the bus | {c['median_ms']:.2f} | {c['p99_ms']:.2f} |\n"
             f"| supervisor CPU per frame (inputs, FCW, CAN encoding) | {s['median_ms']:.2f} | {s['p99_ms']:.2f} |")
 
 
+def _stage_rows(stages: dict) -> list[str]:
+    lines = ["| frames | stage | n | median ms | p99 ms |", "| --- | --- | ---: | ---: | ---: |"]
+    for bucket, by_name in stages.items():
+        for name, s in by_name.items():
+            lines.append(f"| {bucket} | {name} | {s['n']} | {s['median_ms']:.3f} | {s['p99_ms']:.3f} |")
+    return lines
+
+
 def format_table(report: dict) -> str:
     lines = [f"headway bench: preset {report['preset']}, {report['frame_size']}, scenario {report['scenario']}, "
-             f"{report['frames']} frames ({report['machine']})", "",
-             "| frames | stage | n | median ms | p99 ms |", "| --- | --- | ---: | ---: | ---: |"]
-    for bucket, stages in report["stages"].items():
-        for name, s in stages.items():
-            lines.append(f"| {bucket} | {name} | {s['n']} | {s['median_ms']:.3f} | {s['p99_ms']:.3f} |")
+             f"{report['frames']} frames ({report['machine']})", "", "Back to back (the work per frame):", "",
+             *_stage_rows(report["stages"])]
+    paced = report.get("at_camera_rate")
+    if paced:
+        lines += ["", f"At the camera's rate, {paced['fps']:g} fps (a frame's latency from its arrival to its result; "
+                      "bg_*: the detection on its worker thread, not in the frame's latency):", "",
+                  *_stage_rows(paced["stages"]), ""]
+        age = paced["detection_age"]
+        lines.append(f"full detections taken: {paced['detections_per_s']:.2f} per s; their age when taken (arrival "
+                     f"of their frame to the result that took them): " +
+                     (f"median {age['median_ms']:.1f} ms, p99 {age['p99_ms']:.1f} ms" if age else "none taken"))
     return "\n".join(lines)
 
 
@@ -239,6 +295,9 @@ def add_parser(subparsers) -> None:
     s.add_argument("--width", type=int, default=640)
     s.add_argument("--height", type=int, default=480)
     s.add_argument("--repeats", type=int, default=3, help="passes over the scenario (with --images: over the images)")
+    s.add_argument("--fps", type=float, default=None,
+                   help="also feed the frames at this camera rate and report each frame's latency and the detection's "
+                        "age (default: the configuration's source.fps; 0: back to back only)")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
     s.add_argument("--latency", action="store_true",
@@ -263,7 +322,7 @@ def run(args) -> int:
         print(json.dumps(report, indent=2) if args.json else format_image_table(report))
         return 0
     with pinned_to_one_core() as core:
-        report = run_bench(args.scenario, args.preset, args.width, args.height, args.repeats, args.config)
+        report = run_bench(args.scenario, args.preset, args.width, args.height, args.repeats, args.config, args.fps)
         if report["preset"] == "parallax" and (args.width, args.height) == (640, 480):
             # the joint particle filter's cost against the vehicles it holds
             report["particles_by_vehicles"] = particles.particle_cost()

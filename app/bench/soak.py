@@ -58,7 +58,9 @@ def _feed(fifo: Path, frames: list[bytes], fps: float, stop: threading.Event, fe
         os.close(fd)
 
 
-def soak(clip: str, minutes: float, every_s: float, workdir: Path, fps: float | None = None) -> dict:
+def soak(clip: str, minutes: float, every_s: float, workdir: Path, fps: float | None = None,
+         sections: dict | None = None) -> dict:
+    """`sections`: further configuration sections ({section: {key: value}}), e.g. {"phd": {"detect_lag": 0}}."""
     rec = open_recording(clip)
     fps = fps or rec.fps
     frames = [g.tobytes() for g in rec.read_all()]
@@ -68,7 +70,8 @@ def soak(clip: str, minutes: float, every_s: float, workdir: Path, fps: float | 
                    f"cy: {h / 2}}}\n"
                    f"source: {{kind: fifo, path: {workdir / 'frames.fifo'}}}\n"
                    f"can: {{interface: virtual, channel: soak-{os.getpid()}, output_log: {workdir / 'out.log'}}}\n"
-                   f"service: {{status_file: {workdir / 'status.json'}}}\n")
+                   f"service: {{status_file: {workdir / 'status.json'}}}\n" +
+                   "".join(f"{name}: {json.dumps(values)}\n" for name, values in (sections or {}).items()))
     p = subprocess.Popen([sys.executable, "-m", "app.cli", "service", "--config", str(cfg)], cwd=REPO,
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     stop = threading.Event()
@@ -106,7 +109,8 @@ def soak(clip: str, minutes: float, every_s: float, workdir: Path, fps: float | 
     after = [s for s in samples if s["t_s"] >= 60.0] or samples  # after a minute of warm-up
     med = [s["latency_median_ms"] for s in samples if s["latency_median_ms"] is not None]
     p99 = [s["latency_p99_ms"] for s in samples if s["latency_p99_ms"] is not None]
-    return {"clip": clip, "frames_in_clip": len(frames), "size": f"{w}x{h}", "fps": fps, "minutes": minutes,
+    return {"clip": clip, "sections": sections or {}, "frames_in_clip": len(frames), "size": f"{w}x{h}", "fps": fps,
+            "minutes": minutes,
             "frames_fed": fed[0], "frames_fed_late": fed[1], "frames_captured": final.get("frames_captured"),
             "frames_processed": final.get("frames"), "queue_drops": final.get("queue_drops"),
             "state_after_stop": final.get("state"),
@@ -126,9 +130,11 @@ def main(argv=None) -> int:
     a.add_argument("--every-s", type=float, default=10.0)
     a.add_argument("--fps", type=float, help="frames/s written into the FIFO (default: the clip's own)")
     a.add_argument("--out", default="soak.json")
+    a.add_argument("--sections", type=json.loads, default=None,
+                   help='further configuration sections as JSON, e.g. \'{"phd": {"detect_lag": 0}}\'')
     args = a.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="headway-soak-") as tmp:
-        rep = soak(args.clip, args.minutes, args.every_s, Path(tmp), args.fps)
+        rep = soak(args.clip, args.minutes, args.every_s, Path(tmp), args.fps, args.sections)
     Path(args.out).write_text(json.dumps(rep, indent=1))
     print(json.dumps({k: v for k, v in rep.items() if k != "samples"}, indent=1))
     return 0

@@ -2,12 +2,20 @@
 #pragma once
 
 #include <chrono>
+#include <ctime>
 
 namespace hw {
 
 inline double monotonic_s() {
     using namespace std::chrono;
     return duration<double>(steady_clock::now().time_since_epoch()).count();
+}
+
+// CPU time of the calling thread, ms: a stage's cost without the time other threads and processes took the core.
+inline double thread_cpu_ms() {
+    timespec t{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+    return 1e3 * double(t.tv_sec) + 1e-6 * double(t.tv_nsec);
 }
 
 // Measures one stage: construct, run the stage, call ms().

@@ -168,7 +168,8 @@ struct FrameOutput {
     int events = 0;
     bool full_detection = false;
     std::vector<TrackState> tracks;
-    std::vector<DetectedBox> detections;  // the detection stage's vehicles when it ran this frame, strongest first
+    std::vector<DetectedBox> detections;  // the detection stage's vehicles the tracker took this frame, strongest first
+    int64_t detections_frame = -1;        // the frame they were found on (earlier than this one with phd.detect_lag)
     LaneModel lanes;
     float horizon_row = kNaN;
     int lead_id = -1;

@@ -140,6 +140,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
         d.lane_index = t.lane_index;
         d.in_path = t.in_path;
     }
+    r->detections_frame = o.full_detection ? o.detections_frame : -1;
     r->n_detections = int32_t(std::min<size_t>(o.detections.size(), HW_MAX_TRACKS));
     for (int i = 0; i < r->n_detections; ++i) {
         const auto &d = o.detections[size_t(i)];

@@ -89,8 +89,12 @@ FrameOutput Pipeline::process(const Frame &frame) {
         const CameraParams cam = cfg_.self_calibration.from_scratch ? calib_.camera() : cfg_.camera;
         const FrameContext ctx{frame.gray, frame.t_s, frame.number, out.lanes, cam, ego, motion};
         parts_.detectors.last.clear();
+        parts_.detectors.last_frame = frame.number;
         parts_.tracker->step(ctx, parts_.detectors, out.tracks, out.times, out.full_detection);
-        if (out.full_detection) out.detections = boxes_of(parts_.detectors.last);
+        if (out.full_detection) {
+            out.detections = boxes_of(parts_.detectors.last);
+            out.detections_frame = parts_.detectors.last_frame;
+        }
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
         last_tracks_ = out.tracks;
     }
@@ -207,7 +211,7 @@ void Pipeline::reset() {
         parts_.tracker->reset();
         parts_.tracker->set_camera(cfg_.camera);
     }
-    for (auto &d : parts_.detectors.parts) d->reset();
+    parts_.detectors.reset();
     if (parts_.road) {
         parts_.road->reset();
         parts_.road->set_camera(cfg_.camera);

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 
 namespace hw {
 
@@ -79,18 +80,70 @@ std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, co
     return out;
 }
 
-bool DetectorSet::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+bool DetectorSet::find(const RoadContext &ctx, std::vector<Hypothesis> &found, StageTimes &times) {
     bool any = false;
-    std::vector<Hypothesis> found;
     for (auto &d : parts) any = d->detect(ctx, found, times) || any;
     if (parts.size() > 1) {
         Stopwatch sw;
         found = fuse_hypotheses(found, fuse);
         times.add("fuse", sw.ms());
     }
+    return any;
+}
+
+bool DetectorSet::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
+    settle();  // the parts are the worker's while it runs
+    std::vector<Hypothesis> found;
+    const bool any = find(ctx, found, times);
     last = found;
     out.insert(out.end(), found.begin(), found.end());
     return any;
+}
+
+bool DetectorSet::can_start() const {
+    return std::none_of(parts.begin(), parts.end(), [](const auto &d) { return d->needs_road_motion(); });
+}
+
+void DetectorSet::start(const RoadContext &ctx, int64_t frame_number) {
+    if (!can_start())
+        throw std::logic_error("DetectorSet::start: a detector part needs the road's motion; run detect() instead");
+    if (!worker_) worker_ = std::make_unique<DetectionWorker>();
+    worker_->wait();
+    started_ = Started{ctx.gray.clone(), ctx.lanes, ctx.camera, ctx.t_s, frame_number};
+    has_started_ = true;
+    worker_->run([this] {
+        Started &s = started_;
+        const RoadContext c{s.gray, s.t_s, s.lanes, s.camera, nullptr};
+        Stopwatch sw;
+        const double cpu0 = thread_cpu_ms();
+        s.ran = find(c, s.found, s.times);
+        s.ms = sw.ms();
+        s.cpu_ms = float(thread_cpu_ms() - cpu0);
+    });
+}
+
+bool DetectorSet::finish(std::vector<Hypothesis> &out, StageTimes &times) {
+    if (!has_started_) throw std::logic_error("DetectorSet::finish: no detection was started");
+    times.add("detect_wait", worker_->wait());
+    has_started_ = false;
+    for (const auto &[name, ms] : started_.times.items) times.add("bg_" + name, ms);
+    times.add("bg_detect", started_.ms);
+    times.add("bg_detect_cpu", started_.cpu_ms);
+    last = started_.found;
+    last_frame = started_.frame;
+    out.insert(out.end(), last.begin(), last.end());
+    return started_.ran;
+}
+
+void DetectorSet::settle() {
+    if (worker_) worker_->wait();
+}
+
+void DetectorSet::reset() {
+    settle();
+    has_started_ = false;
+    started_ = Started{};
+    for (auto &d : parts) d->reset();
 }
 
 } // namespace hw

@@ -21,6 +21,7 @@
 #pragma once
 
 #include "base/params.hpp"
+#include "detect/detection_worker.hpp"
 #include "detect/detector.hpp"
 
 #include <memory>
@@ -48,13 +49,44 @@ struct FuseParams {
 // The vehicles of `found`: every part's hypotheses, in the order of pipeline.detectors.
 std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, const FuseParams &p);
 
-// The composition's detectors, asked together.
+// The composition's detectors, asked together, on the calling thread (detect) or on a worker thread (start, then
+// finish some frames later: detect/detection_worker.hpp).
 struct DetectorSet {
     std::vector<std::unique_ptr<Detector>> parts;
     FuseParams fuse;  // how two or more parts' hypotheses become one list
-    std::vector<Hypothesis> last;  // what the last detect() gave (the pipeline reports it with the frame)
+    std::vector<Hypothesis> last;  // what the last detect() or finish() gave (the pipeline reports it with the frame)
+    int64_t last_frame = -1;       // the frame `last` was found on (the pipeline sets it to the frame for detect())
+
     // The vehicles: one part's hypotheses as they are, several parts' fused; false if no part could run.
     bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times);
+    // Whether start() can run this composition: no part needs the road's motion (the parallax detector keeps the
+    // previous frame's road band in end_frame, every frame, on the frame thread).
+    bool can_start() const;
+    // detect() on the worker thread, on copies of the frame, its lane model and the camera.
+    void start(const RoadContext &ctx, int64_t frame_number);
+    // Waits for the detection start() began and gives its vehicles as detect() does (also into last, last_frame),
+    // its parts' stage times as "bg_<stage>", its wall time "bg_detect", its CPU time "bg_detect_cpu" and the wait "detect_wait".
+    bool finish(std::vector<Hypothesis> &out, StageTimes &times);
+    // Waits for a detection start() began; its result stays for finish(). (reset(): and drops it.)
+    void settle();
+    void reset();
+
+private:
+    bool find(const RoadContext &ctx, std::vector<Hypothesis> &found, StageTimes &times);
+    struct Started {  // what start() handed the worker, and what it found
+        cv::Mat gray;
+        LaneModel lanes;
+        CameraParams camera;
+        double t_s = 0.0;
+        int64_t frame = -1;
+        bool ran = false;
+        std::vector<Hypothesis> found;
+        StageTimes times;
+        float ms = 0.f, cpu_ms = 0.f;
+    };
+    Started started_;
+    bool has_started_ = false;
+    std::unique_ptr<DetectionWorker> worker_;  // last: destroyed (joined) before what its job reads
 };
 
 } // namespace hw

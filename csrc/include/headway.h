@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 10
+#define HW_ABI_VERSION 11
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -127,11 +127,13 @@ typedef struct {
     double t_done_s;       /* monotonic clock when processing finished */
     int32_t width, height;
     int32_t events;        /* HW_EVENT_* bits for this frame */
-    int32_t full_detection;/* 1 if the detector ran on the whole road area this frame */
+    int32_t full_detection;/* 1 if the tracker took a full detection this frame (found on detections_frame) */
     int32_t n_tracks;
     hw_track tracks[HW_MAX_TRACKS];
-    /* the detection stage's vehicles when it ran this frame (full_detection), strongest first: what the
-     * tracker was given; the same list hw_pipeline_run_stage "detect" gives for one image */
+    /* the detection stage's vehicles the tracker took this frame (full_detection), strongest first, found on
+     * frame detections_frame (this one, or phd.detect_lag frames earlier when the detection ran on its worker
+     * thread); the same list hw_pipeline_run_stage "detect" gives for that frame's image alone */
+    int64_t detections_frame; /* -1 when none */
     int32_t n_detections;
     hw_box detections[HW_MAX_TRACKS];
     int32_t n_lanes;

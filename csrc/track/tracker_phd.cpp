@@ -13,6 +13,9 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("detect_every_n", detect_every_n, 1, 1000,
           "frames; the detector runs on every n-th frame to find new vehicles and re-anchor tracked ones; the "
           "features carry the vehicles in between");
+    m.add("detect_lag", detect_lag, 0, 999,
+          "frames; >0: each detection runs on a worker thread and is taken this many frames later (at most "
+          "detect_every_n - 1); 0: on the frame thread, at once");
     m.add("estimator", estimator, "weights|covariance|max_weight",
           "the vehicle's contact point from its stable features: weights (eq. 13, weight-averaged; the paper's "
           "choice for cost), covariance (eq. 14, weighted by 1/|P|), max_weight (eq. 15, the heaviest feature)");
@@ -86,6 +89,8 @@ void PhdTracker::reset() {
     next_id_ = 1;
     frame_ = 0;
     started_ = false;
+    lagged_due_ = -1;  // the pipeline resets the detector set, dropping a running detection
+    lagged_vehicles_.clear();
 }
 
 void PhdTracker::set_camera(const CameraParams &camera) {
@@ -95,13 +100,6 @@ void PhdTracker::set_camera(const CameraParams &camera) {
 }
 
 namespace {
-
-// CPU time of the calling thread, ms: the tracker's cost without the time other processes took the core.
-double thread_cpu_ms() {
-    timespec t{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-    return 1e3 * double(t.tv_sec) + 1e-6 * double(t.tv_nsec);
-}
 
 double median(std::vector<double> &v) {
     const auto mid = v.begin() + long(v.size() / 2);
@@ -294,13 +292,27 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double 
     vehicles_.push_back(std::move(v));
 }
 
-void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon) {
-    // Each vehicle's box as its features carried it to this frame (the motion model), against every detection.
+std::vector<PhdTracker::VehicleAt> PhdTracker::vehicles_now() const {
+    std::vector<VehicleAt> out;
+    for (const Vehicle &v : vehicles_) out.push_back({v.id, v.box(), v.contact, v.width});
+    return out;
+}
+
+void PhdTracker::use_detections(const FrameContext &ctx, const LaneModel &lanes, const std::vector<Hypothesis> &dets,
+                                double horizon, const std::vector<VehicleAt> &then) {
+    // Each vehicle's box on the detections' frame (as its features carried it there: the motion model), against
+    // every detection; a vehicle the detections' frame did not have yet, with its box now.
+    std::vector<const VehicleAt *> was(vehicles_.size(), nullptr);
+    for (size_t i = 0; i < vehicles_.size(); ++i)
+        for (const VehicleAt &a : then)
+            if (a.id == vehicles_[i].id) was[i] = &a;
+    // (a vehicle started below from these detections: its box now, which is the detection's)
+    const auto box_then = [&](size_t i) { return i < was.size() && was[i] ? was[i]->box : vehicles_[i].box(); };
     cv::Mat_<float> iou(int(vehicles_.size()), int(dets.size()));
     std::vector<float> scores;
     for (const Hypothesis &d : dets) scores.push_back(d.score);
     for (size_t i = 0; i < vehicles_.size(); ++i) {
-        const cv::Rect2f vb = vehicles_[i].box();
+        const cv::Rect2f vb = box_then(i);
         for (size_t j = 0; j < dets.size(); ++j)
             iou(int(i), int(j)) = box_iou(vb, vehicles_[i].height.compared_box(dets[j], vb, p_.height));
     }
@@ -315,7 +327,16 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
             continue;
         }
         used[size_t(best)] = true;
-        const Hypothesis &d = dets[size_t(best)];
+        Hypothesis d = dets[size_t(best)];
+        if (was[k] && was[k]->width > 0.0) {
+            // found frames ago: moved as the vehicle moved since (its contact point shifted, its box scaled)
+            const double s = v.width / was[k]->width;
+            const cv::Point2d dc(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
+            const cv::Point2d c = v.contact + s * (dc - was[k]->contact);
+            const double w = s * d.box.width, h = s * d.box.height;
+            d.box = cv::Rect2f(float(c.x - 0.5 * w), float(c.y - h), float(w), float(h));
+            d.foot = {float(c.x), float(c.y)};
+        }
         const cv::Point2d dc(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
         // A contact row the vehicle's state cannot explain (past detection_gate_sigma) is a box that took in
         // something else: the detection confirms the vehicle but does not measure or re-anchor it.
@@ -340,10 +361,10 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         const cv::Rect2f &b = dets[i].box;
         const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
         // A vehicle beside the road (past birth_lanes_beside lanes of the ego lane: bushes, signs) starts no track.
-        if (!ctx.lanes.near_ego_lane(foot.x, foot.y, p_.birth_lanes_beside)) continue;
+        if (!lanes.near_ego_lane(foot.x, foot.y, p_.birth_lanes_beside)) continue;
         bool explained = false;
-        for (const Vehicle &v : vehicles_) {
-            const cv::Rect2f vb = v.box();
+        for (size_t k = 0; k < vehicles_.size(); ++k) {
+            const cv::Rect2f vb = box_then(k);
             explained = explained || box_iou(vb, b) >= 0.2f || vb.contains(foot);
         }
         // A learned detection scoring under birth_min_appearance may follow a vehicle but not found one: the
@@ -421,6 +442,18 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
     }
     started_ = true;
     last_t_s_ = ctx.t_s;
+    // Every n-th frame the detector parts: new vehicles, and re-anchoring of the tracked ones. With detect_lag L the
+    // detection taken on frame k (a multiple of n) is that of frame k - L, started on the worker there, first thing
+    // in the frame so that it has the rest of that frame's time too: the tracker takes detections on the same frames
+    // as without the lag (a vehicle found on the first frame is confirmed on frame n either way).
+    const int lag = detectors.can_start() ? std::min(p_.detect_lag, p_.detect_every_n - 1) : 0;
+    const bool detect_now = frame_ % p_.detect_every_n == 0 && (lag == 0 || frame_ == 0);
+    const bool lagged = lag > 0 && frame_ > 0 && (frame_ + lag) % p_.detect_every_n == 0;
+    if (lagged) {
+        detectors.start(ctx.road(), ctx.number);
+        lagged_due_ = frame_ + lag;
+        lagged_lanes_ = ctx.lanes;
+    }
     const double lane_horizon = horizon_.update(ctx.lanes);
     flow_.next_frame(ctx.gray);
     // the car's pitch from the far scene, the slow part from the lanes (scene_pitch.hpp)
@@ -433,18 +466,27 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
         v.age++;
     }
     follow_features(vehicles_, ctx.gray, horizon, dt);
+    if (lagged) lagged_vehicles_ = vehicles_now();
 
-    // Every n-th frame the detector parts: new vehicles, and re-anchoring of the tracked ones. A part
-    // that could not run (no road motion yet) counts as no detection: nothing is missed for it.
+    // A part that could not run (no road motion yet) counts as no detection: nothing is missed for it.
     full_detection = false;
-    if (frame_ % p_.detect_every_n == 0) {
+    if (detect_now) {
         Stopwatch sd;
         const double c0 = thread_cpu_ms();
         std::vector<Hypothesis> dets;
         full_detection = detectors.detect(ctx.road(), dets, times);
         detect_ms = sd.ms();
         detect_cpu_ms = thread_cpu_ms() - c0;
-        if (full_detection) use_detections(ctx, dets, horizon);
+        if (full_detection) use_detections(ctx, ctx.lanes, dets, horizon, {});
+    } else if (frame_ == lagged_due_) {
+        Stopwatch sd;
+        const double c0 = thread_cpu_ms();
+        std::vector<Hypothesis> dets;
+        full_detection = detectors.finish(dets, times);
+        detect_ms = sd.ms();  // the wait ("detect_wait"); the fusion below is tracking
+        detect_cpu_ms = thread_cpu_ms() - c0;
+        lagged_due_ = -1;
+        if (full_detection) use_detections(ctx, lagged_lanes_, dets, horizon, lagged_vehicles_);
     }
     ++frame_;
     prune(ctx, horizon);

@@ -25,9 +25,14 @@
 //      expand faster than the vehicle and bias every point alike, which more points do not average out.
 //      The horizon row the contact is read against follows the car's pitch through the far scene's
 //      vertical motion, the slow part from the lanes (scene_pitch.hpp).
-//   5. Every detect_every_n frames it asks the detector parts for a full detection; any detector composes. The
-//      detections are paired with the vehicles' predicted boxes in two stages by score (association.hpp:
-//      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left). A paired
+//   5. Every detect_every_n frames it asks the detector parts for a full detection; any detector composes. With
+//      detect_lag L > 0 the detection of frame k - L runs on a worker thread (detect/detection_worker.hpp) and is
+//      taken at frame k, the frame thread waiting there if it is not done: a fixed L keeps the tracks the same on any
+//      machine. The first frame (nothing tracked yet) and compositions with a part that needs the road's motion
+//      detect on the frame thread at once. The
+//      detections are paired with the vehicles' boxes of the detection's frame in two stages by score (association.hpp:
+//      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left); a late
+//      detection paired with a vehicle is moved by that vehicle's own image motion since its frame. A paired
 //      detection re-measures its vehicle's contact point (UKF update), pulls its width and features' offsets
 //      towards the detected box, and counts as a hit (confirmation); an unexplained confident detection starts a
 //      vehicle. A paired detection whose contact row is farther than detection_gate_sigma from the one the UKF
@@ -62,6 +67,8 @@ namespace hw {
 
 struct PhdTrackerParams {
     int detect_every_n = 3;            // frames between runs of the detector (new vehicles, re-anchoring)
+    int detect_lag = 0;                // frames; a detection runs on a worker thread and is taken this much later
+                                       // (at most detect_every_n - 1; 0 = on the frame thread, at once)
     std::string estimator = "weights";  // weights (eq. 13) | covariance (eq. 14) | max_weight (eq. 15)
     int birth_every_n = 2;             // frames between searches for new corners (candidate births)
     double outlier_px = 1.5;           // px; a followed point this far from the vehicle's motion is not measured
@@ -133,7 +140,17 @@ private:
                  const std::vector<uchar> &ok, const cv::Mat &gray, double horizon, double dt);
     bool contact_from_features(const Vehicle &v, double horizon, cv::Point2d &c) const;
     static cv::Vec2d tag_of(const cv::Vec2d &m, const cv::Point2d &contact, double horizon);
-    void use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon);
+    // A vehicle's box on the frame a detection was found on (detect_lag): what the detection is compared with.
+    struct VehicleAt {
+        int id = 0;
+        cv::Rect2f box;
+        cv::Point2d contact;
+        double width = 0.0;
+    };
+    std::vector<VehicleAt> vehicles_now() const;
+    // `then`: the vehicles as they were on the detections' frame (empty: this frame); `lanes`: that frame's.
+    void use_detections(const FrameContext &ctx, const LaneModel &lanes, const std::vector<Hypothesis> &dets,
+                        double horizon, const std::vector<VehicleAt> &then);
     void start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);
     void prune(const FrameContext &ctx, double horizon);
     TrackState report(const Vehicle &v) const;
@@ -146,6 +163,11 @@ private:
     std::vector<Vehicle> vehicles_;
     int next_id_ = 1;
     int64_t frame_ = 0;
+    // the detection running on the worker (detect_lag): the frame it is taken on (-1: none), that frame's lanes and
+    // vehicles
+    int64_t lagged_due_ = -1;
+    LaneModel lagged_lanes_;
+    std::vector<VehicleAt> lagged_vehicles_;
     double last_t_s_ = 0.0;
     bool started_ = false;
 };
