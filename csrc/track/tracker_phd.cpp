@@ -57,9 +57,9 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "confirms it) starts no vehicle but may still re-anchor a tracked one; detections of other parts are not "
           "affected; 0 = every detection may start one");
     m.add("birth_lanes_beside", birth_lanes_beside, 0, 4,
-          "lanes; with a lane model, a detection starts a vehicle only if its bottom centre stands on the ego lane or "
-          "at most this many ego-lane widths beside it (the roadside's bushes and signs start none); 4: as wide as the "
-          "detectors' scan");
+          "lanes; a detection starts a vehicle only if its bottom centre stands on the ego lane or at most this many "
+          "lane widths beside it (the roadside's bushes and signs start none): the lane model's, else the ego path's on "
+          "the flat road (road.lane_width_m); 4: as wide as the detectors' scan");
     m.add("max_detection_misses", max_detection_misses, 1, 1000,
           "detector runs in a row that may miss a confirmed vehicle before it is deleted (a tentative one: 1); "
           "at detect_every_n 3 the features alone carry a vehicle for 15 frames");
@@ -330,8 +330,11 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         if (used[i] || dets[i].score < p_.association.high_score) continue;  // a weak detection starts nothing
         const cv::Rect2f &b = dets[i].box;
         const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
-        // A vehicle beside the road (past birth_lanes_beside lanes of the ego lane: bushes, signs) starts no track.
-        if (!ctx.lanes.near_ego_lane(foot.x, foot.y, p_.birth_lanes_beside)) continue;
+        // A vehicle beside the road (past birth_lanes_beside lanes of the ego lane, or of the ego path without lanes:
+        // bushes, signs) starts no track.
+        if (!on_road_ahead(ctx.lanes, cam_, ctx.ego, horizon, p_.road.lane_width_m, foot.x, foot.y,
+                           p_.birth_lanes_beside))
+            continue;
         bool explained = false;
         for (const Vehicle &v : vehicles_) {
             const cv::Rect2f vb = v.box();

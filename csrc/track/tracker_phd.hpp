@@ -30,7 +30,7 @@
 //      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left). A paired
 //      detection re-measures its vehicle's contact point (UKF update), pulls its width and features' offsets
 //      towards the detected box, and counts as a hit (confirmation); an unexplained confident detection starts a
-//      vehicle.
+//      vehicle if it stands on the road ahead (road_ahead.hpp).
 //   6. A vehicle ends when the PHD weight inside its box falls under end_weight (eq. 12), when the
 //      detector has missed it max_detection_misses times in a row, or when it leaves the image. A confirmed
 //      vehicle whose weight falls under end_weight first coasts for up to coast_frames frames: a sudden change
@@ -45,9 +45,11 @@
 #pragma once
 
 #include "geometry/horizon.hpp"
+#include "geometry/road_params.hpp"
 #include "track/association.hpp"
 #include "track/box_features.hpp"
 #include "track/gmphd.hpp"
+#include "track/road_ahead.hpp"
 #include "track/scene_pitch.hpp"
 #include "track/tracker.hpp"
 #include "track/vehicle_height.hpp"
@@ -77,7 +79,8 @@ struct PhdTrackerParams {
     int confirm_hits = 2;              // detections before a vehicle is confirmed
     double birth_min_appearance = 0.9;  // a learned detection scoring under this starts no vehicle (it may still
                                         // re-anchor one); others are not affected
-    int birth_lanes_beside = 2;        // lanes; a detection farther beside the ego lane starts no vehicle
+    int birth_lanes_beside = 2;        // lanes; a detection farther beside the ego lane (or path) starts no vehicle
+    RoadParams road;                   // section "road" (lane width: the birth gate without lanes), handed in by the configuration
     int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
     int coast_frames = 3;              // frames a confirmed vehicle whose features were lost (eq. 12) is carried by
                                        // its UKF alone before it ends (0 = it ends at once, the paper's rule)
