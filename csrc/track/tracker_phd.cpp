@@ -71,6 +71,9 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "detections a vehicle needs (and one at the detector's last run) before it may coast (coast_frames): a "
           "vehicle the detector has seen this often is a vehicle; a young track that loses its features is more "
           "often none (the cascade preset's near false box on project_video_cut.mp4 coasted at 3 hits and pre-warned)");
+    m.add("weak_keeps_hidden", weak_keeps_hidden,
+          "a weak detection (under high_score) may keep alive a vehicle that a nearer one hides (more than "
+          "coast_max_hidden of its box); false: only a confident one does (the weak ones there are the nearer one's edge)");
     m.add("coast_max_hidden", coast_max_hidden, 0.0, 1.0,
           "share of a vehicle's box that a nearer vehicle's box may cover while it coasts (coast_frames); more: it "
           "is being hidden, which explains its lost features, and it ends as without coasting");
@@ -290,6 +293,13 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double 
     vehicles_.push_back(std::move(v));
 }
 
+bool PhdTracker::hidden(const Vehicle &v) const {
+    const cv::Rect2f b = v.box();
+    return std::any_of(vehicles_.begin(), vehicles_.end(), [&](const Vehicle &u) {
+        return &u != &v && u.ukf->range() < v.ukf->range() && (u.box() & b).area() > p_.coast_max_hidden * b.area();
+    });
+}
+
 void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon) {
     // Each vehicle's box as its features carried it to this frame (the motion model), against every detection.
     cv::Mat_<float> iou(int(vehicles_.size()), int(dets.size()));
@@ -299,6 +309,10 @@ void PhdTracker::use_detections(const FrameContext &ctx, const std::vector<Hypot
         const cv::Rect2f vb = vehicles_[i].box();
         for (size_t j = 0; j < dets.size(); ++j)
             iou(int(i), int(j)) = box_iou(vb, vehicles_[i].height.compared_box(dets[j], vb, p_.height));
+        // A weak detection on a vehicle a nearer one hides is mostly the nearer one's edge: it keeps nothing alive.
+        if (!p_.weak_keeps_hidden && hidden(vehicles_[i]))
+            for (size_t j = 0; j < dets.size(); ++j)
+                if (dets[j].score < p_.association.high_score) iou(int(i), int(j)) = 0.f;
     }
     const std::vector<int> pair = associate(iou, scores, p_.association);
     std::vector<bool> used(dets.size(), false);
@@ -366,11 +380,7 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
             continue;
         }
         const bool found_often = v.coast > 0 || (v.hits >= p_.coast_min_hits && v.detection_misses == 0);
-        const cv::Rect2f b = v.box();
-        const bool hidden = std::any_of(vehicles_.begin(), vehicles_.end(), [&](const Vehicle &u) {
-            return &u != &v && u.ukf->range() < v.ukf->range() && (u.box() & b).area() > p_.coast_max_hidden * b.area();
-        });
-        v.coast = found_often && !hidden ? v.coast + 1 : p_.coast_frames + 1;
+        v.coast = found_often && !hidden(v) ? v.coast + 1 : p_.coast_frames + 1;
     }
     const cv::Size size = ctx.gray.size();
     const auto gone = [&](const Vehicle &v) {

@@ -27,7 +27,8 @@
 //      vertical motion, the slow part from the lanes (scene_pitch.hpp).
 //   5. Every detect_every_n frames it asks the detector parts for a full detection; any detector composes. The
 //      detections are paired with the vehicles' predicted boxes in two stages by score (association.hpp:
-//      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left). A paired
+//      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left and not hidden
+//      by a nearer one: a weak box there is mostly the nearer one's edge). A paired
 //      detection re-measures its vehicle's contact point (UKF update), pulls its width and features' offsets
 //      towards the detected box, and counts as a hit (confirmation); an unexplained confident detection starts a
 //      vehicle if it stands on the road ahead (road_ahead.hpp).
@@ -86,6 +87,7 @@ struct PhdTrackerParams {
                                        // its UKF alone before it ends (0 = it ends at once, the paper's rule)
     int coast_min_hits = 6;            // detections (the last run's included) a vehicle needs before it may coast
     double coast_max_hidden = 0.25;    // share of its box a nearer vehicle's box may cover for a vehicle to coast
+    bool weak_keeps_hidden = false;    // a weak detection may keep alive a vehicle a nearer one hides (coast_max_hidden)
     double max_dt_s = 1.0;             // s; a longer gap between frames restarts tracking
     BoxFeatureParams features;         // corners and LK (section phd_features)
     GmPhdParams phd;                   // the GM-PHD filter (section gmphd)
@@ -133,6 +135,7 @@ private:
     void use_detections(const FrameContext &ctx, const std::vector<Hypothesis> &dets, double horizon);
     void start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);
     void prune(const FrameContext &ctx, double horizon);
+    bool hidden(const Vehicle &v) const;  // a nearer vehicle's box covers more than coast_max_hidden of its box
     TrackState report(const Vehicle &v) const;
 
     PhdTrackerParams p_;
