@@ -88,7 +88,8 @@ void fill_preset_keys(json &root) {
 // The road section is read once and handed to every unit that uses it (their `road` member).
 void share_road(Config &c) {
     for (RoadParams *r : {&c.lanes.assembly.road, &c.shadow.road.road, &c.cascade.road.road, &c.lead.road,
-                          &c.self_calibration.road, &c.parallax.detect.road, &c.proposals.road})
+                          &c.self_calibration.road, &c.parallax.detect.road, &c.proposals.road,
+                          &c.phd.road})
         *r = c.road;
 }
 

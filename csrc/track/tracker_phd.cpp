@@ -60,9 +60,9 @@ void PhdTrackerParams::bind(ParamMap &m) {
           "score under which a learned detection starts no vehicle but may still re-anchor a tracked one; other "
           "parts' detections are not affected; 0 = every detection may start one");
     m.add("birth_lanes_beside", birth_lanes_beside, 0, 4,
-          "lanes; with a lane model, a detection starts a vehicle only if its bottom centre stands on the ego lane or "
-          "at most this many ego-lane widths beside it (the roadside's bushes and signs start none); 4: as wide as the "
-          "detectors' scan");
+          "lanes; a detection starts a vehicle only if its bottom centre stands on the ego lane or at most this many "
+          "lane widths beside it (the roadside's bushes and signs start none): the lane model's, else the ego path's on "
+          "the flat road (road.lane_width_m); 4: as wide as the detectors' scan");
     m.add("max_detection_misses", max_detection_misses, 1, 1000,
           "detector runs in a row that may miss a confirmed vehicle before it is deleted (a tentative one: 1); "
           "at detect_every_n 3 the features alone carry a vehicle for 15 frames");
@@ -72,6 +72,9 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("coast_min_hits", coast_min_hits, 1, 1000,
           "detections a vehicle needs (one at the detector's last run) before it may coast: a young track that "
           "loses its features is more often no vehicle (docs/tracking.md)");
+    m.add("weak_keeps_hidden", weak_keeps_hidden,
+          "a weak detection (under high_score) may keep alive a vehicle a nearer one hides (more than coast_max_hidden "
+          "of its box); false: only a confident one does (the weak ones there are the nearer one's edge)");
     m.add("coast_max_hidden", coast_max_hidden, 0.0, 1.0,
           "share of a vehicle's box that a nearer vehicle's box may cover while it coasts (coast_frames); more: it "
           "is being hidden, which explains its lost features, and it ends as without coasting");
@@ -292,6 +295,13 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double 
     vehicles_.push_back(std::move(v));
 }
 
+bool PhdTracker::hidden(const Vehicle &v) const {
+    const cv::Rect2f b = v.box();
+    return std::any_of(vehicles_.begin(), vehicles_.end(), [&](const Vehicle &u) {
+        return &u != &v && u.ukf->range() < v.ukf->range() && (u.box() & b).area() > p_.coast_max_hidden * b.area();
+    });
+}
+
 std::vector<PhdTracker::VehicleAt> PhdTracker::vehicles_now() const {
     std::vector<VehicleAt> out;
     for (const Vehicle &v : vehicles_) out.push_back({v.id, v.box(), v.contact, v.width});
@@ -315,6 +325,10 @@ void PhdTracker::use_detections(const FrameContext &ctx, const LaneModel &lanes,
         const cv::Rect2f vb = box_then(i);
         for (size_t j = 0; j < dets.size(); ++j)
             iou(int(i), int(j)) = box_iou(vb, vehicles_[i].height.compared_box(dets[j], vb, p_.height));
+        // A weak detection on a vehicle a nearer one hides is mostly the nearer one's edge: it keeps nothing alive.
+        if (!p_.weak_keeps_hidden && hidden(vehicles_[i]))
+            for (size_t j = 0; j < dets.size(); ++j)
+                if (dets[j].score < p_.association.high_score) iou(int(i), int(j)) = 0.f;
     }
     const std::vector<int> pair = associate(iou, scores, p_.association);
     std::vector<bool> used(dets.size(), false);
@@ -360,8 +374,11 @@ void PhdTracker::use_detections(const FrameContext &ctx, const LaneModel &lanes,
         if (used[i] || dets[i].score < p_.association.high_score) continue;  // a weak detection starts nothing
         const cv::Rect2f &b = dets[i].box;
         const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
-        // A vehicle beside the road (past birth_lanes_beside lanes of the ego lane: bushes, signs) starts no track.
-        if (!lanes.near_ego_lane(foot.x, foot.y, p_.birth_lanes_beside)) continue;
+        // A vehicle beside the road (past birth_lanes_beside lanes of the ego lane, or of the ego path without lanes:
+        // bushes, signs) starts no track.
+        if (!on_road_ahead(lanes, cam_, ctx.ego, horizon, p_.road.lane_width_m, foot.x, foot.y,
+                           p_.birth_lanes_beside))
+            continue;
         bool explained = false;
         for (size_t k = 0; k < vehicles_.size(); ++k) {
             const cv::Rect2f vb = box_then(k);
@@ -393,11 +410,7 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
             continue;
         }
         const bool found_often = v.coast > 0 || (v.hits >= p_.coast_min_hits && v.detection_misses == 0);
-        const cv::Rect2f b = v.box();
-        const bool hidden = std::any_of(vehicles_.begin(), vehicles_.end(), [&](const Vehicle &u) {
-            return &u != &v && u.ukf->range() < v.ukf->range() && (u.box() & b).area() > p_.coast_max_hidden * b.area();
-        });
-        v.coast = found_often && !hidden ? v.coast + 1 : p_.coast_frames + 1;
+        v.coast = found_often && !hidden(v) ? v.coast + 1 : p_.coast_frames + 1;
     }
     const cv::Size size = ctx.gray.size();
     const auto gone = [&](const Vehicle &v) {

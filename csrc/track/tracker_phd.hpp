@@ -31,11 +31,12 @@
 //      machine. The first frame (nothing tracked yet) and compositions with a part that needs the road's motion
 //      detect on the frame thread at once. The
 //      detections are paired with the vehicles' boxes of the detection's frame in two stages by score (association.hpp:
-//      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left); a late
+//      Hungarian on IoU, the confident detections first, the weak ones only for the vehicles left and not hidden
+//      by a nearer one: a weak box there is mostly the nearer one's edge); a late
 //      detection paired with a vehicle is moved by that vehicle's own image motion since its frame. A paired
 //      detection re-measures its vehicle's contact point (UKF update), pulls its width and features' offsets
 //      towards the detected box, and counts as a hit (confirmation); an unexplained confident detection starts a
-//      vehicle. A paired detection whose contact row is farther than detection_gate_sigma from the one the UKF
+//      vehicle if it stands on the road ahead (road_ahead.hpp). A paired detection whose contact row is farther than detection_gate_sigma from the one the UKF
 //      predicts (in sigmas of the row's innovation) is a box that took in something else (the road's shadow
 //      under the vehicle, a neighbour): it counts as a hit but neither measures nor re-anchors the vehicle.
 //   6. A vehicle ends when the PHD weight inside its box falls under end_weight (eq. 12), when the
@@ -52,9 +53,11 @@
 #pragma once
 
 #include "geometry/horizon.hpp"
+#include "geometry/road_params.hpp"
 #include "track/association.hpp"
 #include "track/box_features.hpp"
 #include "track/gmphd.hpp"
+#include "track/road_ahead.hpp"
 #include "track/scene_pitch.hpp"
 #include "track/tracker.hpp"
 #include "track/vehicle_height.hpp"
@@ -88,12 +91,14 @@ struct PhdTrackerParams {
     int confirm_hits = 2;              // detections before a vehicle is confirmed
     double birth_min_appearance = 0.9;  // a learned detection scoring under this starts no vehicle (it may still
                                         // re-anchor one); others are not affected
-    int birth_lanes_beside = 2;        // lanes; a detection farther beside the ego lane starts no vehicle
+    int birth_lanes_beside = 2;        // lanes; a detection farther beside the ego lane (or path) starts no vehicle
+    RoadParams road;                   // section "road" (lane width: the birth gate without lanes), handed in by the configuration
     int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
     int coast_frames = 3;              // frames a confirmed vehicle whose features were lost (eq. 12) is carried by
                                        // its UKF alone before it ends (0 = it ends at once, the paper's rule)
     int coast_min_hits = 6;            // detections (the last run's included) a vehicle needs before it may coast
     double coast_max_hidden = 0.25;    // share of its box a nearer vehicle's box may cover for a vehicle to coast
+    bool weak_keeps_hidden = false;    // a weak detection may keep alive a vehicle a nearer one hides (coast_max_hidden)
     double max_dt_s = 1.0;             // s; a longer gap between frames restarts tracking
     BoxFeatureParams features;         // corners and LK (section phd_features)
     GmPhdParams phd;                   // the GM-PHD filter (section gmphd)
@@ -153,6 +158,7 @@ private:
                         double horizon, const std::vector<VehicleAt> &then);
     void start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);
     void prune(const FrameContext &ctx, double horizon);
+    bool hidden(const Vehicle &v) const;  // a nearer vehicle's box covers more than coast_max_hidden of its box
     TrackState report(const Vehicle &v) const;
 
     PhdTrackerParams p_;
