@@ -44,6 +44,9 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("contact_sigma_px", contact_sigma_px, 0.01, 100.0,
           "px; 1-sigma of the contact point the features give (R of the UKF); the mean of several LK "
           "points is steadier than one box edge");
+    m.add("contact_full_depth", contact_full_depth, 0.0, 1000.0,
+          "the features' depth information (sum of k^2) at which their contact point has contact_sigma_px; less (few "
+          "features, or high on the vehicle) widens it by sqrt(this / sum); 0 = contact_sigma_px always");
     m.add("detection_sigma_px", detection_sigma_px, 0.01, 100.0,
           "px; 1-sigma of a detection's contact point (bottom centre of its box) as a UKF measurement");
     m.add("detection_gate_sigma", detection_gate_sigma, 0.0, 100.0,
@@ -125,8 +128,9 @@ std::vector<cv::Vec2d> means_of(const GmPhd &phd) {
 // contact (u - t_x d, v_h + d). A row error e of the feature becomes e / (1 + t_y) in d: each implied
 // contact is weighted by k^2 = (1 + t_y)^2 on top of the estimator's weight, and points near the camera's
 // height (k < min_depth_ratio) say nothing about the range and are left out.
-bool PhdTracker::contact_from_features(const Vehicle &v, double horizon, cv::Point2d &c) const {
+bool PhdTracker::contact_from_features(const Vehicle &v, double horizon, cv::Point2d &c, double &depth) const {
     double sw = 0.0, best = -1.0;
+    depth = 0.0;
     cv::Vec2d acc(0, 0);
     int n = 0;
     for (const GmComponent &g : v.phd.components()) {
@@ -135,6 +139,7 @@ bool PhdTracker::contact_from_features(const Vehicle &v, double horizon, cv::Poi
         const double d = (g.m[1] - horizon) / k;
         const cv::Vec2d ci(g.m[0] - g.tag[0] * d, horizon + d);
         ++n;
+        depth += k * k;
         if (p_.estimator == "max_weight") {
             if (g.w > best) { best = g.w; acc = ci; sw = 1.0; }
             continue;
@@ -249,8 +254,12 @@ void PhdTracker::measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const
     cv::Point2d cp;
     v.stable = 0;
     for (const GmComponent &g : v.phd.components()) v.stable += g.w >= p_.phd.stable_weight;
-    if (contact_from_features(v, horizon, cp)) {
-        v.ukf->update(cp, p_.contact_sigma_px, horizon);
+    double depth = 0.0;
+    if (contact_from_features(v, horizon, cp, depth)) {
+        // a row error e of a feature is e / k in the contact's depth: fewer features, or features higher on the
+        // vehicle, measure the contact less well
+        const double widen = p_.contact_full_depth > 0.0 ? std::sqrt(std::max(1.0, p_.contact_full_depth / depth)) : 1.0;
+        v.ukf->update(cp, p_.contact_sigma_px * widen, horizon);
         v.contact = cp;
     }
 }

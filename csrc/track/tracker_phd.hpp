@@ -82,6 +82,7 @@ struct PhdTrackerParams {
     int expansion_independent_points = 4;     // points counted as independent in the expansion's 1-sigma, at most
     double expansion_min_width_px = 40.0;  // px; narrower (far) vehicles: no expansion observation
     double contact_sigma_px = 0.8;     // px; 1-sigma of the features' contact point (UKF R)
+    double contact_full_depth = 16.0;  // sum of k^2 over the features at which contact_sigma_px holds (0: always)
     double detection_sigma_px = 2.0;   // px; 1-sigma of a detection's contact point (UKF R)
     double detection_gate_sigma = 6.0;  // sigmas; a paired detection's contact row farther from the vehicle's predicted
                                         // one: a hit, not a measurement (0 = no gate)
@@ -143,7 +144,7 @@ private:
     void follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, double horizon, double dt);
     void measure(Vehicle &v, const std::vector<cv::Point2f> &prev, const std::vector<cv::Point2f> &cur,
                  const std::vector<uchar> &ok, const cv::Mat &gray, double horizon, double dt);
-    bool contact_from_features(const Vehicle &v, double horizon, cv::Point2d &c) const;
+    bool contact_from_features(const Vehicle &v, double horizon, cv::Point2d &c, double &depth) const;
     static cv::Vec2d tag_of(const cv::Vec2d &m, const cv::Point2d &contact, double horizon);
     // A vehicle's box on the frame a detection was found on (detect_lag): what the detection is compared with.
     struct VehicleAt {
