@@ -100,7 +100,9 @@ void PhdTracker::reset() {
 }
 
 void PhdTracker::set_camera(const CameraParams &camera) {
-    horizon_.set_camera(camera);
+    // The vehicles are ranged with the estimate; the horizon tracker keeps the configured mounting as its prior
+    // for frames without lanes: without lanes the lane-based estimate is least sure (false lanes in unmarked
+    // congestion pulled its pitch 2.4 deg off, and the birth gate's road with it).
     for (Vehicle &v : vehicles_) v.ukf->set_camera(camera);
     cam_ = camera;
 }
