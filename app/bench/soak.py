@@ -24,7 +24,7 @@ import can
 
 from app.recording import open_recording
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]  # the checkout: app/bench/soak.py
 
 
 def rss_kb(pid: int) -> int:
@@ -100,6 +100,9 @@ def soak(clip: str, minutes: float, every_s: float, workdir: Path, fps: float | 
         p.send_signal(signal.SIGTERM)
         rc = p.wait(timeout=30)
         err = p.stderr.read()
+    if not (workdir / "out.log").exists():
+        last = err.strip().splitlines()[-1:] or ["nothing on stderr"]
+        raise RuntimeError(f"the service ended before it sent a CAN frame (exit {rc}): {last[0]}")
     try:
         final = json.loads((workdir / "status.json").read_text())
     except (OSError, ValueError):
