@@ -492,23 +492,22 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
     follow_features(vehicles_, ctx.gray, horizon, dt);
     if (lagged) lagged_vehicles_ = vehicles_now();
 
-    // A part that could not run (no road motion yet) counts as no detection: nothing is missed for it.
+    // A part that could not run (no road motion yet) counts as no detection: nothing is missed for it. The time
+    // of the detection (or of the wait for the lagged one, "detect_wait") is the detector's; the fusion is tracking.
     full_detection = false;
-    if (detect_now) {
+    std::vector<Hypothesis> dets;
+    const auto timed = [&](const auto &run) {
         Stopwatch sd;
         const double c0 = thread_cpu_ms();
-        std::vector<Hypothesis> dets;
-        full_detection = detectors.detect(ctx.road(), dets, times);
+        full_detection = run();
         detect_ms = sd.ms();
         detect_cpu_ms = thread_cpu_ms() - c0;
+    };
+    if (detect_now) {
+        timed([&] { return detectors.detect(ctx.road(), dets, times); });
         if (full_detection) use_detections(ctx, ctx.lanes, dets, horizon, {});
     } else if (frame_ == lagged_due_) {
-        Stopwatch sd;
-        const double c0 = thread_cpu_ms();
-        std::vector<Hypothesis> dets;
-        full_detection = detectors.finish(dets, times);
-        detect_ms = sd.ms();  // the wait ("detect_wait"); the fusion below is tracking
-        detect_cpu_ms = thread_cpu_ms() - c0;
+        timed([&] { return detectors.finish(dets, times); });
         lagged_due_ = -1;
         if (full_detection) use_detections(ctx, lagged_lanes_, dets, horizon, lagged_vehicles_);
     }
@@ -518,7 +517,7 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
     tracks.clear();
     for (const Vehicle &v : vehicles_) tracks.push_back(report(v));
     times.add("track", std::max(0.f, track_time.ms() - detect_ms));
-    // the same work in CPU time of this thread (a loaded machine preempts the wall time; app/bench_phd.py)
+    // the same work in CPU time of this thread (a loaded machine preempts the wall time; app/bench/phd.py)
     times.add("track_cpu", float(std::max(0.0, thread_cpu_ms() - cpu0 - detect_cpu_ms)));
 }
 
