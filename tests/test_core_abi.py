@@ -15,7 +15,7 @@ def gray(w=640, h=480, v=90):
 
 
 def test_abi_version_matches_header():
-    assert abi_version() == lib.HW_ABI_VERSION == 11
+    assert abi_version() == lib.HW_ABI_VERSION == 12
 
 
 def test_schema_documents_every_core_key():

@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 11
+#define HW_ABI_VERSION 12
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -244,45 +244,6 @@ int hw_pipeline_push(hw_pipeline *p, const uint8_t *data, int32_t width, int32_t
 int hw_pipeline_push_end(hw_pipeline *p);
 int hw_pipeline_health(hw_pipeline *p, hw_health *out);
 
-/* ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) --------------------------------------
- * The GM-PHD filter on 2-D points (csrc/track/gmphd.hpp) step by step, and the UKF on a sequence of
- * observations (csrc/track/ukf.hpp). Not used by the pipeline, which runs them inside the phd tracker. */
-typedef struct hw_gmphd hw_gmphd;
-
-typedef struct {
-    double w;              /* weight */
-    double mx, my;         /* mean, px */
-    double pxx, pxy, pyy;  /* covariance, px^2 */
-} hw_gm_component;
-
-/* params_json: keys of the "gmphd" configuration section ({} for the defaults); seed: the random
- * draw of births (P_clutter). */
-int hw_gmphd_create(const char *params_json, uint32_t seed, hw_gmphd **out);
-void hw_gmphd_destroy(hw_gmphd *f);
-/* Survival and motion x' = c + t + s (x - c) (eq. 6). */
-int hw_gmphd_predict(hw_gmphd *f, double scale, double cx, double cy, double tx, double ty);
-/* n births at xy[2n] (eq. 7); random != 0: each admitted with probability birth_accept_prob.
- * *admitted (may be NULL) receives how many were added. */
-int hw_gmphd_births(hw_gmphd *f, const double *xy, int32_t n, int32_t random, int32_t *admitted);
-/* The update with the measurement set xy[2n] (eq. 3-5). */
-int hw_gmphd_update(hw_gmphd *f, const double *xy, int32_t n);
-/* Merging (eq. 9-11) and adaptive pruning with the cap (eq. 8). */
-int hw_gmphd_merge_prune(hw_gmphd *f);
-/* Copies at most cap components into out; *n receives the number of components the filter holds. */
-int hw_gmphd_components(hw_gmphd *f, hw_gm_component *out, int32_t cap, int32_t *n);
-/* Weight summed inside the box (eq. 12). */
-int hw_gmphd_weight_in(hw_gmphd *f, double left, double top, double right, double bottom, double *out);
-
-/* Runs the UKF over n_steps observations z[n_steps * z_dim] (a NaN row skips the update) and writes
- * the state after each step into x_out[n_steps * 4] and its covariance into p_out[n_steps * 16]
- * (row-major; p_out may be NULL); NaN entries of a row are left out of that update. spec_json: {"model":
- * "linear"|"pinhole", "dt": s, "x0": [4], "P0": [16], "Q": [16], "R": [z_dim^2], "ukf": {"alpha", "beta",
- * "kappa"}, and for "linear" "H": [z_dim * 4]; for "pinhole" (z = the contact point (u, v) of the state
- * [X, Z, dX/dt, dZ/dt], and with z_dim 3 the image expansion rate e = -(dZ/dt)/Z, 1/s) "camera": {camera
- * keys} and optionally "horizon_row" (default: the camera's pitch)}. The transition is constant velocity. */
-int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t z_dim, double *x_out,
-               double *p_out);
-/* ---- END paper 004 units ------------------------------------------------------------------------- */
 /* HW_CDEF_END */
 
 #ifdef __cplusplus

