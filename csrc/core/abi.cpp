@@ -100,6 +100,18 @@ void copy_name(char (&dst)[HW_STAGE_NAME_LEN], const std::string &src) {
     dst[HW_STAGE_NAME_LEN - 1] = '\0';
 }
 
+void fill_stages(const hw::StageTimes &times, hw_stage_time (&out)[HW_MAX_STAGES], int32_t &n) {
+    n = int32_t(std::min<size_t>(times.items.size(), HW_MAX_STAGES));
+    for (int i = 0; i < n; ++i) {
+        copy_name(out[i].name, times.items[size_t(i)].first);
+        out[i].ms = times.items[size_t(i)].second;
+    }
+}
+
+hw_box box_of(const hw::DetectedBox &d) {
+    return hw_box{d.box.x, d.box.y, d.box.x + d.box.width, d.box.y + d.box.height, d.score};
+}
+
 void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     std::memset(r, 0, sizeof(*r));
     r->frame_number = o.frame_number;
@@ -136,8 +148,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->detections_frame = o.full_detection ? o.detections_frame : -1;
     r->n_detections = int32_t(std::min<size_t>(o.detections.size(), HW_MAX_TRACKS));
     for (int i = 0; i < r->n_detections; ++i) {
-        const auto &d = o.detections[size_t(i)];
-        r->detections[i] = hw_box{d.box.x, d.box.y, d.box.x + d.box.width, d.box.y + d.box.height, d.score};
+        r->detections[i] = box_of(o.detections[size_t(i)]);
     }
     int n = 0;
     auto add_lane = [&](const hw::LaneBoundary &b, int position) {
@@ -161,11 +172,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->lanes_certain = o.lanes.certain ? 1 : 0;
     r->horizon_row = o.horizon_row;
     r->lead_id = o.lead_id;
-    r->n_stages = int32_t(std::min<size_t>(o.times.items.size(), HW_MAX_STAGES));
-    for (int i = 0; i < r->n_stages; ++i) {
-        copy_name(r->stages[i].name, o.times.items[i].first);
-        r->stages[i].ms = o.times.items[i].second;
-    }
+    fill_stages(o.times, r->stages, r->n_stages);
     r->total_ms = o.total_ms;
     r->image_mean = o.image_mean;
     r->image_stddev = o.image_stddev;
@@ -297,23 +304,21 @@ int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray
     });
 }
 
-int hw_pipeline_stage_boxes(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width, int32_t height,
-                            int32_t stride, hw_box *out, int32_t cap, int32_t *n, float *horizon_row) {
+int hw_pipeline_detect(hw_pipeline *p, const char *detector, const uint8_t *gray, int32_t width, int32_t height,
+                       int32_t stride, hw_box *out, int32_t cap, hw_detect_info *info) {
     return guard([&] {
         require(p, "pipeline");
-        require(stage, "stage");
-        require(n, "n");
+        require(info, "info");
         if (cap < 0) throw std::invalid_argument("cap must not be negative");
         if (cap > 0) require(out, "out");
         std::lock_guard<std::mutex> lock(p->mu);
-        require_stopped(p, "stage_boxes()");
-        const hw::FrameOutput o = p->pipeline->run_stage(stage, wrap_gray(gray, width, height, stride));
-        *n = int32_t(o.tracks.size());
-        if (horizon_row) *horizon_row = o.horizon_row;
-        for (int32_t i = 0; i < std::min(cap, *n); ++i) {
-            const auto &t = o.tracks[size_t(i)];
-            out[i] = hw_box{t.box.x, t.box.y, t.box.x + t.box.width, t.box.y + t.box.height, t.confidence};
-        }
+        require_stopped(p, "detect()");
+        const hw::ImageDetections d = p->pipeline->detect_image(detector ? detector : "", wrap_gray(gray, width, height, stride));
+        info->n_detections = int32_t(d.boxes.size());
+        info->horizon_row = d.horizon_row;
+        fill_stages(d.times, info->stages, info->n_stages);
+        info->total_ms = d.total_ms;
+        for (int32_t i = 0; i < std::min(cap, info->n_detections); ++i) out[i] = box_of(d.boxes[size_t(i)]);
         return HW_OK;
     });
 }

@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 12
+#define HW_ABI_VERSION 13
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -115,7 +115,7 @@ typedef struct {
     float ms;
 } hw_stage_time;
 
-/* One detection: a box of the detection stage (hw_frame_result.detections, hw_pipeline_stage_boxes). */
+/* One detection: a box of the detection stage (hw_frame_result.detections, hw_pipeline_detect). */
 typedef struct {
     float left, top, right, bottom; /* px */
     float confidence;               /* 0..1 */
@@ -132,7 +132,7 @@ typedef struct {
     hw_track tracks[HW_MAX_TRACKS];
     /* the detection stage's vehicles the tracker took this frame (full_detection), strongest first, found on
      * frame detections_frame (this one, or phd.detect_lag frames earlier when the detection ran on its worker
-     * thread); the same list hw_pipeline_run_stage "detect" gives for that frame's image alone */
+     * thread); the same list hw_pipeline_detect (detector NULL) gives for that frame's image alone */
     int64_t detections_frame; /* -1 when none */
     int32_t n_detections;
     hw_box detections[HW_MAX_TRACKS];
@@ -209,20 +209,30 @@ int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *need
  * Not allowed while the loop runs. t_s must not go backwards (HW_ERR_INVALID_ARGUMENT). */
 int hw_pipeline_process(hw_pipeline *p, const uint8_t *gray, int32_t width, int32_t height,
                         int32_t stride, double t_s, hw_frame_result *out);
-/* Run the single-image units on one frame, without touching any tracking state, for tests and
- * evaluation: stage "lanes" (lane markings of this image alone), "hypotheses" (lanes + shadow
- * hypotheses, reported as unconfirmed tracks with id -1), "detect" (lanes + hypotheses + vertical-edge
- * verification: the detector's boxes with their scores as confidence). */
+/* What hw_pipeline_detect found besides the boxes. */
+typedef struct {
+    int32_t n_detections;  /* detections the stage gave (all of them: may be more than the cap asked for) */
+    float horizon_row;     /* the horizon row they were found with (the configured camera's) */
+    int32_t n_stages;      /* wall time of the stage's sub-stages (lanes, the detector parts' own) */
+    hw_stage_time stages[HW_MAX_STAGES];
+    float total_ms;
+} hw_detect_info;
+
+/* Offline: the detection stage on one 8-bit gray image alone, without touching any tracking state (what
+ * `headway detect` writes): the detector part named `detector` (one of the configuration's pipeline.detectors
+ * choices, built from this configuration), or the pipeline's own detection stage (its composition's detector parts,
+ * fused as in a tracked pipeline) when detector is NULL or "". The lane markings of this image alone give the road
+ * context. Every detection the stage gives, in its order (strongest first), without the HW_MAX_TRACKS cap of
+ * hw_frame_result (the cascade with cascade.nms_iou 1 gives ~150 groups on a 1280x720 image): copies at most cap of
+ * them into out (NULL allowed when cap is 0) and info->n_detections receives how many there are: call again with a
+ * larger out when it is > cap. HW_ERR_INVALID_ARGUMENT for an unknown name or a part that needs the road's motion
+ * (parallax: two frames). */
+int hw_pipeline_detect(hw_pipeline *p, const char *detector, const uint8_t *gray, int32_t width, int32_t height,
+                       int32_t stride, hw_box *out, int32_t cap, hw_detect_info *info);
+/* Units on frames without touching any tracking state, for tests and evaluation: stage "lanes" (lane markings of
+ * this image alone), and the two-frame units "homography" and "parallax" (csrc/core/parallax_stage.hpp). */
 int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
                           int32_t height, int32_t stride, hw_frame_result *out);
-/* Offline, for training (ABI 8): the same stages as hw_pipeline_run_stage, but every detection the stage
- * gives, without the HW_MAX_TRACKS cap of hw_frame_result (the cascade stage with cascade.nms_iou 1 gives
- * ~150 groups on a 1280x720 image). Copies at most cap of them into out (NULL allowed when cap is 0) and
- * *n receives how many the stage gave: call again with a larger out when *n > cap. *horizon_row (may be
- * NULL) receives the frame's horizon row as hw_frame_result.horizon_row. */
-int hw_pipeline_stage_boxes(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
-                            int32_t height, int32_t stride, hw_box *out, int32_t cap, int32_t *n,
-                            float *horizon_row);
 /* The car's own motion from the vehicle bus (NaN = not available): used for the ego path when the
  * lanes are missing. Allowed while the loop runs; takes effect from the next frame. */
 int hw_pipeline_set_ego_motion(hw_pipeline *p, double speed_mps, double yaw_rate_rps);
