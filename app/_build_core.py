@@ -4,9 +4,14 @@ The C++ sources under ``csrc/`` are compiled to objects in ``build/obj`` (only t
 included headers changed, two at a time), then cffi links them with a small stub generated from the
 declarations in ``csrc/include/headway.h``. Run directly (``python -m app._build_core``) for an
 incremental rebuild, or through setup.py's ``cffi_modules`` when pip builds a wheel.
+
+``python -m app._build_core --tests`` also builds the C++ unit tests: the doctest sources under ``tests/cpp/``
+compiled to ``build/cpp_tests/obj`` the same incremental way and linked with the core's objects into
+``build/cpp_tests/headway_cpp_tests`` (tests/test_cpp_units.py builds and runs it).
 """
 from __future__ import annotations
 
+import argparse
 import os
 import re
 import shutil
@@ -29,7 +34,9 @@ MODULE = "app._headway_core"
 # run on any x86-64. No -ffast-math. The parallax preset's particle filter amplifies last-bit differences, so its
 # synthetic scores moved within their usual spread (MOTA 0.338 -> 0.339).
 CXXFLAGS = ["-std=c++17", "-O3", "-fPIC", "-Wall", "-Wextra", "-Wno-unused-parameter", "-g0"]
-FLAGS_STAMP = OBJ / "flags"
+CPP_TESTS = ROOT / "tests" / "cpp"
+TESTS_BUILD = BUILD / "cpp_tests"
+TESTS_BINARY = TESTS_BUILD / "headway_cpp_tests"
 
 
 def pkg_config(*args: str) -> list[str]:
@@ -51,12 +58,12 @@ def cdef_text() -> str:
     return m.group(1)
 
 
-def sources() -> list[Path]:
-    return sorted(CSRC.rglob("*.cpp"))
+def sources(root: Path = CSRC) -> list[Path]:
+    return sorted(root.rglob("*.cpp"))
 
 
-def object_of(src: Path) -> Path:
-    return OBJ / (str(src.relative_to(CSRC)).replace(os.sep, "__") + ".o")
+def object_of(src: Path, root: Path = CSRC, obj_dir: Path = OBJ) -> Path:
+    return obj_dir / (str(src.relative_to(root)).replace(os.sep, "__") + ".o")
 
 
 def is_stale(src: Path, obj: Path) -> bool:
@@ -71,17 +78,19 @@ def is_stale(src: Path, obj: Path) -> bool:
     return any(not Path(d).exists() or Path(d).stat().st_mtime > t for d in deps + [str(src)])
 
 
-def compile_objects(jobs: int = 2) -> list[Path]:
-    OBJ.mkdir(parents=True, exist_ok=True)
+def compile_objects(jobs: int = 2, root: Path = CSRC, obj_dir: Path = OBJ) -> list[Path]:
+    """Compiles the stale sources under ``root`` into ``obj_dir``; returns every object, in source order."""
+    obj_dir.mkdir(parents=True, exist_ok=True)
+    stamp = obj_dir / "flags"
     cflags = pkg_config("--cflags") + ["-I/usr/include/eigen3", f"-I{CSRC}"]
-    srcs = sources()
+    srcs = sources(root)
     # objects compiled with other flags are all stale (timestamps alone would keep them)
     flags = " ".join(CXXFLAGS + cflags)
-    same_flags = FLAGS_STAMP.exists() and FLAGS_STAMP.read_text() == flags
-    stale = [s for s in srcs if not same_flags or is_stale(s, object_of(s))]
+    same_flags = stamp.exists() and stamp.read_text() == flags
+    stale = [s for s in srcs if not same_flags or is_stale(s, object_of(s, root, obj_dir))]
 
     def build(src: Path) -> tuple[Path, str]:
-        obj = object_of(src)
+        obj = object_of(src, root, obj_dir)
         cmd = ["g++", *CXXFLAGS, *cflags, "-MMD", "-MF", str(obj.with_suffix(".d")), "-c", str(src), "-o", str(obj)]
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
@@ -90,15 +99,15 @@ def compile_objects(jobs: int = 2) -> list[Path]:
 
     failed = []
     if stale:
-        print(f"compiling {len(stale)} of {len(srcs)} C++ sources", file=sys.stderr)
+        print(f"compiling {len(stale)} of {len(srcs)} C++ sources under {root.relative_to(ROOT)}", file=sys.stderr)
         with ThreadPoolExecutor(max_workers=jobs) as pool:
             for src, err in pool.map(build, stale):
                 if err:
                     failed.append(f"{src.relative_to(ROOT)}:\n{err}")
     if failed:
         raise SystemExit("C++ build failed:\n" + "\n".join(failed))
-    FLAGS_STAMP.write_text(flags)
-    return [object_of(s) for s in srcs]
+    stamp.write_text(flags)
+    return [object_of(s, root, obj_dir) for s in srcs]
 
 
 def make_ffibuilder(objects: list[Path]) -> cffi.FFI:
@@ -145,5 +154,27 @@ def build_inplace(jobs: int = 2) -> Path:
 if os.environ.get("HEADWAY_CFFI_SETUP") == "1":
     ffibuilder = make_ffibuilder(compile_objects())
 
+def build_tests(jobs: int = 2) -> Path:
+    """Incremental build of the C++ unit tests (doctest, Debian's doctest-dev) linked with the core's objects;
+    returns the binary's path. Links only when an object changed."""
+    if not Path("/usr/include/doctest/doctest.h").exists():
+        raise SystemExit("doctest.h not found: install Debian's doctest-dev (./headway.sh does it)")
+    core = compile_objects(jobs)
+    tests = compile_objects(jobs, CPP_TESTS, TESTS_BUILD / "obj")
+    objects = core + tests
+    if TESTS_BINARY.exists() and TESTS_BINARY.stat().st_mtime >= max(o.stat().st_mtime for o in objects):
+        return TESTS_BINARY
+    cmd = ["g++", "-o", str(TESTS_BINARY), *map(str, objects), *pkg_config("--libs"), "-pthread"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit("linking the C++ unit tests failed:\n" + r.stderr)
+    return TESTS_BINARY
+
+
 if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description="Incremental build of the C++ core (and its unit tests).")
+    parser.add_argument("--tests", action="store_true", help="also build build/cpp_tests/headway_cpp_tests")
+    args = parser.parse_args()
     print(build_inplace())
+    if args.tests:
+        print(build_tests())

@@ -154,6 +154,19 @@ def annotate(frame: np.ndarray, r: FrameResult, truth: Optional[list[dict]] = No
     return img
 
 
+def annotate_detections(frame: np.ndarray, boxes: np.ndarray, truth: Optional[list[dict]] = None) -> np.ndarray:
+    """A BGR picture of `frame` with one image's detections (Detections.boxes) drawn as unconfirmed vehicles are,
+    and the truth boxes thin, in blue, if given."""
+    img = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR) if frame.ndim == 2 else frame.copy()
+    thick = max(1, round(img.shape[0] / 720))
+    for t in truth or []:
+        l, tp, rt, b = (int(round(v)) for v in t["box"])
+        cv2.rectangle(img, (l, tp), (rt, b), _TRUTH, 1)
+    for l, tp, rt, b in np.round(boxes[:, :4]).astype(int):
+        cv2.rectangle(img, (l, tp), (rt, b), _TENTATIVE, thick, cv2.LINE_AA)
+    return img
+
+
 class VideoOut:
     """An annotated video file (mp4v); opened on the first frame so its size is the frame's."""
 

@@ -168,6 +168,24 @@ class FrameResult:
         return None if self.lead is None else self.lead.id
 
 
+@dataclass
+class Detections:
+    """The detection stage's vehicles on one image (Pipeline.detect)."""
+    boxes: np.ndarray               # (n, 5) float32 rows: left, top, right, bottom, score (0-1); strongest first
+    horizon_row: Optional[float]    # the horizon row they were found with (the configured camera's)
+    stages: dict[str, float]        # ms of the stage's sub-stages (lanes, the detector parts' own)
+    total_ms: float
+
+    def rows(self) -> list[tuple[float, float, float, float, float]]:
+        """The boxes as tuples of floats, as FrameResult.detections holds a tracked frame's."""
+        return [tuple(float(v) for v in b) for b in self.boxes]
+
+
+def _stage_times(r: Any) -> dict[str, float]:
+    """{stage: ms} of an hw_frame_result or hw_detect_info."""
+    return {ffi.string(r.stages[i].name).decode(): float(r.stages[i].ms) for i in range(r.n_stages)}
+
+
 def _result(r: Any) -> FrameResult:
     tracks = []
     for i in range(r.n_tracks):
@@ -199,7 +217,7 @@ def _result(r: Any) -> FrameResult:
     ]
     vp = None if math.isnan(r.vanishing_x) else (float(r.vanishing_x), float(r.vanishing_y))
     lead = next((t for t in tracks if t.id == r.lead_id), None) if r.lead_id >= 0 else None
-    stages = {ffi.string(r.stages[i].name).decode(): float(r.stages[i].ms) for i in range(r.n_stages)}
+    stages = _stage_times(r)
     return FrameResult(
         frame=int(r.frame_number),
         t_s=float(r.t_capture_s),
@@ -309,7 +327,7 @@ class Pipeline:
         _check(lib.hw_pipeline_create(json.dumps(config or {}).encode(), out))
         self._p = ffi.gc(out[0], lib.hw_pipeline_destroy)
         self._res = ffi.new("hw_frame_result *")  # reused: one result buffer per pipeline
-        self._box_cap = 1024  # stage_boxes(): detections room is made for (grows when a stage gives more)
+        self._box_cap = 1024  # detect(): detections room is made for (grows when a stage gives more)
         _live.add(self)
 
     @property
@@ -329,29 +347,33 @@ class Pipeline:
                                        float(t_s), self._res))
         return _result(self._res)
 
+    def detect(self, gray: np.ndarray, detector: Optional[str] = None) -> "Detections":
+        """The detection stage on one image alone (tracking state untouched; what `headway detect` writes): the
+        registered detector part ``detector`` (one of the configuration's pipeline.detectors choices), or the
+        pipeline's own detection stage (its composition's parts, fused) when None. Every detection, strongest
+        first, and the horizon row they were found with."""
+        g = _as_gray(gray, "detect()")
+        info = ffi.new("hw_detect_info *")
+        name = detector.encode() if detector else ffi.NULL
+        cap = self._box_cap
+        while True:
+            buf = ffi.new("hw_box[]", cap)
+            _check(lib.hw_pipeline_detect(self._handle(), name, ffi.from_buffer(g), g.shape[1], g.shape[0],
+                                          g.strides[0], buf, cap, info))
+            n = int(info.n_detections)
+            if n <= cap:
+                break
+            cap = self._box_cap = n   # more than ever before: once more with room for all
+        boxes = np.frombuffer(ffi.buffer(buf, n * ffi.sizeof("hw_box")), np.float32).reshape(n, 5).copy()
+        return Detections(boxes, _opt(info.horizon_row), _stage_times(info), float(info.total_ms))
+
     def run_stage(self, stage: str, gray: np.ndarray) -> FrameResult:
-        """Single-image units ("lanes", "hypotheses", "detect"); tracking state is untouched."""
+        """Units without touching tracking state: "lanes" on one image, and the two-frame units "homography" and
+        "parallax" on frames stacked vertically (csrc/core/parallax_stage.hpp)."""
         g = _as_gray(gray, "run_stage()")
         _check(lib.hw_pipeline_run_stage(self._handle(), stage.encode(), ffi.from_buffer(g), g.shape[1], g.shape[0],
                                          g.strides[0], self._res))
         return _result(self._res)
-
-    def stage_boxes(self, stage: str, gray: np.ndarray) -> tuple[np.ndarray, Optional[float]]:
-        """Every detection of a single-image stage as (n, 5) float32 rows (left, top, right, bottom,
-        confidence), without run_stage()'s cap of HW_MAX_TRACKS (for training on every cascade group), and
-        the frame's horizon row (run_stage()'s horizon_row)."""
-        g = _as_gray(gray, "stage_boxes()")
-        n, horizon = ffi.new("int32_t *"), ffi.new("float *")
-        cap = self._box_cap
-        while True:
-            buf = ffi.new("hw_box[]", cap)
-            _check(lib.hw_pipeline_stage_boxes(self._handle(), stage.encode(), ffi.from_buffer(g), g.shape[1],
-                                               g.shape[0], g.strides[0], buf, cap, n, horizon))
-            if n[0] <= cap:
-                break
-            cap = self._box_cap = int(n[0])   # more than ever before: once more with room for all
-        boxes = np.frombuffer(ffi.buffer(buf, n[0] * ffi.sizeof("hw_box")), np.float32).reshape(n[0], 5).copy()
-        return boxes, _opt(horizon[0])
 
     def reset(self) -> None:
         _check(lib.hw_pipeline_reset(self._handle()))
@@ -426,69 +448,3 @@ class Pipeline:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-# ---- BEGIN paper 004 units, reachable alone for tests (ABI 7) ----------------------------------------------
-
-def _points(xy: Any) -> np.ndarray:
-    a = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
-    if not np.all(np.isfinite(a)):
-        raise ValueError("points must be finite (x, y) pairs")
-    return a
-
-
-class GmPhd:
-    """The core's GM-PHD filter on 2-D image points (csrc/track/gmphd.hpp), step by step.
-    ``params``: keys of the ``gmphd`` configuration section."""
-
-    def __init__(self, params: Optional[dict] = None, seed: int = 1):
-        out = ffi.new("hw_gmphd **")
-        _check(lib.hw_gmphd_create(json.dumps(params or {}).encode(), int(seed), out))
-        self._f = ffi.gc(out[0], lib.hw_gmphd_destroy)
-
-    def predict(self, scale: float = 1.0, centre: tuple = (0.0, 0.0), shift: tuple = (0.0, 0.0)) -> None:
-        _check(lib.hw_gmphd_predict(self._f, float(scale), float(centre[0]), float(centre[1]), float(shift[0]),
-                                    float(shift[1])))
-
-    def births(self, xy: Any, random: bool = False) -> int:
-        a = _points(xy)
-        n = ffi.new("int32_t *")
-        _check(lib.hw_gmphd_births(self._f, ffi.cast("double *", ffi.from_buffer(a)), len(a), int(random), n))
-        return int(n[0])
-
-    def update(self, xy: Any) -> None:
-        a = _points(xy)
-        _check(lib.hw_gmphd_update(self._f, ffi.cast("double *", ffi.from_buffer(a)), len(a)))
-
-    def merge_prune(self) -> None:
-        _check(lib.hw_gmphd_merge_prune(self._f))
-
-    def components(self) -> np.ndarray:
-        """(n, 6) array of weight, mean x, mean y, Pxx, Pxy, Pyy."""
-        n = ffi.new("int32_t *")
-        _check(lib.hw_gmphd_components(self._f, ffi.NULL, 0, n))
-        buf = ffi.new("hw_gm_component[]", max(1, int(n[0])))
-        _check(lib.hw_gmphd_components(self._f, buf, int(n[0]), n))
-        return np.array([[c.w, c.mx, c.my, c.pxx, c.pxy, c.pyy] for c in buf[0:int(n[0])]]).reshape(-1, 6)
-
-    def weight_in(self, left: float, top: float, right: float, bottom: float) -> float:
-        out = ffi.new("double *")
-        _check(lib.hw_gmphd_weight_in(self._f, left, top, right, bottom, out))
-        return float(out[0])
-
-
-def ukf_run(spec: dict, z: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Runs the core's UKF (csrc/track/ukf.hpp) over observations ``z`` (n_steps x z_dim; NaN entries are left
-    out of that step's update); returns the states (n_steps x 4) and covariances (n_steps x 4 x 4).
-    ``spec``: see hw_ukf_run."""
-    zz = np.ascontiguousarray(np.asarray(z, dtype=np.float64))
-    if zz.ndim != 2:
-        raise ValueError("z must be a 2-D array: one observation per row")
-    n, dim = zz.shape
-    x = np.zeros((n, 4))
-    p = np.zeros((n, 4, 4))
-    _check(lib.hw_ukf_run(json.dumps(spec).encode(), ffi.cast("double *", ffi.from_buffer(zz)), n, dim,
-                          ffi.cast("double *", ffi.from_buffer(x)), ffi.cast("double *", ffi.from_buffer(p))))
-    return x, p
-
-# ---- END paper 004 units -------------------------------------------------------------------------------------

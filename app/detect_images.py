@@ -2,7 +2,7 @@
 
 Output: [{"file_name", "bbox": [{"left","top","right","bottom","score"}]}]. Each image goes alone through the
 pipeline's detection stage (the configuration's preset, default `default`: the learned detector with the shadow
-detector's cues; Pipeline.run_stage("detect"), the stage a tracked pipeline asks for its detections), with the
+detector's cues; Pipeline.detect, the stage a tracked pipeline asks for its detections), with the
 camera fitted to the image's size. An image that cannot be used (unreadable, truncated, too small) is left out of
 the output and listed with the reason; the others are written.
 
@@ -63,11 +63,11 @@ def image_pipeline(base: dict, width: int, height: int) -> Pipeline:
     return Pipeline(configuration.core_sections(cfg))
 
 
-def image_entry(path: str, result, min_score: float) -> dict:
-    """The output's entry of one image: its detections scoring at least `min_score`."""
+def image_entry(path: str, detections, min_score: float) -> dict:
+    """The output's entry of one image: its detections (Detections.rows()) scoring at least `min_score`."""
     return {"file_name": Path(path).name, "bbox": [
         {"left": round(l, 1), "top": round(t, 1), "right": round(r, 1), "bottom": round(b, 1), "score": round(s, 4)}
-        for l, t, r, b, s in result.detections if s >= min_score]}
+        for l, t, r, b, s in detections if s >= min_score]}
 
 
 def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False,
@@ -95,7 +95,7 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # one pipeline per image size, camera scaled to it
                 pipes[size] = image_pipeline(base, *size)
-            out.append(image_entry(path, pipes[size].run_stage("detect", gray), min_score))
+            out.append(image_entry(path, pipes[size].detect(gray).rows(), min_score))
     finally:
         for p in pipes.values():
             p.close()

@@ -20,7 +20,7 @@ def data_path(*parts: str) -> Path:
 
 
 def cascade_alone(**sections) -> dict:
-    """Configuration values whose detection stage (Pipeline.run_stage / stage_boxes "detect") is the trained cascade
+    """Configuration values whose detection stage (Pipeline.detect) is the trained cascade
     with its verifier alone: pipeline.detectors [cascade] (tracked by kalman), with the other `sections` given (a
     `pipeline` among them adds to those keys)."""
     return {**sections, "pipeline": {"detectors": ["cascade"], "tracker": "kalman", **sections.get("pipeline", {})}}

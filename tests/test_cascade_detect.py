@@ -1,6 +1,6 @@
 """The shipped vehicle cascade (app/models/vehicle_cascade.xml, trained by `headway train cascade`,
-recipe in docs/detection.md) as the detection stage alone (pipeline.detectors [cascade]: Pipeline.run_stage
-"detect", preset paper004's detection): it loads in OpenCV, scans only where a vehicle can stand, and is measured
+recipe in docs/detection.md) as the detection stage alone (pipeline.detectors [cascade]: Pipeline.detect,
+preset paper004's detection): it loads in OpenCV, scans only where a vehicle can stand, and is measured
 on the real TuSimple validation images (0001-0600) by the project's one scoring code (app/eval/tusimple_boxes.py:
 IoU >= 0.5, boxes >= 40 px)."""
 from __future__ import annotations
@@ -36,11 +36,11 @@ def test_the_cascade_reports_boxes_with_scores_below_the_horizon_only():
     rng = np.random.default_rng(0)
     gray = cv2.GaussianBlur(rng.normal(110, 30, (480, 640)).clip(0, 255).astype(np.uint8), (0, 0), 1.0)
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        r = pipe.run_stage("detect", gray)
+        r = pipe.detect(gray)
         horizon = r.horizon_row
-        for t in r.tracks:
-            assert 0.0 <= t.confidence <= 1.0
-            assert t.box[3] > horizon  # the box stands below the horizon
+        for b in r.boxes:
+            assert 0.0 <= b[4] <= 1.0
+            assert b[3] > horizon  # the box stands below the horizon
         assert "cascade" in r.stages
 
 
@@ -90,22 +90,22 @@ def test_core_confidence_is_the_verifier_probability_the_trainer_computes():
     cfg["cascade"]["nms_iou"] = 1.0  # every group, in the same order with and without the verifier
     off = tusimple_config(configuration.load(None, cascade_alone(cascade={"verifier": "off", "nms_iou": 1.0})))
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
-        r = pipe.run_stage("detect", gray)
-        tracks = r.tracks
+        r = pipe.detect(gray)
+        tracks = r.rows()
         # the same groups without the verifier: confidence n / (n + neighbors_half) gives their window counts
         half = off["cascade"]["neighbors_half"]
-        n = [round(half * t.confidence / (1 - t.confidence)) for t in plain.run_stage("detect", gray).tracks]
+        n = [round(half * g[4] / (1 - g[4])) for g in plain.detect(gray).rows()]
     assert tracks and len(n) == len(tracks)
-    boxes = [t.box for t in tracks]
+    boxes = [t[:4] for t in tracks]
     x = np.c_[box_features(hog(), gray, boxes), geometry_features(boxes, n, r.horizon_row, cfg["camera"]["height_m"])]
     p = model.probability(x)
-    assert np.abs(p - np.array([t.confidence for t in tracks])).max() < 0.02
+    assert np.abs(p - r.boxes[:, 4]).max() < 0.02
 
 
 def _cascade_tracks(cfg: dict, images: list) -> list:
     """Each image's detections (left, top, right, bottom, score) by the detection stage of `cfg`'s composition."""
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        return [[(*t.box, t.confidence) for t in pipe.run_stage("detect", g).tracks] for g in images]
+        return [pipe.detect(g).rows() for g in images]
 
 
 # every raw group kept and scored by its window count: any window found or missed changes the output
@@ -150,14 +150,14 @@ def test_scan_lanes_other_than_0_4_8_are_refused():
     cfg = configuration.load(None, cascade_alone(cascade={"scan_lanes": 5}))
     with pytest.raises(Exception, match="scan_lanes"):
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            pipe.run_stage("detect", np.zeros((480, 640), np.uint8))
+            pipe.detect(np.zeros((480, 640), np.uint8))
 
 
 def test_opencv_scan_takes_only_opencvs_step():
     cfg = configuration.load(None, cascade_alone(cascade={"opencv_scan": True, "step_px": 3}))
     with pytest.raises(Exception, match="step_px"):
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            pipe.run_stage("detect", np.zeros((480, 640), np.uint8))
+            pipe.detect(np.zeros((480, 640), np.uint8))
 
 
 def test_max_groups_keeps_the_groups_of_the_strongest_windows():
@@ -177,11 +177,11 @@ def test_max_groups_keeps_the_groups_of_the_strongest_windows():
     assert out[10] == [a[:10] for a in out[0]]
 
 
-def test_stage_boxes_gives_every_group_past_the_abis_64_tracks():
-    """Pipeline.stage_boxes (hw_pipeline_stage_boxes) returns every detection of the detection stage: on a real
-    1280x720 image the cascade alone forms far more than the HW_MAX_TRACKS (64) groups run_stage() can report; the
-    first 64 are run_stage()'s tracks and detections, box for box, and the horizon row is run_stage()'s. The
-    verifier is trained on them."""
+def test_detect_gives_every_group_past_the_abis_64_tracks():
+    """Pipeline.detect (hw_pipeline_detect) returns every detection of the detection stage: on a real 1280x720
+    image the cascade alone forms far more than the HW_MAX_TRACKS (64) vehicles a frame result holds (the verifier is
+    trained on them all). The registered part named alone gives the same boxes as the composition made of it, and
+    the horizon row is the configured camera's; an unknown name is refused with the registered ones."""
     from app._headway_core import lib
     from app.eval.tusimple_boxes import tusimple_config
 
@@ -190,15 +190,14 @@ def test_stage_boxes_gives_every_group_past_the_abis_64_tracks():
     gray = cv2.imread(str(supp / entry["file_name"]), cv2.IMREAD_GRAYSCALE)
     cfg = tusimple_config(configuration.load(None, cascade_alone(cascade=EVERY_GROUP)))
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        r = pipe.run_stage("detect", gray)
-        boxes, horizon = pipe.stage_boxes("detect", gray)
-    assert len(r.tracks) == len(r.detections) == lib.HW_MAX_TRACKS < len(boxes)
-    assert np.allclose(boxes[:lib.HW_MAX_TRACKS], [(*t.box, t.confidence) for t in r.tracks])
-    assert np.allclose(boxes[:lib.HW_MAX_TRACKS], r.detections)
-    assert horizon == pytest.approx(r.horizon_row)
-    with Pipeline(configuration.core_sections(cfg)) as pipe:
-        with pytest.raises(ValueError, match="stage"):
-            pipe.stage_boxes("no such stage", gray)
+        found = pipe.detect(gray)
+        named = pipe.detect(gray, "cascade")
+        with pytest.raises(ValueError, match=r"unknown detector 'no such part' \(one of .*cascade"):
+            pipe.detect(gray, "no such part")
+    assert len(found.boxes) > lib.HW_MAX_TRACKS
+    assert np.array_equal(found.boxes, named.boxes)
+    cam = cfg["camera"]
+    assert found.horizon_row == pytest.approx(cam["cy"] - cam["fy"] * np.tan(np.radians(cam["pitch_deg"])), abs=1e-3)
 
 
 @pytest.mark.parametrize("side", ["left", "right"])
@@ -234,7 +233,7 @@ def test_a_vehicle_cut_by_the_border_is_found_by_windows_reaching_past_it(side):
         cfg = configuration.load(None, cascade_alone(cascade={**EVERY_GROUP, "border_frac": frac}))
         cfg["camera"].update(scenario_camera(sc).to_dict())
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            boxes, _ = pipe.stage_boxes("detect", gray)
+            boxes = pipe.detect(gray).boxes
         assert len(boxes) and boxes[:, 0].min() >= 0 and boxes[:, 2].max() <= width
         best[frac] = float(iou_matrix([visible], [tuple(b[:4]) for b in boxes]).max())
     assert best[0.5] >= 0.6 > 0.5 > best[0.0], best
@@ -327,12 +326,12 @@ def test_a_process_forked_after_the_workers_started_detects_alone_and_exits():
     cfg["camera"].update(scenario_camera(sc).to_dict())
     pipe = Pipeline(configuration.core_sections(cfg)).__enter__()
     try:
-        expected = [pipe.run_stage("detect", g).detections for g in frames]
+        expected = [pipe.detect(g).rows() for g in frames]
         pid = os.fork()
         if pid == 0:  # the child: the same answers on its one thread, then a clean close
             code = 1
             try:
-                got = [pipe.run_stage("detect", g).detections for g in frames]
+                got = [pipe.detect(g).rows() for g in frames]
                 pipe.__exit__(None, None, None)
                 code = 0 if got == expected else 2
             finally:

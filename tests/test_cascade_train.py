@@ -241,7 +241,7 @@ def test_a_square_window_cascade_runs_in_the_core_at_its_own_size(tiny_square):
                                                               "min_neighbors": 1, "opencv_scan": opencv}))
         cfg["camera"].update(scenario_camera(sc).to_dict())
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            found[opencv] = [[(*t.box, t.confidence) for t in pipe.run_stage("detect", g).tracks] for g in frames]
+            found[opencv] = [pipe.detect(g).rows() for g in frames]
     assert found[False] == found[True]
     boxes = np.array([b[:4] for f in found[False] for b in f])
     assert len(boxes) > 20

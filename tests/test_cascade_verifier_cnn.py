@@ -216,21 +216,21 @@ def test_core_and_cv2_dnn_give_the_trainers_probability():
         "verifier": str(SHIPPED_CNN), "nms_iou": 1.0, "rejudge_refined": False, "verify_mirrored": False})))
     off = tusimple_config(configuration.load(None, OFF))
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
-        r = pipe.run_stage("detect", gray)
+        r = pipe.detect(gray)
         # the same groups without the verifier: confidence n / (n + neighbors_half) gives their window counts, and
         # their boxes are what the verifier crops (the shipped one, with its box output, then moves them)
         half = off["cascade"]["neighbors_half"]
-        groups = plain.run_stage("detect", gray).tracks
-        n = [round(half * t.confidence / (1 - t.confidence)) for t in groups]
-    assert len(r.tracks) >= 10 and len(n) == len(r.tracks)
-    boxes = [t.box for t in groups]
+        groups = plain.detect(gray).rows()
+        n = [round(half * g[4] / (1 - g[4])) for g in groups]
+    assert len(r.boxes) >= 10 and len(n) == len(r.boxes)
+    boxes = [g[:4] for g in groups]
     params = vo.load_onnx(str(SHIPPED_CNN))
     z = vo.standardise(vo.crop_boxes(gray, boxes, vo.crop_margin(params)))
     extra = geometry_features(boxes, n, r.horizon_row, cfg["camera"]["height_m"])
     p, d = vo.forward(params, z, extra, box=True)
-    assert np.abs(p - np.array([t.confidence for t in r.tracks])).max() < 1e-3
+    assert np.abs(p - r.boxes[:, 4]).max() < 1e-3
     assert np.abs(p - _dnn_probability(SHIPPED_CNN, z, extra)).max() < 1e-3
-    assert np.abs(_cut(vo.refine(boxes, d), gray.shape) - np.array([t.box for t in r.tracks])).max() < 0.05   # px
+    assert np.abs(_cut(vo.refine(boxes, d), gray.shape) - r.boxes[:, :4]).max() < 0.05   # px
     assert p.min() < 0.5 < p.max()   # it tells the boxes apart
 
 
@@ -273,9 +273,10 @@ def test_core_refines_boxes_as_the_trainers_box_output_says(tmp_path):
     off = tusimple_config(configuration.load(None, OFF))
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain, \
             Pipeline(configuration.core_sections(kept)) as unmoved:
-        core, horizon = pipe.stage_boxes("detect", gray)
-        groups, _ = plain.stage_boxes("detect", gray)
-        as_is, _ = unmoved.stage_boxes("detect", gray)
+        found = pipe.detect(gray)
+        core, horizon = found.boxes, found.horizon_row
+        groups = plain.detect(gray).boxes
+        as_is = unmoved.detect(gray).boxes
     half = off["cascade"]["neighbors_half"]
     n = np.rint(half * groups[:, 4] / (1 - groups[:, 4]))
     assert len(groups) > 64 and len(core) == len(groups) == len(as_is)
@@ -311,7 +312,7 @@ def test_the_own_forward_pass_gives_cv_dnns_answers():
     for dnn in (False, True):
         cfg = tusimple_config(configuration.load(None, cascade_alone(cascade={**over, "verifier_dnn": dnn})))
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            runs.append(pipe.stage_boxes("detect", gray)[0])
+            runs.append(pipe.detect(gray).boxes)
     own, dnn = runs
     assert len(own) == len(dnn) > 40
     assert np.abs(own[:, 4] - dnn[:, 4]).max() < 1e-5
@@ -346,7 +347,8 @@ def test_a_network_the_own_forward_pass_cannot_take_runs_by_cv_dnn(tmp_path):
     for cascade in ({**over, "verifier_dnn": False}, {**over, "verifier_dnn": True}, {"verifier": "off", "nms_iou": 1.0}):
         cfg = tusimple_config(configuration.load(None, cascade_alone(cascade=cascade)))
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            out.append(pipe.stage_boxes("detect", gray))
+            found = pipe.detect(gray)
+            out.append((found.boxes, found.horizon_row))
     (core, horizon), (dnn, _), (groups, _) = out
     assert np.array_equal(core, dnn)
     half = configuration.load(None)["cascade"]["neighbors_half"]
@@ -374,8 +376,9 @@ def test_a_moved_box_is_judged_again_where_it_now_stands(tmp_path):
     off = tusimple_config(configuration.load(None, OFF))
     assert cfg["cascade"]["rejudge_refined"] is True
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
-        core, horizon = pipe.stage_boxes("detect", gray)
-        groups, _ = plain.stage_boxes("detect", gray)
+        found = pipe.detect(gray)
+        core, horizon = found.boxes, found.horizon_row
+        groups = plain.detect(gray).boxes
     n = np.rint(off["cascade"]["neighbors_half"] * groups[:, 4] / (1 - groups[:, 4]))
     params = vo.load_onnx(str(path))
     h = cfg["camera"]["height_m"]
@@ -410,9 +413,10 @@ def test_the_second_look_moves_a_believed_box_again_by_rejudge_move(tmp_path):
     off = tusimple_config(configuration.load(None, OFF))
     with Pipeline(configuration.core_sections(still)) as a, Pipeline(configuration.core_sections(half)) as b, \
             Pipeline(configuration.core_sections(off)) as plain:
-        first, horizon = a.stage_boxes("detect", gray)
-        second, _ = b.stage_boxes("detect", gray)
-        groups, _ = plain.stage_boxes("detect", gray)
+        found = a.detect(gray)
+        first, horizon = found.boxes, found.horizon_row
+        second = b.detect(gray).boxes
+        groups = plain.detect(gray).boxes
     n = np.rint(off["cascade"]["neighbors_half"] * groups[:, 4] / (1 - groups[:, 4]))
     params = vo.load_onnx(str(path))
     z = vo.standardise(vo.crop_boxes(gray, first[:, :4], vo.crop_margin(params)))
@@ -444,8 +448,9 @@ def test_a_mirrored_verifier_averages_the_crop_and_its_mirror_image(tmp_path):
     cfg = tusimple_config(configuration.load(None, cascade_alone(cascade={**over, "mirror_min_p": 0.0})))
     off = tusimple_config(configuration.load(None, OFF))
     with Pipeline(configuration.core_sections(cfg)) as pipe, Pipeline(configuration.core_sections(off)) as plain:
-        core, horizon = pipe.stage_boxes("detect", gray)
-        groups, _ = plain.stage_boxes("detect", gray)
+        found = pipe.detect(gray)
+        core, horizon = found.boxes, found.horizon_row
+        groups = plain.detect(gray).boxes
     n = np.rint(off["cascade"]["neighbors_half"] * groups[:, 4] / (1 - groups[:, 4]))
     params = vo.load_onnx(str(path))
     boxes = groups[:, :4].astype(float)
@@ -480,7 +485,7 @@ def test_only_the_believed_crops_are_mirrored_and_the_high_scores_are_the_same()
     try:
         for e in entries:
             gray = cv2.imread(str(supp / e["file_name"]), cv2.IMREAD_GRAYSCALE)
-            a, b, u, fa, fb = (p.stage_boxes("detect", gray)[0] for p in pipes)
+            a, b, u, fa, fb = (p.detect(gray).boxes for p in pipes)
             believed = u[:, 4] >= 0.5
             assert 1 <= believed.sum() < len(u) / 2   # most crops are not mirrored
             assert np.abs(b[believed] - a[believed]).max() < 1e-3 and np.array_equal(b[~believed], u[~believed])
@@ -516,7 +521,7 @@ def test_no_box_across_the_empty_road_ahead_is_believed():
     def wide(preset: str, min_score: float, cascade: dict) -> list:
         cfg = configuration.load(None, {**values, "pipeline": {"preset": preset}, "cascade": cascade})
         with Pipeline(configuration.core_sections(cfg)) as pipe:
-            return [[b for b in pipe.stage_boxes("detect", f)[0] if b[4] >= min_score and b[2] - b[0] > 300]
+            return [[b for b in pipe.detect(f).boxes if b[4] >= min_score and b[2] - b[0] > 300]
                     for f in frames[2:6]]
 
     found = wide("paper004", 0.5, one_look)
@@ -542,7 +547,7 @@ def _bad_verifier_is_named(path: str, message: str) -> None:
             Pipeline(configuration.core_sections(configuration.load(None, {**values, "cascade": {"verifier": path}})))
     cfg = configuration.load(None, {"cascade": {"verifier": path}, "pipeline": {"preset": "thesis"}})
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        pipe.run_stage("detect", np.zeros((480, 640), np.uint8))
+        pipe.detect(np.zeros((480, 640), np.uint8))
 
 
 def test_a_file_that_is_not_a_verifier_network_is_a_clear_error(tmp_path):
@@ -573,7 +578,7 @@ def test_integral_crops_are_the_pixel_area_mean_inter_area_computes():
         for e in entries:
             gray = cv2.imread(str(supp / e["file_name"]), cv2.IMREAD_GRAYSCALE)
             ii = cv2.integral(gray, sdepth=cv2.CV_32S)
-            for l, t, r, b in pipe.stage_boxes("detect", gray)[0][:, :4].astype(float):
+            for l, t, r, b in pipe.detect(gray).boxes[:, :4].astype(float):
                 mx, my = 0.25 * (r - l), 0.25 * (b - t)
                 x0, y0, x1, y1 = (int(np.floor(v + 0.5)) for v in (l - mx, t - my, r + mx, b + my))
                 if x0 < 0 or y0 < 0 or x1 > gray.shape[1] or y1 > gray.shape[0] or x1 - x0 < vo.CROP_W \

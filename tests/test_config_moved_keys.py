@@ -151,8 +151,7 @@ def test_the_hood_line_of_the_camera_stops_the_lanes_and_the_shadow_scan():
 
     def detect(hood: float):
         with Pipeline(thesis_scenes.config("steady_following", json.dumps({"hood_frac": hood}))) as p:
-            r = p.run_stage("detect", image)
-        return sorted(round(t.box[3]) for t in r.tracks), r.lanes
+            return sorted(round(b[3]) for b in p.detect(image).rows()), p.run_stage("lanes", image).lanes
 
     bottoms, lanes = detect(0.0)
     assert bottoms == [248, 263] and len(lanes) == 4

@@ -1,6 +1,7 @@
 """The door to the C++ core: versions, errors as exceptions, offline processing, the loop's queue."""
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -15,7 +16,7 @@ def gray(w=640, h=480, v=90):
 
 
 def test_abi_version_matches_header():
-    assert abi_version() == lib.HW_ABI_VERSION == 11
+    assert abi_version() == lib.HW_ABI_VERSION == 13
 
 
 def test_schema_documents_every_core_key():
@@ -85,38 +86,45 @@ def test_time_going_backwards_is_rejected():
         p.process(gray(), 0.5)  # after reset the clock may start again
 
 
-@pytest.mark.parametrize("stage", ["track", "cascade", "fused"])
+@pytest.mark.parametrize("stage", ["track", "cascade", "detect", "hypotheses"])
 def test_run_stage_rejects_unknown_stage(stage):
-    """The single-image stages are lanes, hypotheses and detect (the composition's detection stage); a detector
-    part is no stage of its own."""
+    """The units run_stage knows are lanes and the two-frame homography and parallax; detections come from detect(),
+    through the detector registry."""
     with Pipeline({"pipeline": {"preset": "thesis"}}) as p:
-        with pytest.raises(InvalidArgument, match=f"unknown stage '{stage}': one of lanes, hypotheses, detect,"):
+        with pytest.raises(InvalidArgument, match=f"unknown stage '{stage}': one of lanes, homography, parallax"):
             p.run_stage(stage, gray())
-        with pytest.raises(InvalidArgument, match=f"unknown stage '{stage}'"):
-            p.stage_boxes(stage, gray())
 
 
-@pytest.mark.parametrize("preset, match", [("none", "has none"), ("parallax", "two frames")])
-def test_detect_stage_needs_a_detector_that_works_on_one_image(preset, match):
+@pytest.mark.parametrize("preset, detector, match", [
+    ("none", None, "has no detector parts"), ("parallax", None, "two frames"), ("thesis", "parallax", "two frames"),
+    ("thesis", "haar", r"unknown detector 'haar' \(one of cascade\|parallax\|proposals\|shadow\)")])
+def test_detect_needs_a_registered_detector_that_works_on_one_image(preset, detector, match):
     with Pipeline({"pipeline": {"preset": preset}}) as p:
         with pytest.raises(InvalidArgument, match=match):
-            p.run_stage("detect", gray())
+            p.detect(gray(), detector)
 
 
-def test_run_stage_detect_reports_its_detections_as_tracks_and_detections():
-    """Stage "detect" fills FrameResult.detections, (left, top, right, bottom, score) per vehicle, strongest first,
-    and reports the same boxes and scores as its tracks; stage "lanes" runs no detection and reports none."""
+def test_detect_reports_the_detections_strongest_first_and_by_name():
+    """detect() gives (left, top, right, bottom, score) per vehicle, strongest first, the stage's sub-stage times
+    and the camera's horizon row; the composition's one part named alone gives the same; a pipeline without detector
+    parts (lanes only) detects with a part named."""
     from tests import thesis_scenes
 
     image = thesis_scenes.frames("steady_following")[60].image
-    with Pipeline(thesis_scenes.config("steady_following")) as p:
-        r = p.run_stage("detect", image)
-        lanes_only = p.run_stage("lanes", image)
-    assert r.full_detection and len(r.detections) >= 2
-    assert all(len(d) == 5 and d[0] < d[2] and d[1] < d[3] and 0.0 <= d[4] <= 1.0 for d in r.detections)
-    assert [d[4] for d in r.detections] == sorted((d[4] for d in r.detections), reverse=True)
-    assert r.detections == [(*t.box, t.confidence) for t in r.tracks]
-    assert lanes_only.detections == []
+    cfg = thesis_scenes.config("steady_following")
+    with Pipeline(cfg) as p:
+        r = p.detect(image)
+        named = p.detect(image, "shadow")
+    with Pipeline({**cfg, "pipeline": {"preset": "none"}}) as lanes_only:
+        alone = lanes_only.detect(image, "shadow")
+    rows = r.rows()
+    assert len(rows) >= 2
+    assert all(len(d) == 5 and d[0] < d[2] and d[1] < d[3] and 0.0 <= d[4] <= 1.0 for d in rows)
+    assert [d[4] for d in rows] == sorted((d[4] for d in rows), reverse=True)
+    assert {"lanes", "hypotheses", "verify"} <= set(r.stages) and r.total_ms > 0
+    cam = cfg["camera"]
+    assert r.horizon_row == pytest.approx(cam["cy"] - cam["fy"] * math.tan(math.radians(cam["pitch_deg"])), abs=1e-3)
+    assert np.array_equal(named.boxes, r.boxes) and np.array_equal(alone.boxes, r.boxes)
 
 
 def test_push_source_round_trip_keeps_order_and_timestamps():

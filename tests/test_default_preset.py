@@ -34,7 +34,7 @@ def _detect(pipeline: dict, gray, **sections):
 
     cfg = tusimple_config(configuration.load(None, {"pipeline": pipeline, **sections}))
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        return pipe.run_stage("detect", gray)
+        return pipe.detect(gray)
 
 
 def test_the_cascade_part_finds_the_car_in_a_validation_image():
@@ -42,9 +42,9 @@ def test_the_cascade_part_finds_the_car_in_a_validation_image():
     detections scored in [0, 1], and one of them boxes the nearest car (79 x 46 px) at IoU >= 0.5."""
     gray, truth = _validation_image("images/0001.jpg")
     r = _detect({"preset": "paper004"}, gray)
-    assert r.detections and all(0.0 <= d[4] <= 1.0 for d in r.detections)
+    assert r.rows() and all(0.0 <= d[4] <= 1.0 for d in r.rows())
     assert "cascade" in r.stages and "verifier" in r.stages
-    assert max(_iou(d[:4], truth[0]) for d in r.detections) >= 0.5
+    assert max(_iou(d[:4], truth[0]) for d in r.rows()) >= 0.5
 
 
 def test_cues_add_vehicles_and_never_remove_a_learned_detection():
@@ -52,12 +52,12 @@ def test_cues_add_vehicles_and_never_remove_a_learned_detection():
     there, with its box, scored at least as high (higher where a shadow detection confirms it: + fuse.agree_bonus);
     a shadow detection no learned one explains is added at fuse.cue_weight of its score; nothing else."""
     gray, truth = _validation_image("images/0001.jpg")
-    learned = _detect({"preset": "paper004"}, gray).detections
-    shadow = _detect({"preset": "thesis"}, gray).detections
+    learned = _detect({"preset": "paper004"}, gray).rows()
+    shadow = _detect({"preset": "thesis"}, gray).rows()
     both = _detect({"preset": "default"}, gray)
     fuse = configuration.load(None)["fuse"]
     assert "fuse" in both.stages
-    fused = {d[:4]: d[4] for d in both.detections}
+    fused = {d[:4]: d[4] for d in both.rows()}
     assert all(d[:4] in fused and fused[d[:4]] >= d[4] for d in learned)
     confirmed = [d for d in learned if fused[d[:4]] > d[4]]
     assert confirmed, "no learned detection confirmed by a shadow on a car ahead"
@@ -66,8 +66,8 @@ def test_cues_add_vehicles_and_never_remove_a_learned_detection():
     added = [(box, s) for box, s in fused.items() if box not in {d[:4] for d in learned}]
     by_box = {d[:4]: d[4] for d in shadow}
     assert all(box in by_box and abs(s - fuse["cue_weight"] * by_box[box]) < 1e-5 for box, s in added), added
-    assert len(both.detections) == len(learned) + len(added)
-    nearest = max(both.detections, key=lambda d: _iou(d[:4], truth[0]))
+    assert len(both.rows()) == len(learned) + len(added)
+    nearest = max(both.rows(), key=lambda d: _iou(d[:4], truth[0]))
     assert _iou(nearest[:4], truth[0]) >= 0.5 and nearest[4] >= 0.9
 
 
@@ -79,8 +79,8 @@ def test_a_vehicle_only_a_cue_finds_is_added_scoring_under_the_trackers_confiden
     added = []
     for k in range(1, 11):
         gray = cv2.imread(str(supp / "images" / f"{k:04d}.jpg"), cv2.IMREAD_GRAYSCALE)
-        learned = {d[:4] for d in _detect({"preset": "paper004"}, gray).detections}
-        added += [d for d in _detect({"preset": "default"}, gray).detections if d[:4] not in learned]
+        learned = {d[:4] for d in _detect({"preset": "paper004"}, gray).rows()}
+        added += [d for d in _detect({"preset": "default"}, gray).rows() if d[:4] not in learned]
     assert added and all(d[4] <= 0.5 for d in added), added
 
 

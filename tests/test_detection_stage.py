@@ -1,5 +1,5 @@
 """One detection stage: what `headway detect` writes for an image (app.detect_images.detect_images) is the
-detections of Pipeline.run_stage("detect", image) for the preset's composition, and a tracked pipeline reports the
+detections of Pipeline.detect(image) for the preset's composition, and a tracked pipeline reports the
 detections its detection stage gave the tracker (FrameResult.detections) on each frame with a full detection."""
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import cv2
 import pytest
 
 from app import config as configuration
+from app._headway_core import lib
 from app.core import Pipeline
 from tests.conftest import data_path
 
@@ -21,13 +22,13 @@ def _validation_images(n: int = 4) -> list:
 
 
 def _stage_detections(preset: str, path) -> list:
-    """run_stage("detect")'s detections for the image, by a pipeline of the preset's defaults with the camera
+    """Pipeline.detect's detections for the image, by a pipeline of the preset's defaults with the camera
     scaled to the image's size (as `headway detect` sets it up)."""
     gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     cfg = configuration.load(None, {"pipeline": {"preset": preset}})
     cfg["camera"] = configuration.scaled_camera(cfg["camera"], gray.shape[1], gray.shape[0])
     with Pipeline(configuration.core_sections(cfg)) as pipe:
-        return pipe.run_stage("detect", gray).detections
+        return pipe.detect(gray).rows()
 
 
 def _same(written: list[dict], detections: list) -> bool:
@@ -39,7 +40,7 @@ def _same(written: list[dict], detections: list) -> bool:
 
 @pytest.mark.parametrize("preset", ["default", "paper004", "thesis"])
 def test_headway_detect_writes_the_detection_stages_boxes_and_scores(preset):
-    """Every detection written (--min-score 0) is run_stage("detect")'s, box and score, in its order; at the
+    """Every detection written (--min-score 0) is Pipeline.detect's, box and score, in its order; at the
     preset's operating point (the default --min-score) exactly those scoring at least it."""
     from app.detect_images import OPERATING_POINT, detect_images
 
@@ -85,7 +86,8 @@ def test_a_tracked_pipeline_reports_its_detections_on_full_detection_frames():
 def test_the_tracked_pipelines_detection_stage_on_one_image_is_headway_detect():
     """On 20 validation images, a tracked default pipeline given the image as its first frame (after a reset)
     hands its tracker exactly the detections `headway detect` finds in it: the same boxes and scores, bit for bit,
-    in the same order (a first frame has nothing tracked yet, and gets the single image's lane model)."""
+    in the same order (a first frame has nothing tracked yet, and gets the single image's lane model); a frame
+    result holds the strongest HW_MAX_TRACKS (64) of them, Pipeline.detect every one."""
     from app.eval.tusimple_boxes import tusimple_config
 
     cfg = configuration.core_sections(tusimple_config(configuration.load(None, {"pipeline": {"preset": "default"}})))
@@ -96,6 +98,6 @@ def test_the_tracked_pipelines_detection_stage_on_one_image_is_headway_detect():
             tracked.reset()
             r = tracked.process(gray, 0.0)
             assert r.full_detection, path.name
-            assert r.detections == single.run_stage("detect", gray).detections, path.name
+            assert r.detections == single.detect(gray).rows()[:lib.HW_MAX_TRACKS], path.name
             compared += len(r.detections)
     assert compared >= 20

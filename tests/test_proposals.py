@@ -113,7 +113,7 @@ def test_training_logs_every_epoch_and_the_core_finds_the_vehicles_of_unseen_sce
     with _pipeline(out) as pipe:
         for _ in range(10):
             img, boxes = _scene(rng, 3)
-            det = [t.box for t in pipe.run_stage("detect", img).tracks if t.confidence >= 0.3]
+            det = [b[:4] for b in pipe.detect(img).rows() if b[4] >= 0.3]
             pairs = match(boxes, det)
             found, total, others = found + len(pairs), total + len(boxes), others + len(det) - len(pairs)
     assert found / total >= 0.8, (found, total)
@@ -132,12 +132,11 @@ def test_the_core_decodes_the_peaks_as_the_trainer(trained):
     ref[:, [0, 2]] = ref[:, [0, 2]].clip(0, SIZE[0])
     ref[:, [1, 3]] = ref[:, [1, 3]].clip(0, SIZE[1])
     with _pipeline(out, min_heat=0.05) as pipe:
-        r = pipe.run_stage("detect", img)
-    tracks = r.tracks
+        r = pipe.detect(img)
     ref = ref[ref[:, 3] > r.horizon_row + 1]
-    assert len(tracks) == len(ref) > 0
-    np.testing.assert_allclose([t.box for t in tracks], ref[:, :4], atol=0.05)
-    np.testing.assert_allclose([t.confidence for t in tracks], ref[:, 4], atol=1e-5)
+    assert len(r.boxes) == len(ref) > 0
+    np.testing.assert_allclose(r.boxes[:, :4], ref[:, :4], atol=0.05)
+    np.testing.assert_allclose(r.boxes[:, 4], ref[:, 4], atol=1e-5)
 
 
 def test_a_file_that_is_not_a_proposal_network_is_refused_by_name(tmp_path):

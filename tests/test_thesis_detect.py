@@ -1,4 +1,4 @@
-"""Thesis detector on single images (run_stage 'detect': shadow hypotheses + vertical-edge
+"""Thesis detector on single images (Pipeline.detect: shadow hypotheses + vertical-edge
 verification): rendered scenarios with exact ground truth, and the real TuSimple images.
 
 TuSimple matching rule (explicit, as the issue asks): a detection and an annotated box match at
@@ -15,10 +15,11 @@ import math
 import cv2
 import pytest
 
+from app.core import Pipeline
 from app.sim import load_scenario
 from app.sim.frames import scenario_camera
 from tests.conftest import data_path
-from tests.thesis_scenes import best_match, detected, edge_errors, false_boxes, iou, lead
+from tests.thesis_scenes import best_match, config, detected, edge_errors, false_boxes, iou, lead
 
 EDGE_TOL_PX = 3.0
 
@@ -28,7 +29,7 @@ TUSIMPLE_FLOOR_40 = {"recall": 0.29, "precision": 0.68}
 
 
 def _boxes(result):
-    return [t.box for t in result.tracks]
+    return [tuple(b[:4]) for b in result.rows()]
 
 
 @pytest.mark.parametrize("name", ["steady_following", "dense_traffic", "cut_in", "lane_change"])
@@ -43,7 +44,7 @@ def test_lead_detected_in_every_single_image_within_60m(name):
         i, v = best_match(_boxes(r), g["box"])
         assert v >= 0.5, f"{name} frame {f.index}: lead at {g['longitudinal_m']:.1f} m missed (IoU {v:.2f})"
         if name != "lane_change":  # while it changes lanes a lane marking can stand next to its side
-            errors = edge_errors(r.tracks[i].box, g["box"])
+            errors = edge_errors(_boxes(r)[i], g["box"])
             assert max(errors) <= EDGE_TOL_PX, f"{name} frame {f.index}: left/right/bottom errors {errors}"
     assert checked > 100
 
@@ -62,7 +63,7 @@ def test_adjacent_lane_vehicles_detected():
 
 def test_empty_road_gives_no_detection():
     fr, results = detected("empty_road")
-    assert sum(len(r.tracks) for r in results) == 0
+    assert sum(len(r.boxes) for r in results) == 0
 
 
 def test_overpass_shadow_band_is_not_a_vehicle():
@@ -89,7 +90,6 @@ def test_a_shadow_cast_past_the_vehicle_up_to_a_lane_marking_is_not_its_width(su
     cut off (`shadow.beside_rel`): measured, a box within IoU 0.8 in 60, 60 (left lane) and 60, 59 (right lane) of
     the 60 frames at 20 and 28 m. Without it the verification took the marking for the car's side: no such box in
     any frame, boxes 87-104 px wide on the 61 px car at 20 m, 62-72 px on the 43 px car at 28 m."""
-    from app.core import Pipeline
     from app.sim import render
     from app.sim.scenario import parse_scenario
 
@@ -97,7 +97,7 @@ def test_a_shadow_cast_past_the_vehicle_up_to_a_lane_marking_is_not_its_width(su
         cam = scenario_camera(scenario).to_dict()
         config = {"pipeline": {"preset": "thesis"}, "camera": cam, "shadow": {"beside_rel": beside_rel}}
         with Pipeline(config) as p:
-            return sum(best_match(_boxes(p.run_stage("detect", f.image)), f.truth[0]["box"])[1] >= 0.8
+            return sum(best_match(_boxes(p.detect(f.image)), f.truth[0]["box"])[1] >= 0.8
                        for f in fr)
 
     for z_m in (20.0, 28.0):
@@ -114,10 +114,11 @@ def test_a_shadow_cast_past_the_vehicle_up_to_a_lane_marking_is_not_its_width(su
 def test_detection_without_a_lane_model():
     sections = json.dumps({"lanes": {"min_edge_contrast": 255.0, "min_bar_contrast": 255.0}})
     fr, results = detected("steady_following", "{}", sections)
-    assert all(not r.lanes for r in results)
+    with Pipeline(config("steady_following", "{}", **json.loads(sections))) as p:
+        assert all(not p.run_stage("lanes", f.image).lanes for f in fr)
     for f, r in zip(fr, results):
         i, v = best_match(_boxes(r), lead(f.truth)["box"])
-        assert v >= 0.5 and max(edge_errors(r.tracks[i].box, lead(f.truth)["box"])) <= EDGE_TOL_PX
+        assert v >= 0.5 and max(edge_errors(_boxes(r)[i], lead(f.truth)["box"])) <= EDGE_TOL_PX
 
 
 def test_detection_on_a_larger_image_with_the_camera_scaled():

@@ -37,10 +37,10 @@ def tracked(name: str, sections_json: str = "{}") -> tuple:
 
 @functools.lru_cache(maxsize=None)
 def detected(name: str, camera_json: str = "{}", sections_json: str = "{}") -> tuple:
-    """(frames, results) of run_stage('detect') on every frame alone."""
+    """(frames, Detections) of Pipeline.detect on every frame alone."""
     fr = frames(name, camera_json)
     with Pipeline(config(name, camera_json, **json.loads(sections_json))) as p:
-        return fr, tuple(p.run_stage("detect", f.image) for f in fr)
+        return fr, tuple(p.detect(f.image) for f in fr)
 
 
 def iou(a, b) -> float:

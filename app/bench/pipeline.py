@@ -155,12 +155,12 @@ def run_image_bench(sources: Sequence[str], preset: Optional[str] = None, config
                 size = (gray.shape[1], gray.shape[0])
                 if size not in pipes:  # a new size: its pipeline, warmed up (the models loaded) untimed
                     pipes[size] = image_pipeline(base, *size)
-                    pipes[size].run_stage("detect", gray)
+                    pipes[size].detect(gray)
                     t0 = time.perf_counter()
                     gray, _ = read_usable(path)
                     t_read = time.perf_counter()
-                r = pipes[size].run_stage("detect", gray)
-                image_entry(path, r, min_score)
+                r = pipes[size].detect(gray)
+                image_entry(path, r.rows(), min_score)
                 t1 = time.perf_counter()
                 for name, ms in [("read", 1000.0 * (t_read - t0)), *r.stages.items(), ("core", r.total_ms),
                                  ("total", 1000.0 * (t1 - t0))]:

@@ -54,7 +54,7 @@ def scored_images(folder: str, entries: list[dict], cfg: dict, progress=None) ->
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:
                 pipes[size] = image_pipeline(cfg, *size)
-            out.append([(*t.box, t.confidence) for t in pipes[size].run_stage("detect", gray).tracks])
+            out.append(pipes[size].detect(gray).rows())
             if progress:
                 progress(1)
     finally:

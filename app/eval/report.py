@@ -12,7 +12,7 @@ from typing import Optional
 import cv2
 
 from app import config as configuration
-from app.annotate import annotate
+from app.annotate import annotate, annotate_detections
 from app.bench.pipeline import run_bench
 from app.eval import (compare, fcw_scenarios, lane_clips, lanes_sample, range_clip, real_video_fcw, road_motion,
                       synthetic, tusimple_boxes)
@@ -157,7 +157,7 @@ def evaluate(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/
                 if shown[0] < examples and e["bbox"]:
                     truth = [{"box": (b["left"], b["top"], b["right"], b["bottom"])} for b in e["bbox"]]
                     cv2.imwrite(str(out / "examples" / f"tusimple_{Path(e['file_name']).stem}.jpg"),
-                                annotate(gray, r, truth))
+                                annotate_detections(gray, r.boxes, truth))
                     shown[0] += 1
 
             say("TuSimple images")

@@ -126,8 +126,8 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
             gray = cv2.imread(str(root / e["file_name"]), cv2.IMREAD_GRAYSCALE)
             if gray is None:
                 raise FileNotFoundError(f"{root / e['file_name']}: cannot be read")
-            r = pipe.run_stage("detect", gray)
-            scored.append(list(r.detections))
+            r = pipe.detect(gray)
+            scored.append(r.rows())
             if on_image:
                 on_image(e, gray, r)
     # The bar is stated at one operating point; the detection scores also give the whole curve, so

@@ -68,7 +68,8 @@ def cascade_detections(folders: list[str], cascade_xml: str, every: int, cfg: di
     with Pipeline(configuration.core_sections(cfg)) as pipe:
         for k, it in enumerate(load_folders(folders)[::every]):
             g = read_gray(it.path)
-            r, horizon = pipe.stage_boxes("detect", g)   # every group (run_stage's tracks stop at HW_MAX_TRACKS)
+            found = pipe.detect(g)   # every group
+            r, horizon = found.boxes, found.horizon_row
             det = r[:, :4].astype(float)
             conf = r[:, 4].astype(float)
             n = np.rint(half * conf / np.maximum(1 - conf, 1e-6))   # confidence n / (n + half) without verifier

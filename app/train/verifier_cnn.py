@@ -12,7 +12,7 @@ Box output: for every detection with IoU >= REGRESS_IOU (0.3) with an annotated 
 target is that box (the one it overlaps most) as verifier_onnx.offsets of the detection's box; with
 `near="ignore"` the detections at IoU 0.3-0.5 are left out of the classification (they are neither: once
 refined they may be well placed) but still teach the box output. Samples come from the core without the
-ABI's cap of 64 tracks (Pipeline.stage_boxes): every group of every image.
+ABI's cap of 64 tracks (Pipeline.detect): every group of every image.
 
 Fit: Adam (beta 0.9, 0.999; the learning rate falls linearly to 0) on the class-balanced cross-entropy and
 the smooth-L1 loss of the box output,

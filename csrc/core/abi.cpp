@@ -8,9 +8,6 @@
 #include "core/pipeline.hpp"
 #include "core/realtime_loop.hpp"
 #include "base/stopwatch.hpp"
-#include "geometry/flat_road.hpp"
-#include "track/gmphd.hpp"
-#include "track/ukf.hpp"
 
 #include <opencv2/core.hpp>
 #include <opencv2/core/utils/logger.hpp>
@@ -20,10 +17,6 @@
 #include <memory>
 #include <mutex>
 #include <string>
-
-struct hw_gmphd {
-    hw::GmPhd filter;
-};
 
 struct hw_pipeline {
     hw::Config config;
@@ -107,6 +100,18 @@ void copy_name(char (&dst)[HW_STAGE_NAME_LEN], const std::string &src) {
     dst[HW_STAGE_NAME_LEN - 1] = '\0';
 }
 
+void fill_stages(const hw::StageTimes &times, hw_stage_time (&out)[HW_MAX_STAGES], int32_t &n) {
+    n = int32_t(std::min<size_t>(times.items.size(), HW_MAX_STAGES));
+    for (int i = 0; i < n; ++i) {
+        copy_name(out[i].name, times.items[size_t(i)].first);
+        out[i].ms = times.items[size_t(i)].second;
+    }
+}
+
+hw_box box_of(const hw::DetectedBox &d) {
+    return hw_box{d.box.x, d.box.y, d.box.x + d.box.width, d.box.y + d.box.height, d.score};
+}
+
 void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     std::memset(r, 0, sizeof(*r));
     r->frame_number = o.frame_number;
@@ -143,8 +148,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->detections_frame = o.full_detection ? o.detections_frame : -1;
     r->n_detections = int32_t(std::min<size_t>(o.detections.size(), HW_MAX_TRACKS));
     for (int i = 0; i < r->n_detections; ++i) {
-        const auto &d = o.detections[size_t(i)];
-        r->detections[i] = hw_box{d.box.x, d.box.y, d.box.x + d.box.width, d.box.y + d.box.height, d.score};
+        r->detections[i] = box_of(o.detections[size_t(i)]);
     }
     int n = 0;
     auto add_lane = [&](const hw::LaneBoundary &b, int position) {
@@ -168,11 +172,7 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->lanes_certain = o.lanes.certain ? 1 : 0;
     r->horizon_row = o.horizon_row;
     r->lead_id = o.lead_id;
-    r->n_stages = int32_t(std::min<size_t>(o.times.items.size(), HW_MAX_STAGES));
-    for (int i = 0; i < r->n_stages; ++i) {
-        copy_name(r->stages[i].name, o.times.items[i].first);
-        r->stages[i].ms = o.times.items[i].second;
-    }
+    fill_stages(o.times, r->stages, r->n_stages);
     r->total_ms = o.total_ms;
     r->image_mean = o.image_mean;
     r->image_stddev = o.image_stddev;
@@ -304,23 +304,21 @@ int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray
     });
 }
 
-int hw_pipeline_stage_boxes(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width, int32_t height,
-                            int32_t stride, hw_box *out, int32_t cap, int32_t *n, float *horizon_row) {
+int hw_pipeline_detect(hw_pipeline *p, const char *detector, const uint8_t *gray, int32_t width, int32_t height,
+                       int32_t stride, hw_box *out, int32_t cap, hw_detect_info *info) {
     return guard([&] {
         require(p, "pipeline");
-        require(stage, "stage");
-        require(n, "n");
+        require(info, "info");
         if (cap < 0) throw std::invalid_argument("cap must not be negative");
         if (cap > 0) require(out, "out");
         std::lock_guard<std::mutex> lock(p->mu);
-        require_stopped(p, "stage_boxes()");
-        const hw::FrameOutput o = p->pipeline->run_stage(stage, wrap_gray(gray, width, height, stride));
-        *n = int32_t(o.tracks.size());
-        if (horizon_row) *horizon_row = o.horizon_row;
-        for (int32_t i = 0; i < std::min(cap, *n); ++i) {
-            const auto &t = o.tracks[size_t(i)];
-            out[i] = hw_box{t.box.x, t.box.y, t.box.x + t.box.width, t.box.y + t.box.height, t.confidence};
-        }
+        require_stopped(p, "detect()");
+        const hw::ImageDetections d = p->pipeline->detect_image(detector ? detector : "", wrap_gray(gray, width, height, stride));
+        info->n_detections = int32_t(d.boxes.size());
+        info->horizon_row = d.horizon_row;
+        fill_stages(d.times, info->stages, info->n_stages);
+        info->total_ms = d.total_ms;
+        for (int32_t i = 0; i < std::min(cap, info->n_detections); ++i) out[i] = box_of(d.boxes[size_t(i)]);
         return HW_OK;
     });
 }
@@ -430,202 +428,3 @@ int hw_pipeline_health(hw_pipeline *p, hw_health *out) {
 }
 
 } // extern "C"
-
-// ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) ------------------------------------------
-
-namespace {
-
-std::vector<cv::Vec2d> points_of(const double *xy, int32_t n) {
-    if (n < 0) throw std::invalid_argument("n must be >= 0");
-    if (n > 0) require(xy, "xy");
-    std::vector<cv::Vec2d> pts(static_cast<size_t>(n));
-    for (int32_t i = 0; i < n; ++i) pts[size_t(i)] = {xy[2 * i], xy[2 * i + 1]};
-    return pts;
-}
-
-nlohmann::json parse_json(const char *text, const char *what) {
-    try {
-        return nlohmann::json::parse(text && *text ? text : "{}");
-    } catch (const nlohmann::json::parse_error &e) {
-        throw std::invalid_argument(std::string(what) + " is not valid JSON: " + e.what());
-    }
-}
-
-Eigen::MatrixXd matrix_of(const nlohmann::json &spec, const char *key, int rows, int cols) {
-    if (!spec.contains(key)) throw std::invalid_argument(std::string("ukf spec: '") + key + "' is missing");
-    const auto &a = spec.at(key);
-    if (!a.is_array() || int(a.size()) != rows * cols)
-        throw std::invalid_argument(std::string("ukf spec: '") + key + "' must be a list of " +
-                                    std::to_string(rows * cols) + " numbers");
-    Eigen::MatrixXd m(rows, cols);
-    for (int i = 0; i < rows * cols; ++i) {
-        if (!a[size_t(i)].is_number()) throw std::invalid_argument(std::string("ukf spec: '") + key + "' holds a non-number");
-        m(i / cols, i % cols) = a[size_t(i)].get<double>();
-    }
-    return m;
-}
-
-} // namespace
-
-extern "C" {
-
-int hw_gmphd_create(const char *params_json, uint32_t seed, hw_gmphd **out) {
-    return guard([&] {
-        require(out, "out");
-        *out = nullptr;
-        hw::GmPhdParams p;
-        hw::ParamMap m("gmphd");
-        p.bind(m);
-        m.read(parse_json(params_json, "gmphd params"));
-        *out = new hw_gmphd{hw::GmPhd(p, seed)};
-        return HW_OK;
-    });
-}
-
-void hw_gmphd_destroy(hw_gmphd *f) { delete f; }
-
-int hw_gmphd_predict(hw_gmphd *f, double scale, double cx, double cy, double tx, double ty) {
-    return guard([&] {
-        require(f, "filter");
-        if (!(scale > 0.0)) throw std::invalid_argument("scale must be > 0");
-        f->filter.predict(scale, {cx, cy}, {tx, ty});
-        return HW_OK;
-    });
-}
-
-int hw_gmphd_births(hw_gmphd *f, const double *xy, int32_t n, int32_t random, int32_t *admitted) {
-    return guard([&] {
-        require(f, "filter");
-        const auto pts = points_of(xy, n);
-        int k = int(pts.size());
-        if (random) k = f->filter.add_births(pts);
-        else for (const auto &p : pts) f->filter.add_birth(p);
-        if (admitted) *admitted = k;
-        return HW_OK;
-    });
-}
-
-int hw_gmphd_update(hw_gmphd *f, const double *xy, int32_t n) {
-    return guard([&] {
-        require(f, "filter");
-        f->filter.update(points_of(xy, n));
-        return HW_OK;
-    });
-}
-
-int hw_gmphd_merge_prune(hw_gmphd *f) {
-    return guard([&] {
-        require(f, "filter");
-        f->filter.merge_and_prune();
-        return HW_OK;
-    });
-}
-
-int hw_gmphd_components(hw_gmphd *f, hw_gm_component *out, int32_t cap, int32_t *n) {
-    return guard([&] {
-        require(f, "filter");
-        require(n, "n");
-        const auto &c = f->filter.components();
-        *n = int32_t(c.size());
-        if (cap > 0) require(out, "out");
-        for (int32_t i = 0; i < cap && size_t(i) < c.size(); ++i)
-            out[i] = {c[size_t(i)].w, c[size_t(i)].m[0], c[size_t(i)].m[1], c[size_t(i)].P(0, 0), c[size_t(i)].P(0, 1),
-                      c[size_t(i)].P(1, 1)};
-        return HW_OK;
-    });
-}
-
-int hw_gmphd_weight_in(hw_gmphd *f, double left, double top, double right, double bottom, double *out) {
-    return guard([&] {
-        require(f, "filter");
-        require(out, "out");
-        *out = f->filter.weight_in(cv::Rect2d(left, top, right - left, bottom - top));
-        return HW_OK;
-    });
-}
-
-int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t z_dim, double *x_out,
-               double *p_out) {
-    return guard([&] {
-        require(x_out, "x_out");
-        if (n_steps < 0 || z_dim < 1 || z_dim > 8) throw std::invalid_argument("n_steps must be >= 0 and z_dim in 1..8");
-        if (n_steps > 0) require(z, "z");
-        const nlohmann::json spec = parse_json(spec_json, "ukf spec");
-        const std::string model = spec.value("model", "");
-        if (model != "linear" && model != "pinhole")
-            throw std::invalid_argument("ukf spec: 'model' must be \"linear\" or \"pinhole\"");
-        const double dt = spec.value("dt", 0.0);
-        if (!(dt > 0.0)) throw std::invalid_argument("ukf spec: 'dt' must be > 0 (s)");
-        hw::UkfParams up;
-        hw::ParamMap um("ukf");
-        up.bind(um);
-        if (spec.contains("ukf")) um.read(spec.at("ukf"));
-        const Eigen::MatrixXd x0 = matrix_of(spec, "x0", 4, 1), P0 = matrix_of(spec, "P0", 4, 4);
-        const Eigen::MatrixXd Q = matrix_of(spec, "Q", 4, 4), R = matrix_of(spec, "R", z_dim, z_dim);
-        hw::Ukf::Observation h;
-        Eigen::MatrixXd H;
-        hw::CameraParams cam;
-        double horizon = 0.0;
-        if (model == "linear") {
-            H = matrix_of(spec, "H", z_dim, 4);
-            h = [&](const hw::Ukf::Vec &x) { return hw::Ukf::Vec(H * x); };
-        } else {
-            if (z_dim != 2 && z_dim != 3)
-                throw std::invalid_argument(
-                    "ukf spec: the pinhole observation has z_dim 2 (u, v) or 3 (u, v, expansion e)");
-            hw::ParamMap cm("camera");
-            cam.bind(cm);
-            if (spec.contains("camera")) cm.read(spec.at("camera"));
-            horizon = spec.value("horizon_row", cam.horizon_row());
-            h = [&](const hw::Ukf::Vec &x) {
-                const cv::Point2d p = hw::project_road_point(cam, x(0), x(1), horizon);
-                hw::Ukf::Vec y(z_dim);
-                y(0) = p.x;
-                y(1) = p.y;
-                if (z_dim == 3) y(2) = x(1) > 0.1 ? -x(3) / x(1) : NAN;  // e = -(dZ/dt)/Z (vehicle_ukf.hpp)
-                return y;
-            };
-        }
-        const auto f = [](const hw::Ukf::Vec &x, double step) {  // eq. 19
-            hw::Ukf::Vec y = x;
-            y(0) += step * x(2);
-            y(1) += step * x(3);
-            return y;
-        };
-        hw::Ukf ukf(up, x0.col(0), P0);
-        for (int32_t k = 0; k < n_steps; ++k) {
-            if (k > 0) ukf.predict(f, dt, Q);
-            // the finite entries of this step's observation are used, the NaN ones left out
-            const Eigen::Map<const Eigen::VectorXd> zk(z + size_t(k) * size_t(z_dim), z_dim);
-            std::vector<int> use;
-            for (int i = 0; i < z_dim; ++i)
-                if (std::isfinite(zk(i))) use.push_back(i);
-            if (int(use.size()) == z_dim) {
-                ukf.update(h, zk, R);
-            } else if (!use.empty()) {
-                const int m = int(use.size());
-                Eigen::VectorXd zs(m);
-                Eigen::MatrixXd Rs(m, m);
-                for (int i = 0; i < m; ++i) {
-                    zs(i) = zk(use[size_t(i)]);
-                    for (int j = 0; j < m; ++j) Rs(i, j) = R(use[size_t(i)], use[size_t(j)]);
-                }
-                const auto hs = [&](const hw::Ukf::Vec &x) {
-                    const hw::Ukf::Vec y = h(x);
-                    hw::Ukf::Vec out(m);
-                    for (int i = 0; i < m; ++i) out(i) = y(use[size_t(i)]);
-                    return out;
-                };
-                ukf.update(hs, zs, Rs);
-            }
-            for (int i = 0; i < 4; ++i) x_out[4 * k + i] = ukf.x()(i);
-            if (p_out)
-                for (int i = 0; i < 16; ++i) p_out[16 * k + i] = ukf.P()(i / 4, i % 4);
-        }
-        return HW_OK;
-    });
-}
-
-} // extern "C"
-
-// ---- END paper 004 units -------------------------------------------------------------------------------

@@ -147,6 +147,19 @@ nlohmann::json describe_presets() {
     return out;
 }
 
+std::unique_ptr<Detector> make_detector(const std::string &name, const Config &c) {
+    const auto it = detectors().find(name);
+    if (it == detectors().end())
+        throw ConfigError("unknown detector '" + name + "' (one of " + detector_choices() + ")");
+    return it->second(c);
+}
+
+std::unique_ptr<Tracker> make_tracker(const std::string &name, const Config &c) {
+    const auto it = trackers().find(name);
+    if (it == trackers().end()) throw ConfigError("unknown tracker '" + name + "' (one of " + joined(trackers()) + ")");
+    return it->second(c);
+}
+
 Parts make_parts(const Config &cfg) {
     const Composition comp = composition_of(cfg.pipeline);
     Parts parts;

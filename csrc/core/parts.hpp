@@ -55,5 +55,9 @@ struct Parts {
     std::unique_ptr<RoadMotionStage> road; // null unless a part needs the road's motion
 };
 Parts make_parts(const Config &c);
+// One part of a registry, built from the configuration alone (outside any composition). Throws ConfigError naming
+// the registered names for an unknown one.
+std::unique_ptr<Detector> make_detector(const std::string &name, const Config &c);
+std::unique_ptr<Tracker> make_tracker(const std::string &name, const Config &c);
 
 } // namespace hw

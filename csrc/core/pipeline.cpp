@@ -2,7 +2,6 @@
 
 #include "base/stopwatch.hpp"
 #include "core/parallax_stage.hpp"
-#include "detect/shadow.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -72,7 +71,7 @@ FrameOutput Pipeline::process(const Frame &frame) {
         const bool first = !std::isfinite(prev_t_s_);
         lanes_.update(frame.gray, out.lanes, last_tracks_);
         // Nothing tracked yet: the first frame is a single image, and gets the single image's lane model, so that
-        // its detections are exactly what `headway detect` finds in it (run_stage "detect"). Not when the camera's
+        // its detections are exactly what `headway detect` finds in it (detect_image). Not when the camera's
         // mounting is yet to be found (self_calibration.from_scratch): the lane tracker's wide search is needed.
         if (first && !cfg_.self_calibration.from_scratch) out.lanes = detect_lanes(frame.gray, cfg_.lanes, cfg_.camera);
         out.times.add("lanes", sw.ms());
@@ -149,57 +148,61 @@ FrameOutput Pipeline::process(const Frame &frame) {
     return out;
 }
 
+ImageDetections Pipeline::detect_image(const std::string &detector, const cv::Mat &gray) {
+    check_frame(gray);
+    DetectorSet *set = &parts_.detectors;
+    if (!detector.empty()) {
+        auto it = single_parts_.find(detector);
+        if (it == single_parts_.end()) {
+            DetectorSet named;
+            try {
+                named.parts.push_back(make_detector(detector, cfg_));
+            } catch (const ConfigError &e) {
+                throw std::invalid_argument(std::string("detector: ") + e.what());
+            }
+            named.fuse = cfg_.fuse;
+            it = single_parts_.emplace(detector, std::move(named)).first;
+        }
+        set = &it->second;
+    } else if (set->parts.empty()) {
+        throw std::invalid_argument("this composition has no detector parts (pipeline.detectors): name one of " +
+                                    std::string(detector_choices()));
+    }
+    for (const auto &d : set->parts)
+        if (d->needs_road_motion())
+            throw std::invalid_argument("one image alone: detector parts that need the road's motion (parallax) need "
+                                        "two frames and run in process()");
+    Stopwatch total;
+    ImageDetections out;
+    Stopwatch sw;
+    const LaneModel lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
+    out.times.add("lanes", sw.ms());
+    const RoadContext ctx{gray, 0.0, lanes, cfg_.camera, nullptr, true};
+    std::vector<Hypothesis> hyps;
+    set->detect(ctx, hyps, out.times);
+    out.boxes = boxes_of(hyps);
+    out.horizon_row = float(cfg_.camera.horizon_row());
+    out.total_ms = total.ms();
+    return out;
+}
+
 FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
     // Two-frame units (frames stacked vertically): see core/parallax_stage.hpp.
     if (is_parallax_stage(stage)) return run_parallax_stage(stage, gray, cfg_);
     check_frame(gray);
+    if (stage != "lanes")
+        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, homography, parallax (detections: "
+                                    "hw_pipeline_detect)");
     Stopwatch total;
     FrameOutput out;
     out.width = gray.cols;
     out.height = gray.rows;
-    if (stage != "lanes" && stage != "hypotheses" && stage != "detect")
-        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, hypotheses, detect, homography, parallax");
     {
         Stopwatch sw;
         out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
         out.times.add("lanes", sw.ms());
     }
     out.horizon_row = float(cfg_.camera.horizon_row());
-    if (stage == "hypotheses") {
-        Stopwatch sw;
-        for (const auto &h : shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow)) {
-            TrackState t;
-            t.box = h.box;
-            t.confidence = h.strength;
-            out.tracks.push_back(t);
-        }
-        out.times.add("hypotheses", sw.ms());
-    } else if (stage == "detect") {
-        // The pipeline's detection stage on one image: the composition's detectors (those that work on one
-        // image), fused as in a tracked pipeline (DetectorSet, detect/fuse_hypotheses.hpp).
-        for (const auto &d : parts_.detectors.parts)
-            if (d->needs_road_motion())
-                throw std::invalid_argument("stage 'detect' runs on one image, and detector parts that need the road's "
-                                            "motion (parallax) need two frames: stage 'parallax'");
-        if (parts_.detectors.parts.empty())
-            throw std::invalid_argument("stage 'detect' runs the detectors of pipeline.detectors, and this composition "
-                                        "has none");
-        std::vector<Hypothesis> hyps;
-        const RoadContext ctx{gray, 0.0, out.lanes, cfg_.camera, nullptr, true};
-        parts_.detectors.detect(ctx, hyps, out.times);
-        out.detections = boxes_of(hyps);
-        for (const auto &h : hyps) {
-            TrackState t;
-            t.box = h.box;
-            t.confidence = h.score;
-            out.tracks.push_back(t);
-        }
-    }
-    if (stage != "lanes") {
-        out.full_detection = true;
-        // single-image range from the calibrated horizon (no history: no range rate or TTC)
-        TrackKinematics(cfg_.kinematics, cfg_.camera).update(out.tracks, out.horizon_row, 0.0);
-    }
     out.total_ms = total.ms();
     out.t_done_s = monotonic_s();
     return out;
@@ -212,6 +215,7 @@ void Pipeline::reset() {
         parts_.tracker->set_camera(cfg_.camera);
     }
     parts_.detectors.reset();
+    for (auto &[name, set] : single_parts_) set.reset();
     if (parts_.road) {
         parts_.road->reset();
         parts_.road->set_camera(cfg_.camera);

@@ -12,9 +12,19 @@
 #include "lanes/lane_tracker.hpp"
 
 #include <atomic>
+#include <map>
 #include <memory>
 
 namespace hw {
+
+// The detection stage's vehicles on one image, in the order the stage gives them, and the horizon row they were
+// found with (the configured camera's), and what it cost.
+struct ImageDetections {
+    std::vector<DetectedBox> boxes;
+    float horizon_row = kNaN;
+    StageTimes times;     // lanes and the detector parts' own stages
+    float total_ms = 0.f;
+};
 
 class Pipeline {
 public:
@@ -24,10 +34,13 @@ public:
     // tracker part, asking the detector parts) -> geometry -> lead.
     // Throws std::invalid_argument for a frame of the wrong size or type, or a time going backwards.
     FrameOutput process(const Frame &frame);
-    // Single-image units without touching tracking state: "lanes", "hypotheses" (the shadow detector's
-    // hypotheses before verification), "detect" (the composition's detector parts that need no road
-    // motion); the two-frame units "homography" and "parallax" take frames stacked vertically
-    // (core/parallax_stage.hpp).
+    // The detection stage on one image alone, without touching tracking state (what `headway detect` writes):
+    // the detector part `detector` of the registry built from this configuration, or, when it is empty, the
+    // composition's own detector parts fused as in a tracked pipeline; the lanes of this image alone give the
+    // road context. Throws std::invalid_argument for an unknown name or a part that needs the road's motion.
+    ImageDetections detect_image(const std::string &detector, const cv::Mat &gray);
+    // Units without touching tracking state: "lanes" on one image; the two-frame units "homography" and
+    // "parallax" take frames stacked vertically (core/parallax_stage.hpp).
     FrameOutput run_stage(const std::string &stage, const cv::Mat &gray);
     void reset();
     // The car's own motion from the vehicle bus; any thread may set it (the loop reads it per frame).
@@ -53,6 +66,7 @@ private:
     HorizonTracker horizon_;
     TrackKinematics kinematics_;
     LeadSelector lead_;
+    std::map<std::string, DetectorSet> single_parts_;  // detect_image()'s named parts, built on first use
     std::atomic<double> ego_speed_mps_{NAN}, ego_yaw_rate_rps_{NAN};
     double last_t_s_ = -1e300;
     double prev_t_s_ = NAN;  // the previous frame's time (yaw rate from the road motion)

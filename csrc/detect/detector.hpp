@@ -24,7 +24,7 @@ struct RoadContext {
     const LaneModel &lanes;              // this frame's lane model (may be invalid)
     const CameraParams &camera;
     const RoadMotionFrame *motion;       // the road-motion stage's output; null when no part needs it
-    bool single_image = false;           // one image alone (Pipeline::run_stage "detect"): no tracker follows
+    bool single_image = false;           // one image alone (Pipeline::detect_image): no tracker follows
 };
 
 // One vehicle hypothesis.

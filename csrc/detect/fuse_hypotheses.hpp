@@ -17,7 +17,7 @@
 // Returned strongest first (ties in the parts' order). With one detector part, its own hypotheses as they are.
 //
 // DetectorSet, the composition's detectors asked together, is the detection stage: of a tracked pipeline (the
-// tracker asks it for a full detection) and of `headway detect` on one image (Pipeline::run_stage "detect").
+// tracker asks it for a full detection) and of `headway detect` on one image (Pipeline::detect_image).
 #pragma once
 
 #include "base/params.hpp"

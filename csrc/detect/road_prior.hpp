@@ -55,7 +55,7 @@ struct RoadPrior {
 };
 
 // Builds the prior for an image of `size`. The camera is scaled to the image width if its
-// configured size differs (run_stage on images of another resolution).
+// configured size differs (Pipeline::detect_image on images of another resolution).
 RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraParams &cam,
                           const RoadPriorParams &p);
 

@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 11
+#define HW_ABI_VERSION 13
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -115,7 +115,7 @@ typedef struct {
     float ms;
 } hw_stage_time;
 
-/* One detection: a box of the detection stage (hw_frame_result.detections, hw_pipeline_stage_boxes). */
+/* One detection: a box of the detection stage (hw_frame_result.detections, hw_pipeline_detect). */
 typedef struct {
     float left, top, right, bottom; /* px */
     float confidence;               /* 0..1 */
@@ -132,7 +132,7 @@ typedef struct {
     hw_track tracks[HW_MAX_TRACKS];
     /* the detection stage's vehicles the tracker took this frame (full_detection), strongest first, found on
      * frame detections_frame (this one, or phd.detect_lag frames earlier when the detection ran on its worker
-     * thread); the same list hw_pipeline_run_stage "detect" gives for that frame's image alone */
+     * thread); the same list hw_pipeline_detect (detector NULL) gives for that frame's image alone */
     int64_t detections_frame; /* -1 when none */
     int32_t n_detections;
     hw_box detections[HW_MAX_TRACKS];
@@ -209,20 +209,30 @@ int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *need
  * Not allowed while the loop runs. t_s must not go backwards (HW_ERR_INVALID_ARGUMENT). */
 int hw_pipeline_process(hw_pipeline *p, const uint8_t *gray, int32_t width, int32_t height,
                         int32_t stride, double t_s, hw_frame_result *out);
-/* Run the single-image units on one frame, without touching any tracking state, for tests and
- * evaluation: stage "lanes" (lane markings of this image alone), "hypotheses" (lanes + shadow
- * hypotheses, reported as unconfirmed tracks with id -1), "detect" (lanes + hypotheses + vertical-edge
- * verification: the detector's boxes with their scores as confidence). */
+/* What hw_pipeline_detect found besides the boxes. */
+typedef struct {
+    int32_t n_detections;  /* detections the stage gave (all of them: may be more than the cap asked for) */
+    float horizon_row;     /* the horizon row they were found with (the configured camera's) */
+    int32_t n_stages;      /* wall time of the stage's sub-stages (lanes, the detector parts' own) */
+    hw_stage_time stages[HW_MAX_STAGES];
+    float total_ms;
+} hw_detect_info;
+
+/* Offline: the detection stage on one 8-bit gray image alone, without touching any tracking state (what
+ * `headway detect` writes): the detector part named `detector` (one of the configuration's pipeline.detectors
+ * choices, built from this configuration), or the pipeline's own detection stage (its composition's detector parts,
+ * fused as in a tracked pipeline) when detector is NULL or "". The lane markings of this image alone give the road
+ * context. Every detection the stage gives, in its order (strongest first), without the HW_MAX_TRACKS cap of
+ * hw_frame_result (the cascade with cascade.nms_iou 1 gives ~150 groups on a 1280x720 image): copies at most cap of
+ * them into out (NULL allowed when cap is 0) and info->n_detections receives how many there are: call again with a
+ * larger out when it is > cap. HW_ERR_INVALID_ARGUMENT for an unknown name or a part that needs the road's motion
+ * (parallax: two frames). */
+int hw_pipeline_detect(hw_pipeline *p, const char *detector, const uint8_t *gray, int32_t width, int32_t height,
+                       int32_t stride, hw_box *out, int32_t cap, hw_detect_info *info);
+/* Units on frames without touching any tracking state, for tests and evaluation: stage "lanes" (lane markings of
+ * this image alone), and the two-frame units "homography" and "parallax" (csrc/core/parallax_stage.hpp). */
 int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
                           int32_t height, int32_t stride, hw_frame_result *out);
-/* Offline, for training (ABI 8): the same stages as hw_pipeline_run_stage, but every detection the stage
- * gives, without the HW_MAX_TRACKS cap of hw_frame_result (the cascade stage with cascade.nms_iou 1 gives
- * ~150 groups on a 1280x720 image). Copies at most cap of them into out (NULL allowed when cap is 0) and
- * *n receives how many the stage gave: call again with a larger out when *n > cap. *horizon_row (may be
- * NULL) receives the frame's horizon row as hw_frame_result.horizon_row. */
-int hw_pipeline_stage_boxes(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
-                            int32_t height, int32_t stride, hw_box *out, int32_t cap, int32_t *n,
-                            float *horizon_row);
 /* The car's own motion from the vehicle bus (NaN = not available): used for the ego path when the
  * lanes are missing. Allowed while the loop runs; takes effect from the next frame. */
 int hw_pipeline_set_ego_motion(hw_pipeline *p, double speed_mps, double yaw_rate_rps);
@@ -244,45 +254,6 @@ int hw_pipeline_push(hw_pipeline *p, const uint8_t *data, int32_t width, int32_t
 int hw_pipeline_push_end(hw_pipeline *p);
 int hw_pipeline_health(hw_pipeline *p, hw_health *out);
 
-/* ---- BEGIN paper 004 units, reachable alone for tests (ABI 6) --------------------------------------
- * The GM-PHD filter on 2-D points (csrc/track/gmphd.hpp) step by step, and the UKF on a sequence of
- * observations (csrc/track/ukf.hpp). Not used by the pipeline, which runs them inside the phd tracker. */
-typedef struct hw_gmphd hw_gmphd;
-
-typedef struct {
-    double w;              /* weight */
-    double mx, my;         /* mean, px */
-    double pxx, pxy, pyy;  /* covariance, px^2 */
-} hw_gm_component;
-
-/* params_json: keys of the "gmphd" configuration section ({} for the defaults); seed: the random
- * draw of births (P_clutter). */
-int hw_gmphd_create(const char *params_json, uint32_t seed, hw_gmphd **out);
-void hw_gmphd_destroy(hw_gmphd *f);
-/* Survival and motion x' = c + t + s (x - c) (eq. 6). */
-int hw_gmphd_predict(hw_gmphd *f, double scale, double cx, double cy, double tx, double ty);
-/* n births at xy[2n] (eq. 7); random != 0: each admitted with probability birth_accept_prob.
- * *admitted (may be NULL) receives how many were added. */
-int hw_gmphd_births(hw_gmphd *f, const double *xy, int32_t n, int32_t random, int32_t *admitted);
-/* The update with the measurement set xy[2n] (eq. 3-5). */
-int hw_gmphd_update(hw_gmphd *f, const double *xy, int32_t n);
-/* Merging (eq. 9-11) and adaptive pruning with the cap (eq. 8). */
-int hw_gmphd_merge_prune(hw_gmphd *f);
-/* Copies at most cap components into out; *n receives the number of components the filter holds. */
-int hw_gmphd_components(hw_gmphd *f, hw_gm_component *out, int32_t cap, int32_t *n);
-/* Weight summed inside the box (eq. 12). */
-int hw_gmphd_weight_in(hw_gmphd *f, double left, double top, double right, double bottom, double *out);
-
-/* Runs the UKF over n_steps observations z[n_steps * z_dim] (a NaN row skips the update) and writes
- * the state after each step into x_out[n_steps * 4] and its covariance into p_out[n_steps * 16]
- * (row-major; p_out may be NULL); NaN entries of a row are left out of that update. spec_json: {"model":
- * "linear"|"pinhole", "dt": s, "x0": [4], "P0": [16], "Q": [16], "R": [z_dim^2], "ukf": {"alpha", "beta",
- * "kappa"}, and for "linear" "H": [z_dim * 4]; for "pinhole" (z = the contact point (u, v) of the state
- * [X, Z, dX/dt, dZ/dt], and with z_dim 3 the image expansion rate e = -(dZ/dt)/Z, 1/s) "camera": {camera
- * keys} and optionally "horizon_row" (default: the camera's pitch)}. The transition is constant velocity. */
-int hw_ukf_run(const char *spec_json, const double *z, int32_t n_steps, int32_t z_dim, double *x_out,
-               double *p_out);
-/* ---- END paper 004 units ------------------------------------------------------------------------- */
 /* HW_CDEF_END */
 
 #ifdef __cplusplus

@@ -134,8 +134,7 @@ def found_by_the_cascade(look: str) -> tuple[int, int]:
         cfg["camera"].update(dataclasses.asdict(scenario_camera(scenario)))
         with Pipeline(configuration.core_sections(cfg)) as pipe:
             for frame in render(scenario, frames=range(0, frame_count(scenario), step)):
-                result = pipe.run_stage("detect", frame.image)
-                boxes = [d[:4] for d in result.detections if d[4] >= OPERATING_POINT["paper004"]]
+                boxes = [d[:4] for d in pipe.detect(frame.image).rows() if d[4] >= OPERATING_POINT["paper004"]]
                 for v in frame.truth:
                     if (v["kind"] != "truck" and v["longitudinal_m"] <= 60 and v["visible_fraction"] >= 0.5
                             and v["box"][3] - v["box"][1] >= 20):
