@@ -167,7 +167,7 @@ FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
     out.horizon_row = float(cfg_.camera.horizon_row());
     if (stage == "hypotheses") {
         Stopwatch sw;
-        for (const auto &h : shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.shadow)) {
+        for (const auto &h : shadow_hypotheses(gray, out.lanes, cfg_.camera, cfg_.get<ShadowParams>("shadow"))) {
             TrackState t;
             t.box = h.box;
             t.confidence = h.strength;
