@@ -20,7 +20,7 @@ import yaml
 from app.can.config_schema import CAN_SCHEMA
 from app.contracts.config_key import key as _key
 from app.contracts.health_config import HEALTH_SCHEMA
-from app.core import core_moved_keys, core_presets, core_removed_presets, core_schema
+from app.core import core_detectors, core_moved_keys, core_presets, core_removed_presets, core_schema
 from app.fcw import FCW_SCHEMA
 from app.recording import FPS_MAX, FPS_MIN
 from app.safe_yaml import YamlLimitError, key_lines, load_yaml, short, short_name, short_path
@@ -123,6 +123,24 @@ def _registry() -> dict[str, dict[str, dict]]:
 def presets() -> dict[str, dict]:
     """The core's named compositions with the keys each sets (app.core.core_presets); read only."""
     return core_presets()
+
+
+def detectors_of(cfg: dict) -> list[str]:
+    """The detector parts a configuration runs: its pipeline.detectors, else its preset's."""
+    named = cfg["pipeline"].get("detectors") or presets().get(cfg["pipeline"]["preset"], {}).get("detectors") or []
+    return [d.strip() for d in (named.split(",") if isinstance(named, str) else named)]
+
+
+def works_on_one_image(detectors: list[str]) -> bool:
+    """Whether there are detector parts and all work on one image (the core's registrations: parallax needs two
+    frames)."""
+    known = core_detectors()
+    return bool(detectors) and all(known[d]["single_image"] for d in detectors)
+
+
+def single_image_presets() -> list[str]:
+    """The presets whose detection stage runs on one image (`headway detect`'s choices)."""
+    return [name for name, p in presets().items() if works_on_one_image(p["detectors"])]
 
 
 def defaults(preset: Optional[str] = None) -> dict[str, dict[str, Any]]:

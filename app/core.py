@@ -283,6 +283,7 @@ def core_schema() -> dict:
     described.pop("moved_keys")
     described.pop("presets")
     described.pop("removed_presets")
+    described.pop("detectors")
     return described
 
 
@@ -290,6 +291,11 @@ def core_presets() -> dict[str, dict]:
     """The named compositions: {name: {"detectors": [...], "tracker": str, "keys": {section: {key: value}}}};
     "keys" are the preset's own defaults, which a configuration's own values override."""
     return _config_json(ffi.NULL)["presets"]
+
+
+def core_detectors() -> dict[str, dict]:
+    """The registered detector parts: {name: {"single_image": whether it works on one image (not parallax)}}."""
+    return _config_json(ffi.NULL)["detectors"]
 
 
 def core_removed_presets() -> dict[str, str]:

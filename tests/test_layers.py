@@ -70,6 +70,15 @@ def test_the_check_catches_upward_sideways_and_abi_includes():
     assert not _violations([(Path("core/pipeline.hpp"), "base/types.hpp"), (Path("core/abi.cpp"), "include/headway.h")])
 
 
+def test_the_configuration_includes_no_part_and_the_parts_registry_does_not_include_it_back():
+    """Parts register their sections themselves (base/part_registry.hpp): core/config.hpp includes no detector or
+    tracker part, nor core/parts.hpp (whose .cpp builds the parts from the configuration)."""
+    of_config = [inc for src, inc in _includes() if src == Path("core/config.hpp")]
+    assert of_config, "core/config.hpp: no include read"
+    parts = [inc for inc in of_config if re.search(r"(detector|tracker)_\w+\.hpp$", inc) or inc == "core/parts.hpp"]
+    assert not parts, f"core/config.hpp includes parts' headers: {parts}; register the part's section next to its factory"
+
+
 # ---- the Python side ----
 
 # Bottom first; units on the same line are one layer and do not import each other. A unit is a package or a

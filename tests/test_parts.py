@@ -3,11 +3,13 @@ compositions, any detector can feed any tracker, and a composition that cannot r
 key named."""
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
-from app import config as configuration
+from app import config as configuration, detect_images
 from app.config import SHIPPED_CASCADE
-from app.core import ConfigError, Pipeline, core_schema
+from app.core import ConfigError, Pipeline, core_detectors, core_schema
 from tests.thesis_scenes import config, frames
 
 
@@ -32,6 +34,21 @@ def test_the_registries_are_in_the_configuration_schema():
     assert set(pipe["preset"]["choices"].split("|")) == {"default", "thesis", "parallax", "paper004", "none"}
     assert set(pipe["detectors"]["choices"].split("|")) == {"shadow", "parallax", "cascade", "proposals"}
     assert {"kalman", "particles", "none"} <= set(pipe["tracker"]["choices"].split("|"))
+
+
+def test_single_image_choices_come_from_the_detectors_registrations():
+    """`headway detect --preset` and the TuSimple box evaluation offer what the core's registrations say works on
+    one image: every detector but parallax, which compares two frames."""
+    assert {d: v["single_image"] for d, v in core_detectors().items()} == {
+        "shadow": True, "cascade": True, "proposals": True, "parallax": False}
+    assert configuration.single_image_presets() == ["default", "paper004", "thesis"]
+    assert not configuration.works_on_one_image([])
+    assert not configuration.works_on_one_image(["shadow", "parallax"])
+    parser = argparse.ArgumentParser()
+    detect_images.add_parser(parser.add_subparsers())
+    assert parser.parse_args(["detect", "a.png", "--out", "o.json", "--preset", "paper004"]).preset == "paper004"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["detect", "a.png", "--out", "o.json", "--preset", "parallax"])
 
 
 @pytest.mark.parametrize("preset,detectors,tracker", [("default", ["cascade", "shadow"], "phd"),

@@ -113,9 +113,8 @@ def evaluate(supp_dir: str, config_path: Optional[str] = None, preset: str = "th
     entries = load_entries(supp_dir, limit)
     # the preset's detection stage on each image, as `headway detect` runs it
     cfg = tusimple_config(configuration.load(config_path, {"pipeline": {"preset": preset}}))
-    named = cfg["pipeline"].get("detectors") or configuration.presets().get(preset, {}).get("detectors") or []
-    named = named.split(",") if isinstance(named, str) else named
-    if not named or "parallax" in [d.strip() for d in named]:
+    named = configuration.detectors_of(cfg)
+    if not configuration.works_on_one_image(named):
         raise NoSingleImageDetector(
             f"preset {preset}: its detectors ({', '.join(named) or 'none'}) include one that needs two frames (the "
             "parallax detector compares a frame with the one before), so single images cannot be scored; its tracking "

@@ -1,5 +1,7 @@
 #include "core/config.hpp"
 
+#include "core/parts.hpp"
+
 #include <algorithm>
 
 namespace hw {
@@ -8,32 +10,26 @@ using nlohmann::json;
 
 namespace {
 
-// Applies `fn(name, params)` to every section, so reading, writing and describing list them once.
-template <class Fn> void for_each_section(Config &c, Fn &&fn) {
+// The pipeline's own sections, in the order they are read.
+template <class C, class Fn> void for_each_pipeline_section(C &c, Fn &&fn) {
     fn("camera", c.camera);
     fn("road", c.road);
     fn("pipeline", c.pipeline);
     fn("lanes", c.lanes);
-    fn("shadow", c.shadow);
-    fn("verify", c.verify);
-    fn("kalman", c.kalman);
     fn("horizon", c.horizon);
     fn("self_calibration", c.self_calibration);
     fn("kinematics", c.kinematics);
     fn("lead", c.lead);
     fn("road_features", c.road_features);
     fn("homography", c.homography);
-    fn("parallax", c.parallax);
-    fn("particles", c.particles);
-    fn("cascade", c.cascade);
-    fn("proposals", c.proposals);
     fn("fuse", c.fuse);
-    fn("phd", c.phd);
-    fn("gmphd", c.phd.phd);
-    fn("phd_features", c.phd.features);
-    fn("phd_ukf", c.phd.ukf);
-    fn("phd_pitch", c.phd.pitch);
-    fn("vehicle_height", c.vehicle_height);
+}
+
+// Applies `fn(name, params)` to every section, the pipeline's and the registered ones, so reading, writing and
+// describing list them once.
+template <class Fn> void for_each_section(Config &c, Fn &&fn) {
+    for_each_pipeline_section(c, fn);
+    c.parts.for_each(fn);
 }
 
 // Keys that moved to one shared definition: {old section, old key, new "section.key"}. A
@@ -85,12 +81,10 @@ void fill_preset_keys(json &root) {
     }
 }
 
-// The road section is read once and handed to every unit that uses it (their `road` member).
+// The road section is read once and handed to every pipeline unit that uses it (their `road` member); the
+// registered sections take it themselves (their `share`).
 void share_road(Config &c) {
-    for (RoadParams *r : {&c.lanes.assembly.road, &c.shadow.road.road, &c.cascade.road.road, &c.lead.road,
-                          &c.self_calibration.road, &c.parallax.detect.road, &c.proposals.road,
-                          &c.phd.road})
-        *r = c.road;
+    for (RoadParams *r : {&c.lanes.assembly.road, &c.lead.road, &c.self_calibration.road}) *r = c.road;
 }
 
 } // namespace
@@ -129,9 +123,39 @@ Config Config::from_json(const std::string &text) {
         throw ConfigError("self_calibration.pitch_min_deg: must be below self_calibration.pitch_max_deg (the pitch "
                           "range searched, e.g. -5 to 20 deg)");
     share_road(c);
-    c.kalman.height = c.phd.height = c.vehicle_height;  // one section for both trackers that keep a box height
+    c.parts.share(c);
     composition_of(c.pipeline);  // the parts exist and fit together
     return c;
+}
+
+const void *Config::find(const std::string &name, std::type_index type) const {
+    const void *found = nullptr;
+    for_each_pipeline_section(*this, [&](const char *n, const auto &params) {
+        if (name == n && type == typeid(params)) found = &params;
+    });
+    return found ? found : parts.find(name, type);
+}
+
+void PipelineParams::bind(ParamMap &m) {
+    m.add("preset", preset, preset_choices(),
+          "named composition of detector and tracker parts: default (learned detector with shadow cues, phd tracker), "
+          "thesis, parallax, paper004 (the seed papers' methods), none (lanes only); docs/ARCHITECTURE.md, Presets");
+    m.add("detectors", detectors, detector_choices(),
+          "detector parts that replace the preset's, e.g. [shadow, parallax]; empty: the preset's; two or more "
+          "are fused, learned detections first (docs/ARCHITECTURE.md)");
+    m.add("tracker", tracker, tracker_choices(),
+          "tracker part that replaces the preset's (kalman, particles, phd, none); empty: the preset's");
+    m.add("queue_capacity", queue_capacity, 1, 1024,
+          "results; queue to the supervisor; small so a slow consumer sees fresh results, the oldest is dropped and counted");
+    m.add("push_queue_capacity", push_queue_capacity, 1, 1024,
+          "frames; queue of frames pushed from Python; the oldest is dropped and counted");
+    m.add("reconnect_initial_s", reconnect_initial_s, 0.01, 60.0,
+          "s; first wait before reopening a lost live camera; doubles up to reconnect_max_s");
+    m.add("reconnect_max_s", reconnect_max_s, 0.01, 600.0, "s; longest wait between reconnect attempts");
+    m.add("max_decode_errors", max_decode_errors, 1, 100000,
+          "frames; consecutive undecodable frames after which a recording is reported failed");
+    m.add("debug_stall_after_s", debug_stall_after_s, 0.0, 1e6,
+          "s; test hook: >0 makes the real-time loop hang after this long so the watchdog can be tested; keep 0");
 }
 
 json Config::to_json() {

@@ -23,11 +23,12 @@ FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked,
                                     "x" + std::to_string(stacked.rows));
     Stopwatch total;
     LaneTracker lanes(cfg.lanes, cfg.camera);
-    RoadMotionStage road(cfg.road_features, cfg.homography, cfg.parallax, cfg.camera);
-    auto *detector = new ParallaxDifferenceDetector(cfg.parallax, cfg.camera);
+    const auto &parallax = cfg.get<ParallaxSection>("parallax");
+    RoadMotionStage road(cfg.road_features, cfg.homography, parallax, cfg.camera);
+    auto *detector = new ParallaxDifferenceDetector(parallax, cfg.camera);
     DetectorSet detectors;
     detectors.parts.emplace_back(detector);
-    ParticleTracker tracker(cfg.particles, cfg.parallax.max_dt_s, cfg.camera);
+    ParticleTracker tracker(cfg.get<ParticleParams>("particles"), parallax.max_dt_s, cfg.camera);
     FrameOutput out;
     out.width = W;
     out.height = H;

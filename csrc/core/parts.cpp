@@ -1,13 +1,7 @@
 #include "core/parts.hpp"
 
+#include "base/part_registry.hpp"
 #include "core/config.hpp"
-#include "detect/detector_cascade.hpp"
-#include "detect/detector_parallax.hpp"
-#include "detect/detector_proposals.hpp"
-#include "detect/detector_shadow.hpp"
-#include "track/tracker_kalman.hpp"
-#include "track/tracker_particles.hpp"
-#include "track/tracker_phd.hpp"
 
 #include <functional>
 #include <map>
@@ -17,28 +11,9 @@ namespace hw {
 
 namespace {
 
-template <class Part> using Factory = std::function<std::unique_ptr<Part>(const Config &)>;
-
-// The detector registry: name -> how it is built from the configuration.
-const std::map<std::string, Factory<Detector>> &detectors() {
-    static const std::map<std::string, Factory<Detector>> r{
-        {"shadow", [](const Config &c) { return std::make_unique<ShadowDetector>(c.shadow, c.verify); }},
-        {"parallax", [](const Config &c) { return std::make_unique<ParallaxDifferenceDetector>(c.parallax, c.camera); }},
-        {"cascade", [](const Config &c) { return std::make_unique<CascadeDetectorPart>(c.cascade); }},
-        {"proposals", [](const Config &c) { return std::make_unique<ProposalsDetector>(c.proposals); }},
-    };
-    return r;
-}
-
-// The tracker registry.
-const std::map<std::string, Factory<Tracker>> &trackers() {
-    static const std::map<std::string, Factory<Tracker>> r{
-        {"kalman", [](const Config &c) { return std::make_unique<KalmanTracker>(c.shadow, c.verify, c.kalman); }},
-        {"particles", [](const Config &c) { return std::make_unique<ParticleTracker>(c.particles, c.parallax.max_dt_s, c.camera); }},
-        {"phd", [](const Config &c) { return std::make_unique<PhdTracker>(c.horizon, c.phd, c.camera); }},
-    };
-    return r;
-}
+// The registries: each part registers itself next to its factory (base/part_registry.hpp).
+const std::map<std::string, PartType<Detector>> &detectors() { return part_registry<Detector>(); }
+const std::map<std::string, PartType<Tracker>> &trackers() { return part_registry<Tracker>(); }
 
 // A named composition, and the keys it sets ({section: {key: value}}; a configuration's own value wins).
 struct Preset {
@@ -135,6 +110,29 @@ nlohmann::json describe_removed_presets() {
     return out;
 }
 
+nlohmann::json describe_detectors() {
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto &[name, d] : detectors()) out[name] = {{"single_image", !d.needs_road_motion}};
+    return out;
+}
+
+std::unique_ptr<Detector> make_detector(const std::string &name, const Config &c) {
+    const auto it = detectors().find(name);
+    if (it == detectors().end())
+        throw ConfigError("pipeline.detectors: unknown detector '" + name + "' (one of " + detector_choices() + ")");
+    auto d = it->second.make(c);
+    if (d->needs_road_motion() != it->second.needs_road_motion)  // the registration says what the part does
+        throw std::logic_error("detector '" + name + "': its registration and needs_road_motion() disagree");
+    return d;
+}
+
+std::unique_ptr<Tracker> make_tracker(const std::string &name, const Config &c) {
+    const auto it = trackers().find(name);
+    if (it == trackers().end())
+        throw ConfigError("pipeline.tracker: unknown tracker '" + name + "' (one of " + tracker_choices() + ")");
+    return it->second.make(c);
+}
+
 nlohmann::json preset_keys(const std::string &preset) {
     const auto it = presets().find(preset);
     return it == presets().end() ? nlohmann::json::object() : it->second.keys;
@@ -147,30 +145,19 @@ nlohmann::json describe_presets() {
     return out;
 }
 
-std::unique_ptr<Detector> make_detector(const std::string &name, const Config &c) {
-    const auto it = detectors().find(name);
-    if (it == detectors().end())
-        throw ConfigError("unknown detector '" + name + "' (one of " + detector_choices() + ")");
-    return it->second(c);
-}
-
-std::unique_ptr<Tracker> make_tracker(const std::string &name, const Config &c) {
-    const auto it = trackers().find(name);
-    if (it == trackers().end()) throw ConfigError("unknown tracker '" + name + "' (one of " + joined(trackers()) + ")");
-    return it->second(c);
-}
-
 Parts make_parts(const Config &cfg) {
     const Composition comp = composition_of(cfg.pipeline);
     Parts parts;
     bool road = false;
     for (const auto &d : comp.detectors) {
-        parts.detectors.parts.push_back(detectors().at(d)(cfg));
+        parts.detectors.parts.push_back(make_detector(d, cfg));
         road = road || parts.detectors.parts.back()->needs_road_motion();
     }
     parts.detectors.fuse = cfg.fuse;  // two or more detectors: fused (detect/fuse_hypotheses.hpp)
-    if (!comp.tracker.empty()) parts.tracker = trackers().at(comp.tracker)(cfg);
-    if (road) parts.road = std::make_unique<RoadMotionStage>(cfg.road_features, cfg.homography, cfg.parallax, cfg.camera);
+    if (!comp.tracker.empty()) parts.tracker = make_tracker(comp.tracker, cfg);
+    if (road)
+        parts.road = std::make_unique<RoadMotionStage>(cfg.road_features, cfg.homography,
+                                                       cfg.get<ParallaxSection>("parallax"), cfg.camera);
     return parts;
 }
 

@@ -5,7 +5,8 @@
 // needs it. The configuration names the parts: pipeline.preset picks a named composition,
 // pipeline.detectors and pipeline.tracker, when set, replace the preset's detectors or tracker. A
 // preset may also set keys of other sections (its defaults; the configuration's own value wins).
-// One registry per role, in parts.cpp: adding a part is one file and one line there.
+// One registry per role (base/part_registry.hpp): each part registers itself, with its configuration section,
+// next to its factory in its own .cpp; adding a part is its two files and that one registration.
 #pragma once
 
 #include "detect/detector.hpp"
@@ -48,6 +49,13 @@ nlohmann::json preset_keys(const std::string &preset);
 // Every preset: {name: {"detectors": [...], "tracker": "...", "keys": {section: {key: value}}}}.
 nlohmann::json describe_presets();
 
+// {detector: {"single_image": whether it works on one image}}, for the Python side's choices.
+nlohmann::json describe_detectors();
+
+// One registered part built from the configuration; throws ConfigError naming the key for an unknown name.
+std::unique_ptr<Detector> make_detector(const std::string &name, const Config &c);
+std::unique_ptr<Tracker> make_tracker(const std::string &name, const Config &c);
+
 // The parts of a configuration, built.
 struct Parts {
     DetectorSet detectors;
@@ -55,9 +63,4 @@ struct Parts {
     std::unique_ptr<RoadMotionStage> road; // null unless a part needs the road's motion
 };
 Parts make_parts(const Config &c);
-// One part of a registry, built from the configuration alone (outside any composition). Throws ConfigError naming
-// the registered names for an unknown one.
-std::unique_ptr<Detector> make_detector(const std::string &name, const Config &c);
-std::unique_ptr<Tracker> make_tracker(const std::string &name, const Config &c);
-
 } // namespace hw

@@ -69,6 +69,7 @@ struct CascadeParams {
     int tracked_slices = 1;             // tracked: the scan spread over this many full detections, a block of sizes each
     double tracked_far_m = 0.0;         // tracked slices: a car's sizes beyond this range (m) scanned every time (0: none)
 
+    void share(const SectionLookup &c) { road.share(c); }
     void bind(ParamMap &m) {
         m.add("model", model, nullptr,
               "path of the OpenCV cascade XML; empty = the model shipped with Headway "

@@ -1,5 +1,6 @@
 #include "detect/detector_cascade.hpp"
 
+#include "base/part_registry.hpp"
 namespace hw {
 
 bool CascadeDetectorPart::detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) {
@@ -13,5 +14,14 @@ bool CascadeDetectorPart::detect(const RoadContext &ctx, std::vector<Hypothesis>
     }
     return true;
 }
+
+namespace {
+
+// The part, its configuration section and its factory (base/part_registry.hpp).
+const bool registered = register_part<Detector, CascadeParams>(
+    "cascade", "cascade",
+    [](const CascadeParams &p, const SectionLookup &) { return std::make_unique<CascadeDetectorPart>(p); });
+
+} // namespace
 
 } // namespace hw

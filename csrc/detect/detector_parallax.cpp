@@ -1,5 +1,6 @@
 #include "detect/detector_parallax.hpp"
 
+#include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
 #include "lanes/lane_assembly.hpp"
 
@@ -173,5 +174,17 @@ void ParallaxDifferenceDetector::end_frame(const RoadContext &ctx) {
         history_.clear();
     }
 }
+
+namespace {
+
+// The part, its configuration section and its factory (base/part_registry.hpp).
+const bool registered = register_part<Detector, ParallaxSection>(
+    "parallax", "parallax",
+    [](const ParallaxSection &p, const SectionLookup &c) {
+        return std::make_unique<ParallaxDifferenceDetector>(p, c.get<CameraParams>("camera"));
+    },
+    /*needs_road_motion=*/true);
+
+} // namespace
 
 } // namespace hw

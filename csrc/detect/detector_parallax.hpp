@@ -12,6 +12,7 @@
 // itself (end_frame), every frame, whether or not the tracker asked for a detection.
 #pragma once
 
+#include "base/sections.hpp"
 #include "detect/detector.hpp"
 #include "detect/parallax_detector.hpp"
 
@@ -34,6 +35,7 @@ struct ParallaxSection {
     double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction
     int search_steps = 24;             // travels tried between 0 and that
 
+    void share(const SectionLookup &c) { detect.road = c.get<RoadParams>("road"); }
     void bind(ParamMap &m);
 };
 class ParallaxDifferenceDetector final : public Detector {

@@ -1,5 +1,6 @@
 #include "detect/detector_proposals.hpp"
 
+#include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
 #include "detect/road_prior.hpp"
 #include "detect/vehicle_verifier.hpp"
@@ -97,5 +98,14 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
     }
     return true;
 }
+
+namespace {
+
+// The part, its configuration section and its factory (base/part_registry.hpp).
+const bool registered = register_part<Detector, ProposalsParams>(
+    "proposals", "proposals",
+    [](const ProposalsParams &p, const SectionLookup &) { return std::make_unique<ProposalsDetector>(p); });
+
+} // namespace
 
 } // namespace hw

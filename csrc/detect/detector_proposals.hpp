@@ -15,6 +15,7 @@
 #pragma once
 
 #include "base/params.hpp"
+#include "base/sections.hpp"
 #include "detect/detector.hpp"
 #include "detect/proposal_net.hpp"
 #include "geometry/road_params.hpp"
@@ -29,7 +30,7 @@ class VehicleVerifier;
 struct ProposalsParams {
     std::string model;              // path of the proposal network (ONNX); "" = the shipped model (filled in by Python)
     std::string verifier;           // path of the verifier; "" = the shipped CNN verifier (Python), "off" = none
-    RoadParams road;                // section "road" (vehicle and lane widths), handed in by the configuration
+    RoadParams road;                // section "road" (vehicle and lane widths), taken by share
     int input_width = 320;          // px of the network's input
     double min_heat = 0.05;         // peaks below are not candidates
     int top_k = 24;                 // strongest candidates verified (and output)
@@ -41,6 +42,7 @@ struct ProposalsParams {
     double min_width_ratio = 0.35, max_width_ratio = 3.0;
     double nms_iou = 0.5;
 
+    void share(const SectionLookup &c) { road = c.get<RoadParams>("road"); }  // the road section's widths
     void bind(ParamMap &m) {
         m.add("model", model, nullptr,
               "path of the proposal network (ONNX, `headway train proposals --out X.onnx`); empty = the model shipped "

@@ -1,5 +1,6 @@
 #include "detect/detector_shadow.hpp"
 
+#include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
 
 namespace hw {
@@ -16,5 +17,15 @@ bool ShadowDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &out
     for (const Detection &d : dets) out.push_back(hypothesis_of(d, "shadow"));
     return true;
 }
+
+namespace {
+
+// The part, its configuration section and its factory (base/part_registry.hpp).
+const bool registered = register_part<Detector, ShadowParams>(
+    "shadow", "shadow", [](const ShadowParams &p, const SectionLookup &c) {
+        return std::make_unique<ShadowDetector>(p, c.get<VerifyParams>("verify"));
+    });
+
+} // namespace
 
 } // namespace hw

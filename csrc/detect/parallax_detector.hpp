@@ -49,7 +49,7 @@ struct ParallaxParams {
     double edge_slack_px = 0.5;      // px at the level; hot only beyond this displacement of the local gradient
     bool photometric = true;         // take the smooth brightness change out of the difference
     double photometric_trim = 3.0;   // robust sigmas; road cells farther from the brightness surface are left out
-    RoadParams road;                 // section "road" (vehicle_width_m: width the scan expects), handed in by the configuration
+    RoadParams road;                 // section "road" (vehicle_width_m: width the scan expects), taken by the parallax section's share
     double min_width_frac = 0.3;     // region narrower than this share of the expected width: no vehicle
     double max_width_frac = 2.2;     // wider: no single vehicle
     double inside_margin_m = 0.5;    // m; most of a region's bottom cells lie this far inside the road area

@@ -12,6 +12,7 @@
 #pragma once
 
 #include "base/params.hpp"
+#include "base/sections.hpp"
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
 #include "geometry/road_params.hpp"
@@ -21,11 +22,12 @@
 namespace hw {
 
 struct RoadPriorParams {
-    RoadParams road;                  // section "road" (vehicle_width_m, lane_width_m), handed in by the configuration
+    RoadParams road;                  // section "road" (vehicle_width_m, lane_width_m), taken by share
     double road_half_width_m = 9.0;   // m; fallback scan half-width around the ego-lane centre
     int adjacent_lanes = 2;           // lanes scanned each side of the ego lane at least
     double max_range_m = 120.0;       // m; the scan starts at the row of this range below the horizon
 
+    void share(const SectionLookup &c) { road = c.get<RoadParams>("road"); }  // the road section's widths
     void bind(ParamMap &m) {
         m.add("road_half_width_m", road_half_width_m, 1.0, 50.0,
               "m; without a valid lane model the detector scans this far either side of the ego-lane "

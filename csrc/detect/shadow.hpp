@@ -48,6 +48,7 @@ struct ShadowParams {
     double beside_reach = 0.8;      // with one end cut, the edge reaches this many expected widths from it
     int max_hypotheses = 48;        // cap per frame (strongest kept), bounds the verification cost
 
+    void share(const SectionLookup &c) { road.share(c); }
     void bind(ParamMap &m) {
         road.bind(m);
         m.add("min_run_px", min_run_px, 1, 200,

@@ -1,5 +1,6 @@
 #include "detect/verify.hpp"
 
+#include "base/sections.hpp"
 #include "detect/edge_projection.hpp"
 
 #include <opencv2/imgproc.hpp>
@@ -108,5 +109,12 @@ std::vector<size_t> strongest_apart(const std::vector<Detection> &found, double 
     }
     return out;
 }
+
+namespace {
+
+// Its section, read by the shadow detector and the Kalman tracker's ROI search (base/sections.hpp).
+const bool registered = register_section<VerifyParams>("verify");
+
+} // namespace
 
 } // namespace hw

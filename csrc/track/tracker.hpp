@@ -4,7 +4,8 @@
 // tracks. It decides itself when a full detection runs and asks the detectors then (the Kalman tracker
 // every detect_every_n frames, searching around its predictions between; the particle tracker every
 // frame). To add a tracker: write track/tracker_<name>.{hpp,cpp} with a class derived from Tracker, and
-// add one line to the tracker registry in core/parts.cpp (docs/ARCHITECTURE.md, "Adding a part").
+// register it with its section at the end of its .cpp (base/part_registry.hpp; docs/ARCHITECTURE.md,
+// "Adding a part").
 #pragma once
 
 #include "base/types.hpp"

@@ -1,5 +1,6 @@
 #include "track/tracker_kalman.hpp"
 
+#include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
 #include "detect/road_prior.hpp"
 
@@ -379,5 +380,15 @@ void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::v
     for (const Track &t : tracks_) tracks.push_back(report(t));
     times.add("track", std::max(0.f, track_time.ms() - detect_ms));
 }
+
+namespace {
+
+// The part, its configuration section and its factory (base/part_registry.hpp).
+const bool registered = register_part<Tracker, KalmanBoxParams>(
+    "kalman", "kalman", [](const KalmanBoxParams &p, const SectionLookup &c) {
+        return std::make_unique<KalmanTracker>(c.get<ShadowParams>("shadow"), c.get<VerifyParams>("verify"), p);
+    });
+
+} // namespace
 
 } // namespace hw

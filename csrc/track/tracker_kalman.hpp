@@ -18,6 +18,7 @@
 // search need no lane model (the detector falls back to the camera's flat-road model).
 #pragma once
 
+#include "base/sections.hpp"
 #include "detect/verify.hpp"
 #include "track/kalman_box.hpp"
 #include "track/roi_search.hpp"
@@ -61,8 +62,9 @@ struct KalmanBoxParams {
     double max_dt_s = 1.0;            // s; a longer gap between frames restarts tracking
     double max_width_depth_change = 0.3;   // |width / depth below the horizon of an ROI or template measurement
                                            // against the detections' - 1|, at most (flat road: w = W d / h)
-    VehicleHeightParams height;       // section "vehicle_height", handed in by the configuration (core/config.cpp)
+    VehicleHeightParams height;       // section "vehicle_height", taken by share
 
+    void share(const SectionLookup &c) { height = c.get<VehicleHeightParams>("vehicle_height"); }
     void bind(ParamMap &m);
 };
 

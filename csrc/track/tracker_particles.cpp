@@ -1,6 +1,8 @@
 #include "track/tracker_particles.hpp"
 
+#include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
+#include "detect/detector_parallax.hpp"
 
 namespace hw {
 
@@ -30,5 +32,16 @@ void ParticleTracker::step(const FrameContext &ctx, DetectorSet &detectors, std:
     pf_.report(tracks);
     times.add("particles", sw.ms());
 }
+
+namespace {
+
+// The part, its configuration section and its factory (base/part_registry.hpp).
+const bool registered = register_part<Tracker, ParticleParams>(
+    "particles", "particles", [](const ParticleParams &p, const SectionLookup &c) {
+        return std::make_unique<ParticleTracker>(p, c.get<ParallaxSection>("parallax").max_dt_s,
+                                                 c.get<CameraParams>("camera"));
+    });
+
+} // namespace
 
 } // namespace hw

@@ -1,5 +1,6 @@
 #include "track/tracker_phd.hpp"
 
+#include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
 #include "geometry/flat_road.hpp"
 
@@ -520,5 +521,20 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
     // the same work in CPU time of this thread (a loaded machine preempts the wall time; app/bench/phd.py)
     times.add("track_cpu", float(std::max(0.0, thread_cpu_ms() - cpu0 - detect_cpu_ms)));
 }
+
+namespace {
+
+// The part, its configuration section and its factory (base/part_registry.hpp).
+const bool registered = register_part<Tracker, PhdTrackerParams>(
+    "phd", "phd", [](const PhdTrackerParams &p, const SectionLookup &c) {
+        return std::make_unique<PhdTracker>(c.get<HorizonParams>("horizon"), p, c.get<CameraParams>("camera"));
+    });
+// Its units' sections, held in its struct.
+const bool units_registered = register_subsection("gmphd", "phd", &PhdTrackerParams::phd) &&
+                              register_subsection("phd_features", "phd", &PhdTrackerParams::features) &&
+                              register_subsection("phd_ukf", "phd", &PhdTrackerParams::ukf) &&
+                              register_subsection("phd_pitch", "phd", &PhdTrackerParams::pitch);
+
+} // namespace
 
 } // namespace hw

@@ -52,6 +52,7 @@
 // Range, lateral offset and range rate are the UKF's; the geometry stage adds the TTCs.
 #pragma once
 
+#include "base/sections.hpp"
 #include "geometry/horizon.hpp"
 #include "geometry/road_params.hpp"
 #include "track/association.hpp"
@@ -93,7 +94,7 @@ struct PhdTrackerParams {
     double birth_min_appearance = 0.9;  // a learned detection scoring under this starts no vehicle (it may still
                                         // re-anchor one); others are not affected
     int birth_lanes_beside = 2;        // lanes; a detection farther beside the ego lane (or path) starts no vehicle
-    RoadParams road;                   // section "road" (lane width: the birth gate without lanes), handed in by the configuration
+    RoadParams road;                   // section "road" (lane width: the birth gate without lanes), taken by share
     int max_detection_misses = 5;      // detector runs in a row that may miss a confirmed vehicle
     int coast_frames = 3;              // frames a confirmed vehicle whose features were lost (eq. 12) is carried by
                                        // its UKF alone before it ends (0 = it ends at once, the paper's rule)
@@ -105,8 +106,12 @@ struct PhdTrackerParams {
     GmPhdParams phd;                   // the GM-PHD filter (section gmphd)
     VehicleUkfParams ukf;              // the UKF (section phd_ukf)
     ScenePitchParams pitch;            // the horizon followed through the car's pitch (section phd_pitch)
-    VehicleHeightParams height;        // section "vehicle_height", handed in by the configuration (core/config.cpp)
+    VehicleHeightParams height;        // section "vehicle_height", taken by share
 
+    void share(const SectionLookup &c) {  // the road's widths, the vehicle's height
+        road = c.get<RoadParams>("road");
+        height = c.get<VehicleHeightParams>("vehicle_height");
+    }
     void bind(ParamMap &m);
 };
 

@@ -1,5 +1,6 @@
 #include "track/vehicle_height.hpp"
 
+#include "base/sections.hpp"
 #include <algorithm>
 
 namespace hw {
@@ -34,5 +35,12 @@ cv::Rect2f VehicleHeight::compared_box(const Hypothesis &d, const cv::Rect2f &vb
     if (!tall(p) || d.top_measured) return b;
     return {b.x, b.y + b.height - vb.height, b.width, vb.height};
 }
+
+namespace {
+
+// Its section, handed to the trackers that keep a box height (kalman, phd: their `share`).
+const bool registered = register_section<VehicleHeightParams>("vehicle_height");
+
+} // namespace
 
 } // namespace hw
