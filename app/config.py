@@ -91,6 +91,14 @@ def _source_path(cfg: dict) -> Optional[str]:
 
 
 # Rules between keys, checked after every key is valid alone; each says what to change.
+def _pitch_unknown(overrides: dict) -> bool:
+    """A camera described without its pitch (e.g. only what a calibration file holds: intrinsics and height) is
+    calibrated from scratch: the configured pitch is a guess then, and holding the estimate near it fails."""
+    camera, calib = overrides.get("camera"), overrides.get("self_calibration")
+    return (isinstance(camera, dict) and bool(camera) and "pitch_deg" not in camera
+            and not (isinstance(calib, dict) and "from_scratch" in calib))
+
+
 CROSS_FIELD_RULES = (_fcw_order, _mcu_timing, _source_path)
 
 
@@ -227,6 +235,8 @@ def validate(overrides: dict, origin: str = "configuration") -> dict[str, dict[s
             if key not in sch[sec]:
                 raise ConfigFileError(f"{origin}: {sec}.{short_name(key)}: unknown key ({_known(key, sch[sec])})")
             cfg[sec][key] = _check_value(f"{origin}: {sec}.{key}", value, sch[sec][key])
+    if _pitch_unknown(overrides):
+        cfg["self_calibration"]["from_scratch"] = True
     for rule in CROSS_FIELD_RULES:
         problem = rule(cfg)
         if problem:

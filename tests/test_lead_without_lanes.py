@@ -61,3 +61,29 @@ def test_unmarked_road_lanes_are_not_believed_even_with_more_marking_points():
     assert sum(row[2] for row in tracked) >= 0.98 * len(tracked)
     share = sum(row[2] for row in judged) / len(judged)
     assert share >= 0.95, f"the car ahead was the lead in {share:.0%} of the frames"
+
+
+def test_a_car_stopped_close_ahead_without_markings_is_tracked_and_ranged_within_8_percent():
+    """stopped_close_no_markings, default preset: the car ahead (id 1, real-looking) crawls, stops, and stands 6.7 m
+    ahead with queues beside it on a road without lines. It is tracked (a confirmed track at IoU >= 0.5) in >= 95 %
+    of the frames and every matched range is within 8 % of the truth. Measured 267 of 270 frames (the first three
+    confirm it), range error median 0.5 %, max 1.8 %: the horizon follows only a believed lane model's vanishing
+    point, so the vehicle sides that the lane stage assembles into "lanes" here do not move it."""
+    rows = []  # (a confirmed track matches car 1, that track's relative range error)
+
+    def on_result(r, decision, truth):
+        v1 = next(v for v in truth if v["id"] == 1)
+        confirmed = [t for t in r.tracks if t.confirmed]
+        pair = match([v1["box_clipped"]], [t.box for t in confirmed], 0.5)
+        err = None
+        if pair and confirmed[pair[0][1]].range_m is not None:
+            err = (confirmed[pair[0][1]].range_m - v1["longitudinal_m"]) / v1["longitudinal_m"]
+        rows.append((bool(pair), err))
+
+    replay_scenario("stopped_close_no_markings", on_result=on_result, progress=False)
+    assert len(rows) == 270
+    tracked = sum(row[0] for row in rows)
+    assert tracked >= 0.95 * len(rows), f"the car ahead tracked in {tracked} of {len(rows)} frames"
+    errors = [abs(e) for ok, e in rows if ok and e is not None]
+    assert len(errors) >= 0.95 * len(rows)
+    assert max(errors) <= 0.08, f"range error up to {max(errors):.1%}"

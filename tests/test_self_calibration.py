@@ -184,39 +184,41 @@ MIN_ACCURACY, MAX_FP, MAX_FN = 0.92, 0.10, 0.10
 
 def test_lane_clips_from_intrinsics_and_height_alone_reach_the_tusimple_bar(clips_from_scratch):
     """Each clip replayed as `headway replay CLIP --fps 20 --config F` with F holding only TuSimple's calibration.txt
-    (intrinsics, 1.80 m height), the hood line and self_calibration.from_scratch; the default pitch (1 deg) is 10 deg
-    off the camera's. Measured 0.931 / 0.097 / 0.090 (without from_scratch: 0.512 / 0.667 / 0.729)."""
-    m = clips_from_scratch["from_scratch"]
+    (intrinsics, 1.80 m height) and the hood line: a camera section without pitch_deg is calibrated from scratch;
+    the default pitch (1 deg) is 10 deg off the camera's. Measured 0.931 / 0.097 / 0.090 (the same file with
+    self_calibration.from_scratch false: 0.512 / 0.667 / 0.729)."""
+    m = clips_from_scratch["no_pitch"]
     assert m["clips"] == 12
     assert m["accuracy"] >= MIN_ACCURACY and m["fp"] <= MAX_FP and m["fn"] <= MAX_FN, m
 
 
 def test_lane_clips_lose_nothing_with_the_pitch_given(clips_from_scratch):
-    """The same with camera.pitch_deg 10.5 given: measured 0.931 / 0.097 / 0.090, as without it (the configured pitch
-    is a starting value; the first lane measurement replaces it)."""
-    given, scratch = clips_from_scratch["pitch_given"], clips_from_scratch["from_scratch"]
+    """The same with camera.pitch_deg 10.5 given (the configured mounting is then trusted to +- 3 deg): measured
+    0.930 / 0.097 / 0.090 against 0.931 without it, one lane point of 1,152."""
+    given, scratch = clips_from_scratch["pitch_given"], clips_from_scratch["no_pitch"]
     assert given["accuracy"] >= MIN_ACCURACY and given["fp"] <= MAX_FP and given["fn"] <= MAX_FN, given
-    assert scratch["accuracy"] >= given["accuracy"] - 1e-9, (scratch, given)
+    assert given["accuracy"] >= scratch["accuracy"] - 0.005 and given["fp"] <= scratch["fp"] + 1e-9, (given, scratch)
 
 
-def test_pitch_from_scratch_within_0_3_deg_of_the_pitch_found_when_given_within_20_frames(clips_from_scratch):
-    """Every clip: after its 20 frames the pitch found from scratch is within 0.3 deg of the one found with the pitch
-    given, in the 10-13 deg a downward-looking TuSimple camera has (measured 10.6-12.7 deg), and it was within 0.3 deg
-    of it from frame 11 at the latest on all but 2 clips (measured: frames 0-18)."""
+def test_pitch_from_scratch_settles_within_the_clip(clips_from_scratch):
+    """Every clip without the pitch: after its 20 frames the pitch found is in the 10-13 deg a downward-looking
+    TuSimple camera has (measured 10.6-12.7 deg) with 1-sigma <= 0.15 deg, within 1.2 deg of the estimate with the
+    pitch given (measured <= 1.13 deg), and from frame 11 at the latest it stays within 0.3 deg of its final value
+    (measured: from frames 0-8)."""
     clips = clips_from_scratch["clips"]
     assert len(clips) == 12
     for c in clips:
-        assert abs(c["pitch_diff_deg"]) <= 0.3, c
-        assert 10.0 <= c["from_scratch"]["pitch_deg"] <= 13.0, c
-        assert c["from_scratch"]["pitch_sigma_deg"] <= 0.15, c
-    assert sum(c["within_from_frame"] is not None and c["within_from_frame"] <= 11 for c in clips) >= 10, clips
+        assert 10.0 <= c["no_pitch"]["pitch_deg"] <= 13.0, c
+        assert c["no_pitch"]["pitch_sigma_deg"] <= 0.15, c
+        assert abs(c["pitch_diff_deg"]) <= 1.2, c
+    assert all(c["pitch_settled_from_frame"] is not None and c["pitch_settled_from_frame"] <= 11 for c in clips), clips
 
 
 def test_yaw_from_scratch_is_measured_within_20_frames(clips_from_scratch):
     """The yaw likewise, where the car keeps its lane: on 10 of the 12 clips its 1-sigma is under 0.3 deg after 20
     frames (the other two: a lane change or the lane's offset jittering faster than max_lateral_rate_mps)."""
     clips = clips_from_scratch["clips"]
-    assert sum(c["from_scratch"]["yaw_sigma_deg"] <= 0.3 for c in clips) >= 10, clips
+    assert sum(c["no_pitch"]["yaw_sigma_deg"] <= 0.3 for c in clips) >= 10, clips
 
 
 def test_an_empty_pitch_search_range_is_a_clear_error():
@@ -224,3 +226,20 @@ def test_an_empty_pitch_search_range_is_a_clear_error():
 
     with pytest.raises(ConfigError, match="self_calibration.pitch_min_deg: must be below"):
         Pipeline({"self_calibration": {"pitch_min_deg": 12.0, "pitch_max_deg": 5.0}})
+
+
+@pytest.mark.parametrize("camera, calibration, from_scratch", [
+    ({"fx": 1000.0, "height_m": 1.8}, None, True),               # a camera without its pitch: found from scratch
+    ({"fx": 1000.0, "height_m": 1.8, "pitch_deg": 10.5}, None, False),  # the pitch given: trusted to +- 3 deg
+    ({"fx": 1000.0, "height_m": 1.8}, {"from_scratch": False}, False),  # the configuration's own choice wins
+    (None, None, False),                                           # no camera section: the defaults as they are
+])
+def test_a_camera_section_without_its_pitch_is_calibrated_from_scratch(tmp_path, camera, calibration, from_scratch):
+    import yaml
+
+    from app.config import load
+
+    text = {k: v for k, v in (("camera", camera), ("self_calibration", calibration)) if v is not None}
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(text))
+    assert load(path)["self_calibration"]["from_scratch"] is from_scratch

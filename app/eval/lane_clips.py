@@ -94,16 +94,15 @@ def evaluate(clips_dir: str, config_path: Optional[str] = None, preset: str = "t
             "per_image": m["per_image"]}
 
 
-def write_camera_config(path: str, pitch_deg: Optional[float] = None, from_scratch: bool = False) -> str:
+def write_camera_config(path: str, pitch_deg: Optional[float] = None) -> str:
     """A configuration file with TuSimple's camera as calibration.txt gives it (intrinsics, 1.80 m height) and the
-    bonnet's 8 % hood line; the pitch only if given; self_calibration.from_scratch if asked. Returns `path`."""
+    bonnet's 8 % hood line; the pitch only if given (without it the camera is calibrated from scratch). Returns
+    `path`."""
     cam = {k: v for k, v in TUSIMPLE_CAMERA.items() if k != "pitch_deg"}
     cam["hood_frac"] = 0.08
     if pitch_deg is not None:
         cam["pitch_deg"] = pitch_deg
     cfg: dict = {"camera": cam}
-    if from_scratch:
-        cfg["self_calibration"] = {"from_scratch": True}
     Path(path).write_text(yaml.safe_dump(cfg, sort_keys=False))
     return path
 

@@ -147,17 +147,17 @@ def synthetic(scenario: str = "calibration_drive", offsets: Optional[dict] = Non
 
 
 def lane_clips(data: str, within_deg: float = 0.3) -> dict:
-    """The 12 real lane clips replayed as `headway replay CLIP --fps 20 --config F` does, twice, F with
-    self_calibration.from_scratch: with only what TuSimple's calibration.txt holds (intrinsics, 1.80 m height) and
-    the hood line ("from_scratch"), and with the pitch given as well ("pitch_given"). Per run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's
-    estimate at the last frame and, from scratch, the first frame from which pitch and yaw stay within `within_deg`
-    of the last frame's estimate with the pitch given (None: not within at the end)."""
+    """The 12 real lane clips replayed as `headway replay CLIP --fps 20 --config F` does, twice: F with only what
+    TuSimple's calibration.txt holds (intrinsics, 1.80 m height) and the hood line ("no_pitch": calibrated from
+    scratch, as every camera section without pitch_deg is), and with the pitch given as well ("pitch_given"). Per
+    run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's estimate at the last frame and, without
+    the pitch, the first frame from which the pitch estimate stays within `within_deg` of its last value."""
     clips = str(Path(data) / "tusimple" / "lane_clips")
     out: dict = {}
     course: dict = {}
     with tempfile.TemporaryDirectory(prefix="headway-calib-") as tmp:
-        for run, pitch in (("from_scratch", None), ("pitch_given", TUSIMPLE_LANE_PITCH_DEG)):
-            cfg = clips_eval.write_camera_config(str(Path(tmp) / f"{run}.yaml"), pitch, from_scratch=True)
+        for run, pitch in (("no_pitch", None), ("pitch_given", TUSIMPLE_LANE_PITCH_DEG)):
+            cfg = clips_eval.write_camera_config(str(Path(tmp) / f"{run}.yaml"), pitch)
             per: dict = {}
             m = clips_eval.evaluate_replay(clips, cfg, on_frame=lambda lab, r, per=per: per.setdefault(
                 "/".join(lab["raw_file"].split("/")[1:3]), []).append(r.calibration))
@@ -166,20 +166,18 @@ def lane_clips(data: str, within_deg: float = 0.3) -> dict:
             out[run]["per_clip"] = {"/".join(x["raw_file"].split("/")[1:3]): {k: x[k] for k in ("accuracy", "fp", "fn")}
                                     for x in m["per_image"]}
     per_clip = []
-    for clip, scratch in course["from_scratch"].items():
+    for clip, scratch in course["no_pitch"].items():
         given = course["pitch_given"][clip][-1]
-        near = [abs(c["pitch_deg"] - given["pitch_deg"]) <= within_deg and abs(c["yaw_deg"] - given["yaw_deg"])
-                <= within_deg for c in scratch]
-        first = next((i for i in range(len(near)) if all(near[i:])), None)
         last = scratch[-1]
-        per_clip.append({"clip": clip, "frames": len(scratch), "within_from_frame": first,
-                         "from_scratch": {k: round(last[k], 3) for k in ("pitch_deg", "yaw_deg", "height_m",
-                                                                           "pitch_sigma_deg", "yaw_sigma_deg")}
+        near = [abs(c["pitch_deg"] - last["pitch_deg"]) <= within_deg for c in scratch]
+        first = next((i for i in range(len(near)) if all(near[i:])), None)
+        per_clip.append({"clip": clip, "frames": len(scratch), "pitch_settled_from_frame": first,
+                         "no_pitch": {k: round(last[k], 3) for k in ("pitch_deg", "yaw_deg", "height_m",
+                                                                       "pitch_sigma_deg", "yaw_sigma_deg")}
                          | {"state": last["state"], "updates": last["updates"]},
                          "pitch_given": {k: round(given[k], 3) for k in ("pitch_deg", "yaw_deg", "height_m")}
                          | {"state": given["state"]},
-                         "pitch_diff_deg": round(last["pitch_deg"] - given["pitch_deg"], 3),
-                         "yaw_diff_deg": round(last["yaw_deg"] - given["yaw_deg"], 3)})
+                         "pitch_diff_deg": round(last["pitch_deg"] - given["pitch_deg"], 3)})
     out["clips"] = per_clip
     return out
 

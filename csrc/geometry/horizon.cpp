@@ -7,7 +7,7 @@ namespace hw {
 
 double HorizonTracker::update(const LaneModel &lanes) {
     const double calibrated = cam_.horizon_row();
-    const bool measured = p_.use_lanes && lanes.valid && lanes.ego_left.observed && lanes.ego_right.observed &&
+    const bool measured = p_.use_lanes && lanes.certain && lanes.ego_left.observed && lanes.ego_right.observed &&
                           std::isfinite(lanes.vanishing_point.y);
     if (measured) {
         const double target =

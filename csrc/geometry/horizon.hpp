@@ -2,7 +2,8 @@
 //
 // Braking, bumps and load tilt the camera; a fixed horizon then turns every row error into a range
 // error that grows with Z^2. The lane vanishing point measures the horizon directly when the lanes
-// are straight: we follow it with a first-order filter, bounded around the calibrated horizon so a
+// are straight and believed (paint along both ego boundaries, not vehicle sides on an unmarked road): we follow
+// it with a first-order filter, bounded around the calibrated horizon so a
 // bad vanishing point (a curve, a wrong marking) cannot drag range far off, and fall back towards
 // the calibrated horizon while no vanishing point is measured.
 #pragma once
@@ -29,7 +30,7 @@ struct HorizonParams {
               "fy 700), so a curve or a wrong marking cannot wreck range");
         m.add("return_alpha", return_alpha, 0.0, 1.0,
               "1/frame; drift back to the calibrated horizon while no vanishing point is measured");
-        m.add("use_lanes", use_lanes, "follow the lane vanishing point; false = calibrated pitch only");
+        m.add("use_lanes", use_lanes, "follow the vanishing point of a believed lane model (paint along both ego boundaries); false = calibrated pitch only");
     }
 };
 

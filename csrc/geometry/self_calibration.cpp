@@ -26,9 +26,8 @@ void SelfCalibrationParams::bind(ParamMap &m) {
     m.add("enabled", enabled, "estimate the camera's pitch, yaw and height from the lanes while driving; "
                               "false = the camera section is used as configured");
     m.add("from_scratch", from_scratch,
-          "pitch and yaw not known: found from the lanes over pitch_min_deg..pitch_max_deg and "
-          "+-yaw_max_abs_deg, the limits then around the converged estimate (headway calibrate --from-video "
-          "sets it)");
+          "pitch and yaw not known: searched from the lanes, the limits then around the converged estimate; "
+          "true by default when a configuration file's camera section has no pitch_deg");
     m.add("prior_sigma_deg", prior_sigma_deg, 0.01, 30.0,
           "deg; 1-sigma trust in the configured pitch and yaw (the prior); a surveyed mounting can say 0.2");
     m.add("prior_sigma_height", prior_sigma_height, 0.001, 1.0,
