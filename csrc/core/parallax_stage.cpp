@@ -27,7 +27,7 @@ FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked,
     auto *detector = new ParallaxDifferenceDetector(cfg.parallax, cfg.camera);
     DetectorSet detectors;
     detectors.parts.emplace_back(detector);
-    ParticleTracker tracker(cfg.particles, cfg.parallax.max_dt_s, cfg.camera);
+    ParticleTracker tracker(cfg.particles, cfg.camera);
     FrameOutput out;
     out.width = W;
     out.height = H;

@@ -34,7 +34,7 @@ const std::map<std::string, Factory<Detector>> &detectors() {
 const std::map<std::string, Factory<Tracker>> &trackers() {
     static const std::map<std::string, Factory<Tracker>> r{
         {"kalman", [](const Config &c) { return std::make_unique<KalmanTracker>(c.shadow, c.verify, c.kalman); }},
-        {"particles", [](const Config &c) { return std::make_unique<ParticleTracker>(c.particles, c.parallax.max_dt_s, c.camera); }},
+        {"particles", [](const Config &c) { return std::make_unique<ParticleTracker>(c.particles, c.camera); }},
         {"phd", [](const Config &c) { return std::make_unique<PhdTracker>(c.horizon, c.phd, c.camera); }},
     };
     return r;

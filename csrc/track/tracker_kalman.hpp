@@ -19,6 +19,8 @@
 #pragma once
 
 #include "detect/verify.hpp"
+#include "track/birth_gate.hpp"
+#include "track/frame_clock.hpp"
 #include "track/kalman_box.hpp"
 #include "track/roi_search.hpp"
 #include "track/template_check.hpp"
@@ -89,7 +91,6 @@ private:
         VehicleTemplate appearance;   // last measured box, for the correlation check
         KalmanBox::Vec3 appearance_z = KalmanBox::Vec3::Zero();  // the corners it was cut at
         bool updated = false;         // measured (edges or detection) this frame
-        bool duplicate = false;       // another track follows the same vehicle
     };
 
     void predict_all(double dt, const cv::Point2f &vp);
@@ -101,6 +102,7 @@ private:
     bool occluded(const Track &t) const;
     void start_tracks(const cv::Mat &gray, const std::vector<Hypothesis> &dets, const std::vector<bool> &used);
     void prune(const FrameContext &ctx);
+    BirthGateParams birth_gate() const;
     TrackState report(const Track &t) const;
 
     void apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality);
@@ -117,8 +119,7 @@ private:
     std::vector<Track> tracks_;
     int next_id_ = 1;
     int frames_since_detection_ = 0;
-    double last_t_s_ = 0.0;
-    bool started_ = false;
+    FrameClock clock_;
     float horizon_ = 0.f;             // this frame's horizon row (width per depth of the detections)
     int cols_ = 0;                    // width of the frame being tracked (a box the image side cuts: track/vehicle_height.hpp)
 };

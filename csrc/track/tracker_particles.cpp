@@ -6,18 +6,14 @@ namespace hw {
 
 void ParticleTracker::reset() {
     pf_.reset();
-    started_ = false;
+    clock_.reset();
 }
 
 void ParticleTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
                            StageTimes &times, bool &full_detection) {
-    double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
-    if (started_ && (dt > max_dt_s_ || dt < 0.0)) {
-        reset();
-        dt = 0.0;
-    }
-    started_ = true;
-    last_t_s_ = ctx.t_s;
+    bool gap = false;
+    const double dt = clock_.step(ctx.t_s, gap);
+    if (gap) pf_.reset();
 
     std::vector<Hypothesis> hyps;
     full_detection = detectors.detect(ctx.road(), hyps, times);
