@@ -33,7 +33,7 @@ const std::map<std::string, Factory<Detector>> &detectors() {
 // The tracker registry.
 const std::map<std::string, Factory<Tracker>> &trackers() {
     static const std::map<std::string, Factory<Tracker>> r{
-        {"kalman", [](const Config &c) { return std::make_unique<KalmanTracker>(c.shadow, c.verify, c.kalman); }},
+        {"kalman", [](const Config &c) { return std::make_unique<KalmanTracker>(c.kalman, RoiSearch(c.shadow, c.verify)); }},
         {"particles", [](const Config &c) { return std::make_unique<ParticleTracker>(c.particles, c.camera); }},
         {"phd", [](const Config &c) { return std::make_unique<PhdTracker>(c.horizon, c.phd, c.camera); }},
     };

@@ -85,8 +85,8 @@ void KalmanBoxParams::bind(ParamMap &m) {
           "s; a gap between frames longer than this drops all tracks (the predictions are void)");
 }
 
-KalmanTracker::KalmanTracker(const ShadowParams &s, const VerifyParams &v, const KalmanBoxParams &k)
-    : shadow_(s), verify_(v), kalman_(k), clock_(k.max_dt_s) {}
+KalmanTracker::KalmanTracker(const KalmanBoxParams &k, const RoiSearch &roi)
+    : kalman_(k), roi_(roi), clock_(k.max_dt_s) {}
 
 void KalmanTracker::reset() {
     tracks_.clear();
@@ -132,7 +132,7 @@ double KalmanTracker::accel_bound(const Track &t) const {
     // A vehicle of width W m at range Z spans w = fx W / Z px: a lateral acceleration a shows as
     // fx a / Z = a w / W px/s^2.
     const KalmanBox::Vec3 z = t.kf.measurement();
-    return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / shadow_.road.road.vehicle_width_m + kalman_.ego_accel_px_s2;
+    return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / roi_.vehicle_width_m() + kalman_.ego_accel_px_s2;
 }
 
 void KalmanTracker::predict_all(double dt, const cv::Point2f &vp) {
@@ -176,7 +176,7 @@ bool KalmanTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
     pred.gate_y = float(std::max(kalman_.min_gate_px, kalman_.gate_sigma * std::sqrt(S(1, 1))));
     pred.max_side_change = std::clamp(t.max_side_change, float(kalman_.side_change_floor_px),
                                       std::max(float(kalman_.side_change_floor_px), pred.gate_x));
-    const RoiMeasurement m = search_roi(gray, pred, shadow_, verify_, kalman_.roi);
+    const RoiMeasurement m = roi_.search(gray, pred, kalman_.roi);
     if (!m.found) return false;
     // On a flat road a vehicle's width and its bottom's depth below the horizon grow together (w = W d / h): a side
     // that jumped to another edge changes their ratio, approaching or not.
@@ -258,7 +258,7 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
         const KalmanBox::Vec3 z(b.x, b.y + b.height, b.x + b.width);
         const double w = b.width;
         Track t(next_id_++, KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
-                                      kalman_.init_speed_mps * w / shadow_.road.road.vehicle_width_m));
+                                      kalman_.init_speed_mps * w / roi_.vehicle_width_m()));
         t.confidence = dets[i].score;
         t.height.start(dets[i], gray.cols, kalman_.height);
         note_width_per_depth(t, b);
@@ -286,7 +286,7 @@ void KalmanTracker::prune(const FrameContext &ctx) {
         const KalmanBox::Vec3 z = t.kf.measurement();
         const double w = z[2] - z[0], h = t.height.aspect * w;
         // A box that shrank or grew far from any vehicle at its row lost its vehicle.
-        const float w_exp = expected_vehicle_width(float(z[1]), gray.size(), ctx.lanes, ctx.camera, shadow_.road);
+        const float w_exp = roi_.expected_width(float(z[1]), gray.size(), ctx.lanes, ctx.camera);
         const bool implausible = w_exp > 0.f && (w < kalman_.min_width_ratio * w_exp || w > kalman_.max_width_ratio * w_exp);
         gone[i] = gone[i] || implausible || missed_out(t.misses, t.confirmed, limits) ||
                   out_of_view(cv::Rect2d(z[0], z[1] - h, w, h), horizon_, gray.size());

@@ -18,7 +18,6 @@
 // search need no lane model (the detector falls back to the camera's flat-road model).
 #pragma once
 
-#include "detect/verify.hpp"
 #include "track/birth_gate.hpp"
 #include "track/frame_clock.hpp"
 #include "track/kalman_box.hpp"
@@ -70,9 +69,9 @@ struct KalmanBoxParams {
 
 class KalmanTracker final : public Tracker {
 public:
-    // shadow, verify: the ROI search around each prediction looks for the bottom edge and sides as
-    // the shadow detector and its verification do (and the expected vehicle width at a row).
-    KalmanTracker(const ShadowParams &shadow, const VerifyParams &verify, const KalmanBoxParams &kalman);
+    // roi: the search around each prediction for the bottom edge and sides (as the shadow detector and its
+    // verification find them), and the expected vehicle width at a row.
+    KalmanTracker(const KalmanBoxParams &kalman, const RoiSearch &roi);
     void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
@@ -113,9 +112,8 @@ private:
     KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
     double accel_bound(const Track &t) const;
 
-    ShadowParams shadow_;
-    VerifyParams verify_;
     KalmanBoxParams kalman_;
+    RoiSearch roi_;
     std::vector<Track> tracks_;
     int next_id_ = 1;
     int frames_since_detection_ = 0;
