@@ -35,7 +35,7 @@ const std::map<std::string, Factory<Tracker>> &trackers() {
     static const std::map<std::string, Factory<Tracker>> r{
         {"kalman", [](const Config &c) { return std::make_unique<KalmanTracker>(c.kalman, RoiSearch(c.shadow, c.verify)); }},
         {"particles", [](const Config &c) { return std::make_unique<ParticleTracker>(c.particles, c.camera); }},
-        {"phd", [](const Config &c) { return std::make_unique<PhdTracker>(c.horizon, c.phd, c.camera); }},
+        {"phd", [](const Config &c) { return std::make_unique<PhdTracker>(c.phd, c.camera, HorizonTracker(c.horizon, c.camera)); }},
     };
     return r;
 }

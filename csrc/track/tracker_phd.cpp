@@ -87,8 +87,8 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("max_dt_s", max_dt_s, 0.01, 100.0, "s; a longer gap between frames drops all vehicles");
 }
 
-PhdTracker::PhdTracker(const HorizonParams &h, const PhdTrackerParams &p, const CameraParams &cam)
-    : p_(p), cam_(cam), horizon_(h, cam), flow_(p.features), pitch_(p.pitch, p.features), clock_(p.max_dt_s) {}
+PhdTracker::PhdTracker(const PhdTrackerParams &p, const CameraParams &cam, const HorizonTracker &horizon)
+    : p_(p), cam_(cam), horizon_(horizon), flow_(p.features), pitch_(p.pitch, p.features), clock_(p.max_dt_s) {}
 
 void PhdTracker::reset() {
     vehicles_.clear();

@@ -113,7 +113,8 @@ struct PhdTrackerParams {
 
 class PhdTracker final : public Tracker {
 public:
-    PhdTracker(const HorizonParams &horizon, const PhdTrackerParams &p, const CameraParams &camera);
+    // horizon: the lanes' horizon row followed over frames (the slow part of the car's pitch).
+    PhdTracker(const PhdTrackerParams &p, const CameraParams &camera, const HorizonTracker &horizon);
     void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
