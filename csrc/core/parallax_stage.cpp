@@ -28,7 +28,7 @@ FrameOutput run_parallax_stage(const std::string &stage, const cv::Mat &stacked,
     auto *detector = new ParallaxDifferenceDetector(parallax, cfg.camera);
     DetectorSet detectors;
     detectors.parts.emplace_back(detector);
-    ParticleTracker tracker(cfg.get<ParticleParams>("particles"), parallax.max_dt_s, cfg.camera);
+    ParticleTracker tracker(cfg.get<ParticleParams>("particles"), cfg.camera);
     FrameOutput out;
     out.width = W;
     out.height = H;

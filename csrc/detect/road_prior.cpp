@@ -73,7 +73,7 @@ RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraPar
     r.horizon_row = float(yh);
     // First scanned row: the ground row of a vehicle at max_range, y = y_h + fy * h / Z_max.
     r.y_top = std::max(2, int(std::ceil(yh + c.fy * c.height_m / p.max_range_m)));
-    r.y_bottom = std::min(size.height - 2, int(size.height * (1.0 - cam.hood_frac)));
+    r.y_bottom = std::min(size.height - 2, cam.hood_row(size.height));
     if (r.empty()) return r;
     const int n = r.y_bottom - r.y_top;
     r.x_left.assign(n, 0); r.x_right.assign(n, -1); r.width_px.assign(n, 0.f);

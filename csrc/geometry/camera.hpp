@@ -50,6 +50,9 @@ struct CameraParams {
 
     bool has_distortion() const { return k1 != 0.0 || k2 != 0.0 || k3 != 0.0 || p1 != 0.0 || p2 != 0.0; }
 
+    // First row of the car's bonnet in a frame `rows` high: the rows from it down show no road (`rows`: no bonnet).
+    int hood_row(int rows) const { return rows - int(std::lround(hood_frac * rows)); }
+
     // Horizon row of a level road for the configured pitch.
     double horizon_row() const { return cy - fy * std::tan(pitch_deg * M_PI / 180.0); }
 };

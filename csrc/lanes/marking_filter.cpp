@@ -58,7 +58,7 @@ ScanBand scan_band(cv::Size size, const CameraParams &cam, const HorizonPrior &h
     ScanBand b;
     const float top = row_at_range(cam, hp.row, float(p.max_range_m));
     b.y_top = std::clamp(int(std::ceil(top)), 0, size.height - 1);
-    b.y_bottom = size.height - 1 - int(std::lround(cam.hood_frac * size.height));
+    b.y_bottom = cam.hood_row(size.height) - 1;
     const int n = b.y_bottom - b.y_top + 1;
     b.step = n > 0 ? std::max(1, (n + p.max_scan_rows - 1) / p.max_scan_rows) : 1;
     return b;

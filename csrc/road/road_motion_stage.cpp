@@ -101,8 +101,9 @@ const RoadMotionFrame &RoadMotionStage::update(const cv::Mat &gray, double t_s, 
     // A searched travel only starts the features (large patches); the DLT then relies on RANSAC.
     const bool predicted = kf_.has_prediction() && !kf_.guessed();
     if (!prev_.empty()) f = lane_correspondences(cur_, prev_, vp, cam_, kf_.predicted_px(), predicted, fp_);
+    const float hood = float(cam_.hood_row(cam_.height));
     f.matches.erase(std::remove_if(f.matches.begin(), f.matches.end(),
-                                   [&](const Correspondence &c) { return c.cur.y >= float(hood_row()); }),
+                                   [&](const Correspondence &c) { return c.cur.y >= hood; }),
                     f.matches.end());
     if (pp_.exclude_vehicle_corners && !restart) {
         // Where the confirmed vehicles are now (last estimate moved by its velocity), widened a little
@@ -165,7 +166,7 @@ const RoadMotionFrame &RoadMotionStage::update(const cv::Mat &gray, double t_s, 
     out_.level = pp_.detect.level;
     out_.band = level;
     if (have_prev_level) out_.prev_band = prev_level_;
-    out_.hood_row = hood_row();
+    out_.hood_row = cam_.hood_row(cam_.height);
     prev_level_ = level;
     return out_;
 }
@@ -197,7 +198,7 @@ RoadMotionStage::RoadResidual RoadMotionStage::road_residual(const LaneModel &la
         const cv::Rect b(cv::Point(int(box.x) - 4, int(box.y) - 4), cv::Point(int(box.br().x) + 4, int(box.br().y) + 4));
         road(b & cv::Rect(0, 0, road.cols, road.rows)).setTo(0);
     }
-    road.rowRange(hood_row(), road.rows).setTo(0);
+    road.rowRange(cam_.hood_row(cam_.height), road.rows).setTo(0);
     road &= valid;
     RoadResidual out;
     const int n = cv::countNonZero(road);

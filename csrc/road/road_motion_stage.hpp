@@ -74,8 +74,6 @@ public:
     RoadResidual road_residual(const LaneModel &lanes, const std::vector<cv::Rect2f> &detections) const;
 
 private:
-    int hood_row() const { return cam_.height - int(std::lround(cam_.hood_frac * cam_.height)); }
-
     LaneFeatureParams fp_;
     HomographyParams hp_;
     ParallaxSection pp_;

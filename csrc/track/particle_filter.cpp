@@ -1,5 +1,7 @@
 #include "track/particle_filter.hpp"
 
+#include "track/duplicate_pruning.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -71,6 +73,8 @@ void ParticleParams::bind(ParamMap &m) {
     m.add("resampling", resampling, "joint|per_vehicle",
           "joint: the paper's, each particle resampled whole by its joint weight; per_vehicle: each vehicle's "
           "part resampled by its own factor (docs/tracking.md)");
+    m.add("max_dt_s", max_dt_s, 0.01, 100.0,
+          "s; a longer gap between frames (or time going back) drops all vehicles and starts the filter again");
 }
 
 JointParticleFilter::JointParticleFilter(const ParticleParams &p, const CameraParams &cam)
@@ -355,16 +359,15 @@ void JointParticleFilter::bookkeeping(const std::vector<PointMeasurement> &z, cv
         if (out || v.missed > p_.max_missed_frames || unsupported) remove_vehicle(i);
     }
     // Two vehicles on one: the one measured fewer times goes.
-    for (int i = 0; i < int(vehicles_.size()); ++i)
-        for (int k = i + 1; k < int(vehicles_.size()); ++k) {
-            const Vehicle &a = vehicles_[size_t(i)], &b = vehicles_[size_t(k)];
-            const float lim = float(p_.duplicate_frac) * std::max(a.w, b.w);
-            if (std::fabs(a.mean[0] - b.mean[0]) < lim && std::fabs(a.mean[1] - b.mean[1]) < lim) {
-                remove_vehicle(a.hits < b.hits ? i : k);
-                i = -1;  // restart: indices moved
-                break;
-            }
-        }
+    std::vector<TrackRank> ranks;
+    for (const Vehicle &v : vehicles_) ranks.push_back({v.id, v.hits});
+    const std::vector<bool> twice = duplicate_tracks(ranks, [&](size_t i, size_t k) {
+        const Vehicle &a = vehicles_[i], &b = vehicles_[k];
+        const float lim = float(p_.duplicate_frac) * std::max(a.w, b.w);
+        return std::fabs(a.mean[0] - b.mean[0]) < lim && std::fabs(a.mean[1] - b.mean[1]) < lim;
+    });
+    for (int i = int(vehicles_.size()) - 1; i >= 0; --i)
+        if (twice[size_t(i)]) remove_vehicle(i);
 }
 
 void JointParticleFilter::start_transitory(const std::vector<PointMeasurement> &z) {

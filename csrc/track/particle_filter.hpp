@@ -104,6 +104,7 @@ struct ParticleParams {
     double max_closing_mps = 70.0;     // m/s; nor one whose range changes faster
     int seed = 1;                      // random seed (runs are reproducible)
     std::string resampling = "per_vehicle";  // "joint" (the paper) | "per_vehicle" (see above)
+    double max_dt_s = 1.0;             // s; a longer gap between frames (or time going back) starts the filter again
 
     void bind(ParamMap &m);
 };

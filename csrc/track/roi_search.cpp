@@ -1,6 +1,7 @@
 #include "track/roi_search.hpp"
 
 #include "detect/edge_projection.hpp"
+#include "detect/road_prior.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -86,6 +87,10 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
     m.side_excess = s.weaker() / std::max(1e-3f, t_side);
     m.road_gray = road;
     return m;
+}
+
+float RoiSearch::expected_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam) const {
+    return expected_vehicle_width(y, size, lanes, cam, shadow_.road);
 }
 
 } // namespace hw

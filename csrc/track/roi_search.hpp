@@ -37,6 +37,24 @@ struct RoiMeasurement {
 RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const ShadowParams &shadow,
                           const VerifyParams &verify, const RoiSearchParams &p);
 
+// The search above as the Kalman tracker is handed it: with the shadow detector's edge settings and the verifier's
+// side rule (the tracker re-finds its vehicles by the edges the detector found them by), and the width a vehicle
+// has at a row (the shadow detector's road prior).
+class RoiSearch {
+public:
+    RoiSearch(const ShadowParams &shadow, const VerifyParams &verify) : shadow_(shadow), verify_(verify) {}
+    RoiMeasurement search(const cv::Mat &gray, const RoiPrediction &pred, const RoiSearchParams &p) const {
+        return search_roi(gray, pred, shadow_, verify_, p);
+    }
+    // Expected image width of a vehicle whose bottom is at row y (0 when no vehicle stands there).
+    float expected_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam) const;
+    double vehicle_width_m() const { return shadow_.road.road.vehicle_width_m; }  // m (section road)
+
+private:
+    ShadowParams shadow_;
+    VerifyParams verify_;
+};
+
 // Gray level of the road right below a bottom edge (median of a strip under [x1, x2]); NaN if the
 // strip lies outside the image.
 float road_gray_below(const cv::Mat &gray, float x1, float y1, float x2);

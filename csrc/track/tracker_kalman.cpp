@@ -3,6 +3,8 @@
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
 #include "detect/road_prior.hpp"
+#include "track/duplicate_pruning.hpp"
+#include "track/track_deletion.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -84,14 +86,14 @@ void KalmanBoxParams::bind(ParamMap &m) {
           "s; a gap between frames longer than this drops all tracks (the predictions are void)");
 }
 
-KalmanTracker::KalmanTracker(const ShadowParams &s, const VerifyParams &v, const KalmanBoxParams &k)
-    : shadow_(s), verify_(v), kalman_(k) {}
+KalmanTracker::KalmanTracker(const KalmanBoxParams &k, const RoiSearch &roi)
+    : kalman_(k), roi_(roi), clock_(k.max_dt_s) {}
 
 void KalmanTracker::reset() {
     tracks_.clear();
     next_id_ = 1;
     frames_since_detection_ = 0;
-    started_ = false;
+    clock_.reset();
 }
 
 namespace {
@@ -131,7 +133,7 @@ double KalmanTracker::accel_bound(const Track &t) const {
     // A vehicle of width W m at range Z spans w = fx W / Z px: a lateral acceleration a shows as
     // fx a / Z = a w / W px/s^2.
     const KalmanBox::Vec3 z = t.kf.measurement();
-    return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / shadow_.road.road.vehicle_width_m + kalman_.ego_accel_px_s2;
+    return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / roi_.vehicle_width_m() + kalman_.ego_accel_px_s2;
 }
 
 void KalmanTracker::predict_all(double dt, const cv::Point2f &vp) {
@@ -175,7 +177,7 @@ bool KalmanTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
     pred.gate_y = float(std::max(kalman_.min_gate_px, kalman_.gate_sigma * std::sqrt(S(1, 1))));
     pred.max_side_change = std::clamp(t.max_side_change, float(kalman_.side_change_floor_px),
                                       std::max(float(kalman_.side_change_floor_px), pred.gate_x));
-    const RoiMeasurement m = search_roi(gray, pred, shadow_, verify_, kalman_.roi);
+    const RoiMeasurement m = roi_.search(gray, pred, kalman_.roi);
     if (!m.found) return false;
     // On a flat road a vehicle's width and its bottom's depth below the horizon grow together (w = W d / h): a side
     // that jumped to another edge changes their ratio, approaching or not.
@@ -238,30 +240,26 @@ bool KalmanTracker::occluded(const Track &t) const {
     return false;
 }
 
+BirthGateParams KalmanTracker::birth_gate() const {
+    BirthGateParams g;
+    g.beside_overlap = kalman_.beside_overlap;
+    g.beside_bottom_tol = kalman_.beside_bottom_tol;
+    return g;
+}
+
 void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothesis> &dets,
                                  const std::vector<bool> &used) {
+    const BirthGateParams gate = birth_gate();
+    std::vector<cv::Rect2f> tracked;
+    for (const Track &t : tracks_) tracked.push_back(box_of(t));
     for (size_t i = 0; i < dets.size(); ++i) {
         if (used[i]) continue;
         const cv::Rect2f &b = dets[i].box;
-        const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
-        bool explained = false;
-        for (const Track &t : tracks_) {
-            const cv::Rect2f tb = box_of(t);
-            // A detection on a tracked vehicle's body (window, bumper) is not a new vehicle either.
-            explained = explained || box_iou(tb, b) >= 0.2f ||
-                        (foot.x >= tb.x && foot.x <= tb.x + tb.width && foot.y >= tb.y && foot.y <= tb.y + tb.height);
-            // On the vehicle's own bottom row and overlapping its columns: beside it, not another vehicle.
-            const float narrower = std::min(tb.width, b.width);
-            const float overlap = std::min(tb.x + tb.width, b.x + b.width) - std::max(tb.x, b.x);
-            explained = explained || (kalman_.beside_overlap < 1.0 &&
-                                      std::abs(tb.y + tb.height - foot.y) <= kalman_.beside_bottom_tol * narrower &&
-                                      overlap >= kalman_.beside_overlap * narrower);
-        }
-        if (explained) continue;
+        if (on_tracked_vehicle(b, tracked, gate)) continue;
         const KalmanBox::Vec3 z(b.x, b.y + b.height, b.x + b.width);
         const double w = b.width;
         Track t(next_id_++, KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
-                                      kalman_.init_speed_mps * w / shadow_.road.road.vehicle_width_m));
+                                      kalman_.init_speed_mps * w / roi_.vehicle_width_m()));
         t.confidence = dets[i].score;
         t.height.start(dets[i], gray.cols, kalman_.height);
         note_width_per_depth(t, b);
@@ -269,33 +267,32 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
         t.appearance_z = z;
         t.updated = true;
         t.confirmed = t.hits >= kalman_.confirm_hits;
+        tracked.push_back(box_of(t));
         tracks_.push_back(std::move(t));
     }
 }
 
 void KalmanTracker::prune(const FrameContext &ctx) {
     const cv::Mat &gray = ctx.gray;
-    const float horizon = horizon_;  // this frame's (step)
-    // Same vehicle twice (two tracks converged): keep the one with more measurements.
-    for (size_t i = 0; i < tracks_.size(); ++i)
-        for (size_t j = i + 1; j < tracks_.size(); ++j) {
-            Track &a = tracks_[i], &b = tracks_[j];
-            if (a.duplicate || b.duplicate) continue;
-            if (box_iou(box_of(a), box_of(b)) < kalman_.duplicate_iou) continue;
-            Track &loser = (a.hits > b.hits || (a.hits == b.hits && a.id < b.id)) ? b : a;
-            loser.duplicate = true;
-        }
-    const auto gone = [&](const Track &t) {
+    std::vector<TrackRank> ranks;
+    std::vector<cv::Rect2f> boxes;
+    for (const Track &t : tracks_) {
+        ranks.push_back({t.id, t.hits});
+        boxes.push_back(box_of(t));
+    }
+    std::vector<bool> gone = overlapping_tracks(ranks, boxes, kalman_.duplicate_iou);
+    const MissLimits limits{kalman_.max_misses, kalman_.tentative_max_misses};
+    for (size_t i = 0; i < tracks_.size(); ++i) {
+        const Track &t = tracks_[i];
         const KalmanBox::Vec3 z = t.kf.measurement();
-        const double w = z[2] - z[0];
-        const int limit = t.confirmed ? kalman_.max_misses : kalman_.tentative_max_misses;
+        const double w = z[2] - z[0], h = t.height.aspect * w;
         // A box that shrank or grew far from any vehicle at its row lost its vehicle.
-        const float w_exp = expected_vehicle_width(float(z[1]), gray.size(), ctx.lanes, ctx.camera, shadow_.road);
+        const float w_exp = roi_.expected_width(float(z[1]), gray.size(), ctx.lanes, ctx.camera);
         const bool implausible = w_exp > 0.f && (w < kalman_.min_width_ratio * w_exp || w > kalman_.max_width_ratio * w_exp);
-        return t.duplicate || implausible || t.misses >= limit || !(w >= 3.0) || z[1] <= horizon + 1.0 || z[2] < 0.0 || z[0] > gray.cols ||
-               z[1] - t.height.aspect * w > gray.rows;
-    };
-    tracks_.erase(std::remove_if(tracks_.begin(), tracks_.end(), gone), tracks_.end());
+        gone[i] = gone[i] || implausible || missed_out(t.misses, t.confirmed, limits) ||
+                  out_of_view(cv::Rect2d(z[0], z[1] - h, w, h), horizon_, gray.size());
+    }
+    erase_flagged(tracks_, gone);
 }
 
 TrackState KalmanTracker::report(const Track &t) const {
@@ -316,14 +313,12 @@ void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::v
     CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
     Stopwatch track_time;
     float detect_ms = 0.f;
-    double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
-    if (dt < 0.0 || dt > kalman_.max_dt_s) {  // a gap: the predictions mean nothing any more
+    bool gap = false;
+    const double dt = clock_.step(ctx.t_s, gap);
+    if (gap) {  // the predictions mean nothing any more
         tracks_.clear();
         frames_since_detection_ = 0;
-        dt = 0.0;
     }
-    started_ = true;
-    last_t_s_ = ctx.t_s;
     cols_ = ctx.gray.cols;
 
     // Predict, then re-find each vehicle in the ROI around its prediction.
@@ -386,7 +381,7 @@ namespace {
 // The part, its configuration section and its factory (base/part_registry.hpp).
 const bool registered = register_part<Tracker, KalmanBoxParams>(
     "kalman", "kalman", [](const KalmanBoxParams &p, const SectionLookup &c) {
-        return std::make_unique<KalmanTracker>(c.get<ShadowParams>("shadow"), c.get<VerifyParams>("verify"), p);
+        return std::make_unique<KalmanTracker>(p, RoiSearch(c.get<ShadowParams>("shadow"), c.get<VerifyParams>("verify")));
     });
 
 } // namespace

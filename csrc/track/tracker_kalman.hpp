@@ -20,6 +20,8 @@
 
 #include "base/sections.hpp"
 #include "detect/verify.hpp"
+#include "track/birth_gate.hpp"
+#include "track/frame_clock.hpp"
 #include "track/kalman_box.hpp"
 #include "track/roi_search.hpp"
 #include "track/template_check.hpp"
@@ -70,9 +72,9 @@ struct KalmanBoxParams {
 
 class KalmanTracker final : public Tracker {
 public:
-    // shadow, verify: the ROI search around each prediction looks for the bottom edge and sides as
-    // the shadow detector and its verification do (and the expected vehicle width at a row).
-    KalmanTracker(const ShadowParams &shadow, const VerifyParams &verify, const KalmanBoxParams &kalman);
+    // roi: the search around each prediction for the bottom edge and sides (as the shadow detector and its
+    // verification find them), and the expected vehicle width at a row.
+    KalmanTracker(const KalmanBoxParams &kalman, const RoiSearch &roi);
     void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
@@ -91,7 +93,6 @@ private:
         VehicleTemplate appearance;   // last measured box, for the correlation check
         KalmanBox::Vec3 appearance_z = KalmanBox::Vec3::Zero();  // the corners it was cut at
         bool updated = false;         // measured (edges or detection) this frame
-        bool duplicate = false;       // another track follows the same vehicle
     };
 
     void predict_all(double dt, const cv::Point2f &vp);
@@ -103,6 +104,7 @@ private:
     bool occluded(const Track &t) const;
     void start_tracks(const cv::Mat &gray, const std::vector<Hypothesis> &dets, const std::vector<bool> &used);
     void prune(const FrameContext &ctx);
+    BirthGateParams birth_gate() const;
     TrackState report(const Track &t) const;
 
     void apply(Track &t, const KalmanBox::Vec3 &z, float sigma_scale, float quality);
@@ -113,14 +115,12 @@ private:
     KalmanBox::Vec3 sigma_of(const Track &t) const;  // measurement sigmas (x, y, unused)
     double accel_bound(const Track &t) const;
 
-    ShadowParams shadow_;
-    VerifyParams verify_;
     KalmanBoxParams kalman_;
+    RoiSearch roi_;
     std::vector<Track> tracks_;
     int next_id_ = 1;
     int frames_since_detection_ = 0;
-    double last_t_s_ = 0.0;
-    bool started_ = false;
+    FrameClock clock_;
     float horizon_ = 0.f;             // this frame's horizon row (width per depth of the detections)
     int cols_ = 0;                    // width of the frame being tracked (a box the image side cuts: track/vehicle_height.hpp)
 };

@@ -8,18 +8,14 @@ namespace hw {
 
 void ParticleTracker::reset() {
     pf_.reset();
-    started_ = false;
+    clock_.reset();
 }
 
 void ParticleTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
                            StageTimes &times, bool &full_detection) {
-    double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
-    if (started_ && (dt > max_dt_s_ || dt < 0.0)) {
-        reset();
-        dt = 0.0;
-    }
-    started_ = true;
-    last_t_s_ = ctx.t_s;
+    bool gap = false;
+    const double dt = clock_.step(ctx.t_s, gap);
+    if (gap) pf_.reset();
 
     std::vector<Hypothesis> hyps;
     full_detection = detectors.detect(ctx.road(), hyps, times);
@@ -38,8 +34,7 @@ namespace {
 // The part, its configuration section and its factory (base/part_registry.hpp).
 const bool registered = register_part<Tracker, ParticleParams>(
     "particles", "particles", [](const ParticleParams &p, const SectionLookup &c) {
-        return std::make_unique<ParticleTracker>(p, c.get<ParallaxSection>("parallax").max_dt_s,
-                                                 c.get<CameraParams>("camera"));
+        return std::make_unique<ParticleTracker>(p, c.get<CameraParams>("camera"));
     });
 
 } // namespace

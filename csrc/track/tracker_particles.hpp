@@ -4,6 +4,7 @@
 // its foot point (the mid-lower point of a parallax region, the bottom centre of a shadow box).
 #pragma once
 
+#include "track/frame_clock.hpp"
 #include "track/particle_filter.hpp"
 #include "track/tracker.hpp"
 
@@ -11,9 +12,7 @@ namespace hw {
 
 class ParticleTracker final : public Tracker {
 public:
-    // max_dt_s: a longer gap between frames (or time going back) starts the filter again.
-    ParticleTracker(const ParticleParams &p, double max_dt_s, const CameraParams &cam)
-        : pf_(p, cam), cam_(cam), max_dt_s_(max_dt_s) {}
+    ParticleTracker(const ParticleParams &p, const CameraParams &cam) : pf_(p, cam), cam_(cam), clock_(p.max_dt_s) {}
     void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
@@ -21,9 +20,7 @@ public:
 private:
     JointParticleFilter pf_;
     CameraParams cam_;
-    double max_dt_s_;
-    double last_t_s_ = 0.0;
-    bool started_ = false;
+    FrameClock clock_;
 };
 
 } // namespace hw

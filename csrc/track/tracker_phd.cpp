@@ -3,6 +3,9 @@
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
 #include "geometry/flat_road.hpp"
+#include "track/birth_gate.hpp"
+#include "track/duplicate_pruning.hpp"
+#include "track/track_deletion.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -85,8 +88,8 @@ void PhdTrackerParams::bind(ParamMap &m) {
     m.add("max_dt_s", max_dt_s, 0.01, 100.0, "s; a longer gap between frames drops all vehicles");
 }
 
-PhdTracker::PhdTracker(const HorizonParams &h, const PhdTrackerParams &p, const CameraParams &cam)
-    : p_(p), cam_(cam), horizon_(h, cam), flow_(p.features), pitch_(p.pitch, p.features) {}
+PhdTracker::PhdTracker(const PhdTrackerParams &p, const CameraParams &cam, const HorizonTracker &horizon)
+    : p_(p), cam_(cam), horizon_(horizon), flow_(p.features), pitch_(p.pitch, p.features), clock_(p.max_dt_s) {}
 
 void PhdTracker::reset() {
     vehicles_.clear();
@@ -95,7 +98,7 @@ void PhdTracker::reset() {
     pitch_.reset();
     next_id_ = 1;
     frame_ = 0;
-    started_ = false;
+    clock_.reset();
     lagged_due_ = -1;  // the pipeline resets the detector set, dropping a running detection
     lagged_vehicles_.clear();
 }
@@ -288,9 +291,9 @@ void PhdTracker::follow_features(std::vector<Vehicle> &vs, const cv::Mat &gray, 
     }
 }
 
-void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon) {
+bool PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon) {
     const cv::Point2d contact(d.box.x + 0.5 * d.box.width, d.box.y + d.box.height);
-    if (!road_point(cam_, contact.x, contact.y, horizon).valid()) return;
+    if (!road_point(cam_, contact.x, contact.y, horizon).valid()) return false;
     Vehicle v(next_id_, GmPhd(p_.phd, uint32_t(next_id_)));
     v.ukf = std::make_unique<VehicleUkf>(p_.ukf, cam_, contact.x, contact.y, horizon);
     v.contact = contact;
@@ -305,6 +308,7 @@ void PhdTracker::start_vehicle(const cv::Mat &gray, const Hypothesis &d, double 
     v.confirmed = v.hits >= p_.confirm_hits;
     ++next_id_;
     vehicles_.push_back(std::move(v));
+    return true;
 }
 
 bool PhdTracker::hidden(const Vehicle &v) const {
@@ -382,6 +386,8 @@ void PhdTracker::use_detections(const FrameContext &ctx, const LaneModel &lanes,
         v.confirmed = v.confirmed || v.hits >= p_.confirm_hits;
         v.confidence = 0.7f * v.confidence + 0.3f * d.score;
     }
+    std::vector<cv::Rect2f> tracked;  // each vehicle's box on the detections' frame, and those started from them
+    for (size_t k = 0; k < vehicles_.size(); ++k) tracked.push_back(box_then(k));
     for (size_t i = 0; i < dets.size(); ++i) {
         if (used[i] || dets[i].score < p_.association.high_score) continue;  // a weak detection starts nothing
         const cv::Rect2f &b = dets[i].box;
@@ -391,27 +397,24 @@ void PhdTracker::use_detections(const FrameContext &ctx, const LaneModel &lanes,
         if (!on_road_ahead(lanes, cam_, ctx.ego, horizon, p_.road.lane_width_m, foot.x, foot.y,
                            p_.birth_lanes_beside))
             continue;
-        bool explained = false;
-        for (size_t k = 0; k < vehicles_.size(); ++k) {
-            const cv::Rect2f vb = box_then(k);
-            explained = explained || box_iou(vb, b) >= 0.2f || vb.contains(foot);
-        }
         // A learned detection scoring under birth_min_appearance may follow a vehicle but not found one: the
         // verifier's low-probability groups are mostly not vehicles (docs/detection.md), and each would become a track.
         // Its score is the verifier's probability, raised where a cue (a shadow edge) confirmed it
         // (detect/fuse_hypotheses.hpp).
         const bool doubted = std::isfinite(dets[i].appearance) && dets[i].score < p_.birth_min_appearance;
-        if (!explained && !doubted) start_vehicle(ctx.gray, dets[i], horizon);
+        if (!doubted && !on_tracked_vehicle(b, tracked, BirthGateParams{}) && start_vehicle(ctx.gray, dets[i], horizon))
+            tracked.push_back(vehicles_.back().box());
     }
 }
 
 void PhdTracker::prune(const FrameContext &ctx, double horizon) {
-    for (size_t i = 0; i < vehicles_.size(); ++i)
-        for (size_t j = i + 1; j < vehicles_.size(); ++j) {
-            Vehicle &a = vehicles_[i], &b = vehicles_[j];
-            if (a.duplicate || b.duplicate || box_iou(a.box(), b.box()) < p_.duplicate_iou) continue;
-            (a.hits > b.hits || (a.hits == b.hits && a.id < b.id) ? b : a).duplicate = true;
-        }
+    std::vector<TrackRank> ranks;
+    std::vector<cv::Rect2f> boxes;
+    for (const Vehicle &v : vehicles_) {
+        ranks.push_back({v.id, v.hits});
+        boxes.push_back(v.box());
+    }
+    std::vector<bool> gone = overlapping_tracks(ranks, boxes, p_.duplicate_iou);
     // Eq. 12: a vehicle whose features are all lost ends, or first coasts (coast_frames, counted in `coast`): only
     // one the detector has found often and at its last run, and that no nearer vehicle hides (being hidden explains
     // the lost features). One that may not coast is put past its allowance, so it ends below.
@@ -424,16 +427,17 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
         const bool found_often = v.coast > 0 || (v.hits >= p_.coast_min_hits && v.detection_misses == 0);
         v.coast = found_often && !hidden(v) ? v.coast + 1 : p_.coast_frames + 1;
     }
-    const cv::Size size = ctx.gray.size();
-    const auto gone = [&](const Vehicle &v) {
-        const cv::Rect2f b = v.box();
-        const int limit = v.confirmed ? p_.max_detection_misses : 1;
+    const MissLimits limits{p_.max_detection_misses, 1};
+    for (size_t i = 0; i < vehicles_.size(); ++i) {
+        const Vehicle &v = vehicles_[i];
+        const double h = v.height.aspect * v.width;
         const bool ended = v.coast > (v.confirmed ? p_.coast_frames : 0);  // eq. 12, after coasting
-        return v.duplicate || ended || v.detection_misses >= limit || !(v.width >= 3.0) ||
-               v.contact.y <= horizon + 1.0 || b.x + b.width < 0.f || b.x > size.width || b.y > size.height ||
-               !(v.ukf->range() > 0.5);
-    };
-    vehicles_.erase(std::remove_if(vehicles_.begin(), vehicles_.end(), gone), vehicles_.end());
+        gone[i] = gone[i] || ended || missed_out(v.detection_misses, v.confirmed, limits) ||
+                  out_of_view(cv::Rect2d(v.contact.x - 0.5 * v.width, v.contact.y - h, v.width, h), horizon,
+                              ctx.gray.size()) ||
+                  !(v.ukf->range() > 0.5);
+    }
+    erase_flagged(vehicles_, gone);
 }
 
 TrackState PhdTracker::report(const Vehicle &v) const {
@@ -458,15 +462,13 @@ void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vect
     const double cpu0 = thread_cpu_ms();
     float detect_ms = 0.f;
     double detect_cpu_ms = 0.0;
-    double dt = started_ ? ctx.t_s - last_t_s_ : 0.0;
-    if (dt < 0.0 || dt > p_.max_dt_s) {
+    bool gap = false;
+    const double dt = clock_.step(ctx.t_s, gap);
+    if (gap) {
         vehicles_.clear();
         flow_.reset();
         pitch_.reset();
-        dt = 0.0;
     }
-    started_ = true;
-    last_t_s_ = ctx.t_s;
     // Every n-th frame the detector parts: new vehicles, and re-anchoring of the tracked ones. With detect_lag L the
     // detection taken on frame k (a multiple of n) is that of frame k - L, started on the worker there, first thing
     // in the frame so that it has the rest of that frame's time too: the tracker takes detections on the same frames
@@ -527,7 +529,8 @@ namespace {
 // The part, its configuration section and its factory (base/part_registry.hpp).
 const bool registered = register_part<Tracker, PhdTrackerParams>(
     "phd", "phd", [](const PhdTrackerParams &p, const SectionLookup &c) {
-        return std::make_unique<PhdTracker>(c.get<HorizonParams>("horizon"), p, c.get<CameraParams>("camera"));
+        return std::make_unique<PhdTracker>(p, c.get<CameraParams>("camera"),
+                                            HorizonTracker(c.get<HorizonParams>("horizon"), c.get<CameraParams>("camera")));
     });
 // Its units' sections, held in its struct.
 const bool units_registered = register_subsection("gmphd", "phd", &PhdTrackerParams::phd) &&

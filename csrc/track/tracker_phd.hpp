@@ -57,6 +57,7 @@
 #include "geometry/road_params.hpp"
 #include "track/association.hpp"
 #include "track/box_features.hpp"
+#include "track/frame_clock.hpp"
 #include "track/gmphd.hpp"
 #include "track/road_ahead.hpp"
 #include "track/scene_pitch.hpp"
@@ -117,7 +118,8 @@ struct PhdTrackerParams {
 
 class PhdTracker final : public Tracker {
 public:
-    PhdTracker(const HorizonParams &horizon, const PhdTrackerParams &p, const CameraParams &camera);
+    // horizon: the lanes' horizon row followed over frames (the slow part of the car's pitch).
+    PhdTracker(const PhdTrackerParams &p, const CameraParams &camera, const HorizonTracker &horizon);
     void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
@@ -137,7 +139,7 @@ private:
         int age = 1, hits = 1, detection_misses = 0;
         int coast = 0;                 // frames in a row its PHD weight has been under end_weight (coasting)
         double prev_range = 0.0;       // m; the UKF's range before this frame's prediction
-        bool confirmed = false, duplicate = false;
+        bool confirmed = false;
         int stable = 0;                // stable features this frame
         float confidence = 0.5f;
         cv::Rect2f box() const {
@@ -162,7 +164,7 @@ private:
     // `then`: the vehicles as they were on the detections' frame (empty: this frame); `lanes`: that frame's.
     void use_detections(const FrameContext &ctx, const LaneModel &lanes, const std::vector<Hypothesis> &dets,
                         double horizon, const std::vector<VehicleAt> &then);
-    void start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);
+    bool start_vehicle(const cv::Mat &gray, const Hypothesis &d, double horizon);  // false: its foot is off the road
     void prune(const FrameContext &ctx, double horizon);
     bool hidden(const Vehicle &v) const;  // a nearer vehicle's box covers more than coast_max_hidden of its box
     TrackState report(const Vehicle &v) const;
@@ -180,8 +182,7 @@ private:
     int64_t lagged_due_ = -1;
     LaneModel lagged_lanes_;
     std::vector<VehicleAt> lagged_vehicles_;
-    double last_t_s_ = 0.0;
-    bool started_ = false;
+    FrameClock clock_;
 };
 
 } // namespace hw
