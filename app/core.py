@@ -149,6 +149,12 @@ class FrameResult:
     road_motion: Optional[str] = None
     road_coast_frames: int = 0
     road_homography: Optional[np.ndarray] = None
+    # how well road_homography aligns the road (homography.measure_residual), gray levels over the road pixels
+    # outside this frame's detections: |I_k - warp(I_k-1) - o| with o the smooth brightness change between the
+    # two fitted and taken out, the same without warping, and warped with the brightness change left in
+    road_residual: Optional[float] = None
+    road_residual_unaligned: Optional[float] = None
+    road_residual_raw: Optional[float] = None
     # the camera as self-calibration has it: {pitch_deg, yaw_deg, height_m, *_sigma, updates, active, state}
     # (state: off, learning, converged, at_limit)
     calibration: Optional[dict] = None
@@ -246,6 +252,9 @@ def _result(r: Any) -> FrameResult:
         road_coast_frames=int(r.road_coast_frames),
         road_homography=(None if r.road_motion == lib.HW_ROAD_NONE
                          else np.array([r.road_homography[i] for i in range(9)], dtype=float).reshape(3, 3)),
+        road_residual=_opt(r.road_residual),
+        road_residual_unaligned=_opt(r.road_residual_unaligned),
+        road_residual_raw=_opt(r.road_residual_raw),
         calibration=_calibration(r),
     )
 
@@ -373,13 +382,14 @@ class Pipeline:
         boxes = np.frombuffer(ffi.buffer(buf, n * ffi.sizeof("hw_box")), np.float32).reshape(n, 5).copy()
         return Detections(boxes, _opt(info.horizon_row), _stage_times(info), float(info.total_ms))
 
-    def run_stage(self, stage: str, gray: np.ndarray) -> FrameResult:
-        """Units without touching tracking state: "lanes" on one image, and the two-frame units "homography" and
-        "parallax" on frames stacked vertically (csrc/core/parallax_stage.hpp)."""
-        g = _as_gray(gray, "run_stage()")
-        _check(lib.hw_pipeline_run_stage(self._handle(), stage.encode(), ffi.from_buffer(g), g.shape[1], g.shape[0],
-                                         g.strides[0], self._res))
-        return _result(self._res)
+    def image_lanes(self, gray: np.ndarray) -> FrameResult:
+        """The lane model of one image alone: the state is reset and the image processed as a first frame, which
+        gets the single-image lane detection (a configuration with pipeline.preset none runs nothing else)."""
+        if self.config["self_calibration"]["from_scratch"]:
+            raise ValueError("image_lanes(): with self_calibration.from_scratch the first frame runs the lane "
+                             "tracker's wide search, not the single-image lanes; set it false")
+        self.reset()
+        return self.process(gray, 0.0)
 
     def reset(self) -> None:
         _check(lib.hw_pipeline_reset(self._handle()))

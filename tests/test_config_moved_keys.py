@@ -151,7 +151,7 @@ def test_the_hood_line_of_the_camera_stops_the_lanes_and_the_shadow_scan():
 
     def detect(hood: float):
         with Pipeline(thesis_scenes.config("steady_following", json.dumps({"hood_frac": hood}))) as p:
-            return sorted(round(b[3]) for b in p.detect(image).rows()), p.run_stage("lanes", image).lanes
+            return sorted(round(b[3]) for b in p.detect(image).rows()), p.image_lanes(image).lanes
 
     bottoms, lanes = detect(0.0)
     assert bottoms == [248, 263] and len(lanes) == 4

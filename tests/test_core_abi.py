@@ -16,7 +16,7 @@ def gray(w=640, h=480, v=90):
 
 
 def test_abi_version_matches_header():
-    assert abi_version() == lib.HW_ABI_VERSION == 13
+    assert abi_version() == lib.HW_ABI_VERSION == 14
 
 
 def test_schema_documents_every_core_key():
@@ -86,13 +86,25 @@ def test_time_going_backwards_is_rejected():
         p.process(gray(), 0.5)  # after reset the clock may start again
 
 
-@pytest.mark.parametrize("stage", ["track", "cascade", "detect", "hypotheses"])
-def test_run_stage_rejects_unknown_stage(stage):
-    """The units run_stage knows are lanes and the two-frame homography and parallax; detections come from detect(),
-    through the detector registry."""
-    with Pipeline({"pipeline": {"preset": "thesis"}}) as p:
-        with pytest.raises(InvalidArgument, match=f"unknown stage '{stage}': one of lanes, homography, parallax"):
-            p.run_stage(stage, gray())
+def test_image_lanes_are_the_single_image_lanes_whatever_came_before():
+    """image_lanes() forgets the earlier frames: a pipeline that has tracked the lanes over 30 frames gives for the
+    next image exactly what a new pipeline's first frame gives; with self_calibration.from_scratch it refuses."""
+    from app.sim import load_scenario, render
+
+    frames = [f.image for f in render(load_scenario("steady_following"), frames=range(0, 31))]
+    with Pipeline({"pipeline": {"preset": "none"}}) as fresh:
+        first = fresh.process(frames[30], 0.0)
+    with Pipeline({"pipeline": {"preset": "none"}}) as p:
+        for k, img in enumerate(frames[:30]):
+            p.process(img, k / 30)
+        alone = p.image_lanes(frames[30])
+    assert len(first.lanes) >= 2
+    assert [(l.position, l.x_bottom, l.x_top) for l in alone.lanes] == \
+        [(l.position, l.x_bottom, l.x_top) for l in first.lanes]
+    assert alone.vanishing_point == first.vanishing_point
+    with Pipeline({"pipeline": {"preset": "none"}, "self_calibration": {"from_scratch": True}}) as p:
+        with pytest.raises(ValueError, match="from_scratch"):
+            p.image_lanes(frames[0])
 
 
 @pytest.mark.parametrize("preset, detector, match", [

@@ -225,7 +225,7 @@ def _lane_sample_results() -> tuple:
         size = (gray.shape[1], gray.shape[0])
         if size not in pipes:
             pipes[size] = Pipeline({"camera": _scaled_camera(*size)})
-        out.append((lab, gray.shape[1], pipes[size].run_stage("lanes", gray)))
+        out.append((lab, gray.shape[1], pipes[size].image_lanes(gray)))
     for p in pipes.values():
         p.close()
     return label_file, tuple(out)

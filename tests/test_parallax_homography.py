@@ -1,5 +1,5 @@
-"""The parallax pipeline's two-frame units (paper 000): the filtered road homography and the aligned
-difference, driven through run_stage on frames stacked vertically (csrc/core/parallax_stage.hpp)."""
+"""The parallax pipeline (paper 000) through process(): the filtered road homography, how well it aligns the road
+(homography.measure_residual) and the aligned difference's detections."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from app.core import ConfigError, InvalidArgument, Pipeline, core_schema
-from app.eval.road_motion import road_residuals, true_road_homography
+from app.core import ConfigError, Pipeline, core_schema
+from app.eval.road_motion import last_pair, road_residuals, true_road_homography, window_config
 from app.sim import load_scenario, render
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "app" / "sim" / "scenarios"
@@ -44,14 +44,15 @@ def test_estimated_homography_aligns_the_shaken_road(tmp_path, pitch_deg):
     scenario = shaken_scenario(tmp_path, "empty_road", pitch_deg)
     frames = list(render(scenario, frames=range(0, 60)))
     residuals = []
-    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
+    with Pipeline(window_config({"pipeline": {"preset": "parallax"}})) as p:
         for end in range(10, 61, 10):  # windows of 6 frames: 4 to settle, the last pair judged
-            r = p.run_stage("homography", np.vstack([f.image for f in frames[end - 6:end]]))
+            r = last_pair(p, [f.image for f in frames[end - 6:end]])
             true, unwarped = road_residuals(scenario, frames[end - 2], frames[end - 1])
-            assert r.image_change is not None, f"no alignment at frame {end - 1}"
-            assert r.image_change < 0.75 * unwarped, (end, r.image_change, unwarped)
-            assert r.image_change < true + 1.5, (end, r.image_change, true)
-            residuals.append(r.image_change)
+            assert r.road_residual is not None, f"no alignment at frame {end - 1}"
+            assert r.road_residual < 0.75 * unwarped, (end, r.road_residual, unwarped)
+            assert r.road_residual < true + 1.5, (end, r.road_residual, true)
+            assert r.road_residual_unaligned > r.road_residual, (end, r.road_residual, r.road_residual_unaligned)
+            residuals.append(r.road_residual)
     assert np.median(residuals) < 3.0, residuals
 
 
@@ -88,37 +89,32 @@ def test_process_reports_the_running_road_homography(tmp_path, name, pitch_deg):
     with Pipeline({"pipeline": {"preset": "thesis"}}) as p:  # no road-motion estimate there
         r = p.process(frames[1].image, frames[1].t_s)
         assert r.road_motion is None and r.road_homography is None
+    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:  # the residual costs two warps: off by default
+        assert all(p.process(f.image, f.t_s).road_residual is None for f in frames[:8])
 
 
 def test_measurement_outside_the_gate_is_not_accepted():
     """A pair that is not two consecutive views of one road (a jump of 2 s) gives a homography far
     from the prediction: the filter keeps its prediction."""
     frames = [f.image for f in render(load_scenario("steady_following"), frames=list(range(30, 36)) + [96])]
-    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
-        settled = p.run_stage("homography", np.vstack(frames[:6]))
-        jumped = p.run_stage("homography", np.vstack(frames[:5] + [frames[6]]))
-    assert settled.full_detection
-    assert not jumped.full_detection
-
-
-def test_two_frame_stages_reject_a_single_frame():
-    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
-        with pytest.raises(InvalidArgument, match="K >= 2 frames"):
-            p.run_stage("homography", np.zeros((480, 640), np.uint8))
-        with pytest.raises(InvalidArgument, match="homography, parallax"):
-            p.run_stage("warp", np.zeros((480, 640), np.uint8))
+    with Pipeline(window_config({"pipeline": {"preset": "parallax"}})) as p:
+        settled = last_pair(p, frames[:6])
+        jumped = last_pair(p, frames[:5] + [frames[6]])
+    assert settled.road_motion == "accepted"
+    assert jumped.road_motion == "predicted"
 
 
 def test_aligned_difference_finds_an_overtaking_car_at_its_bottom_edge():
-    """The mid-lower point of the region of differences sits on the car's contact row."""
+    """The bottom of the region of differences (the parallax part's detection) sits on the car's contact row."""
     scenario = load_scenario("overtaking_from_side")
     frames = list(render(scenario, frames=range(70, 76)))
     car = next(v for v in frames[-1].truth if v["id"] == 1)
-    with Pipeline({"pipeline": {"preset": "parallax"}}) as p:
-        r = p.run_stage("parallax", np.vstack([f.image for f in frames]))
+    with Pipeline(window_config({"pipeline": {"preset": "parallax"}})) as p:
+        r = last_pair(p, [f.image for f in frames])
+    assert r.full_detection and r.detections_frame == r.frame
     l, t, rr, b = car["box_clipped"]
-    found = [tr for tr in r.tracks if tr.box[0] < rr and tr.box[2] > l]
-    assert found, [tr.box for tr in r.tracks]
-    best = min(found, key=lambda tr: abs(tr.box[3] - b))
-    assert abs(best.box[3] - b) <= 4.0, (best.box, car["box_clipped"])
-    assert abs(0.5 * (best.box[0] + best.box[2]) - 0.5 * (l + rr)) < 0.25 * (rr - l), (best.box, car["box_clipped"])
+    found = [d for d in r.detections if d[0] < rr and d[2] > l]
+    assert found, r.detections
+    best = min(found, key=lambda d: abs(d[3] - b))
+    assert abs(best[3] - b) <= 4.0, (best, car["box_clipped"])
+    assert abs(0.5 * (best[0] + best[2]) - 0.5 * (l + rr)) < 0.25 * (rr - l), (best, car["box_clipped"])

@@ -115,7 +115,7 @@ def test_detection_without_a_lane_model():
     sections = json.dumps({"lanes": {"min_edge_contrast": 255.0, "min_bar_contrast": 255.0}})
     fr, results = detected("steady_following", "{}", sections)
     with Pipeline(config("steady_following", "{}", **json.loads(sections))) as p:
-        assert all(not p.run_stage("lanes", f.image).lanes for f in fr)
+        assert all(not p.image_lanes(f.image).lanes for f in fr)
     for f, r in zip(fr, results):
         i, v = best_match(_boxes(r), lead(f.truth)["box"])
         assert v >= 0.5 and max(edge_errors(_boxes(r)[i], lead(f.truth)["box"])) <= EDGE_TOL_PX

@@ -38,7 +38,7 @@ def ego_lane_found(lanes, label: dict, width: int) -> bool:
 
 def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optional[Callable] = None,
              predictions_out: Optional[str] = None) -> dict:
-    """Each image alone (the "lanes" stage, no history), scored with the TuSimple metric; the predictions
+    """Each image alone (Pipeline.image_lanes, no history), scored with the TuSimple metric; the predictions
     are written in TuSimple's format to `predictions_out` when given."""
     root = Path(sample_dir)
     label_file = next(root.rglob("label_data.json"))
@@ -54,8 +54,9 @@ def evaluate(sample_dir: str, config_path: Optional[str] = None, on_image: Optio
             if size not in pipes:  # the sample is TuSimple's camera scaled down
                 cfg = tusimple_config(configuration.load(config_path), TUSIMPLE_LANE_PITCH_DEG)
                 cfg["camera"] = configuration.scaled_camera(cfg["camera"], *size)
+                cfg["pipeline"] = {**cfg.get("pipeline", {}), "preset": "none"}  # lanes alone
                 pipes[size] = Pipeline(configuration.core_sections(cfg))
-            r = pipes[size].run_stage("lanes", gray)
+            r = pipes[size].image_lanes(gray)
             preds[lab["raw_file"]] = segments_to_tusimple(r.lanes, lab["h_samples"], size[0])
             run_ms[lab["raw_file"]] = r.stages.get("lanes", r.total_ms)
             ego_hits += ego_lane_found(r.lanes, lab, size[0])

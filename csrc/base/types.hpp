@@ -139,6 +139,11 @@ struct RoadMotion {
     // and height from the road's motion; NaN when not fitted.
     bool tilt_ok = false;
     double tilt_rad = kNaN, tilt_travel_m = kNaN;
+    // How well H aligns the road (homography.measure_residual, RoadMotionStage::road_residual): mean |difference|
+    // in gray levels over the road pixels, outside this frame's detections and the bonnet, between this frame and
+    // the previous one warped with H with their smooth brightness change taken out; the same unwarped; and warped
+    // with the brightness change left in. NaN when not measured or without an estimate.
+    float residual = kNaN, residual_unaligned = kNaN, residual_raw = kNaN;
 };
 
 // What the road-motion stage (road/road_motion_stage.hpp) hands the parts that need it in one frame:

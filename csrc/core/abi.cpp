@@ -183,6 +183,9 @@ void fill_result(const hw::FrameOutput &o, hw_frame_result *r) {
     r->road_coast_frames = o.road.coast_frames;
     for (int i = 0; i < 9; ++i)
         r->road_homography[i] = r->road_motion == HW_ROAD_NONE ? NAN : float(o.road.H.val[i]);
+    r->road_residual = o.road.residual;
+    r->road_residual_unaligned = o.road.residual_unaligned;
+    r->road_residual_raw = o.road.residual_raw;
     r->calib_pitch_deg = o.calib_pitch_deg;
     r->calib_yaw_deg = o.calib_yaw_deg;
     r->calib_height_m = o.calib_height_m;
@@ -288,19 +291,6 @@ int hw_pipeline_process(hw_pipeline *p, const uint8_t *gray, int32_t width, int3
         f.t_s = t_s;
         f.number = p->offline_frames++;
         fill_result(p->pipeline->process(f), out);
-        return HW_OK;
-    });
-}
-
-int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width, int32_t height,
-                          int32_t stride, hw_frame_result *out) {
-    return guard([&] {
-        require(p, "pipeline");
-        require(stage, "stage");
-        require(out, "out");
-        std::lock_guard<std::mutex> lock(p->mu);
-        require_stopped(p, "run_stage()");
-        fill_result(p->pipeline->run_stage(stage, wrap_gray(gray, width, height, stride)), out);
         return HW_OK;
     });
 }

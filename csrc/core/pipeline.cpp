@@ -1,7 +1,6 @@
 #include "core/pipeline.hpp"
 
 #include "base/stopwatch.hpp"
-#include "core/parallax_stage.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -95,6 +94,16 @@ FrameOutput Pipeline::process(const Frame &frame) {
             out.detections_frame = parts_.detectors.last_frame;
         }
         for (auto &d : parts_.detectors.parts) d->end_frame(ctx.road());
+        if (parts_.road && cfg_.homography.measure_residual) {
+            // the road without this frame's detections (found on this frame: the parallax part runs on it)
+            std::vector<cv::Rect2f> boxes;
+            if (parts_.detectors.last_frame == frame.number)
+                for (const auto &h : parts_.detectors.last) boxes.push_back(h.box);
+            const auto res = parts_.road->road_residual(out.lanes, boxes);
+            out.road.residual = res.aligned;
+            out.road.residual_unaligned = res.unaligned;
+            out.road.residual_raw = res.aligned_raw;
+        }
         last_tracks_ = out.tracks;
     }
     // the car's own motion: yaw rate from CAN, else from the road plane's image motion (parallax preset), with
@@ -183,28 +192,6 @@ ImageDetections Pipeline::detect_image(const std::string &detector, const cv::Ma
     out.boxes = boxes_of(hyps);
     out.horizon_row = float(cfg_.camera.horizon_row());
     out.total_ms = total.ms();
-    return out;
-}
-
-FrameOutput Pipeline::run_stage(const std::string &stage, const cv::Mat &gray) {
-    // Two-frame units (frames stacked vertically): see core/parallax_stage.hpp.
-    if (is_parallax_stage(stage)) return run_parallax_stage(stage, gray, cfg_);
-    check_frame(gray);
-    if (stage != "lanes")
-        throw std::invalid_argument("unknown stage '" + stage + "': one of lanes, homography, parallax (detections: "
-                                    "hw_pipeline_detect)");
-    Stopwatch total;
-    FrameOutput out;
-    out.width = gray.cols;
-    out.height = gray.rows;
-    {
-        Stopwatch sw;
-        out.lanes = detect_lanes(gray, cfg_.lanes, cfg_.camera);
-        out.times.add("lanes", sw.ms());
-    }
-    out.horizon_row = float(cfg_.camera.horizon_row());
-    out.total_ms = total.ms();
-    out.t_done_s = monotonic_s();
     return out;
 }
 

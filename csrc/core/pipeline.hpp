@@ -39,9 +39,6 @@ public:
     // composition's own detector parts fused as in a tracked pipeline; the lanes of this image alone give the
     // road context. Throws std::invalid_argument for an unknown name or a part that needs the road's motion.
     ImageDetections detect_image(const std::string &detector, const cv::Mat &gray);
-    // Units without touching tracking state: "lanes" on one image; the two-frame units "homography" and
-    // "parallax" take frames stacked vertically (core/parallax_stage.hpp).
-    FrameOutput run_stage(const std::string &stage, const cv::Mat &gray);
     void reset();
     // The car's own motion from the vehicle bus; any thread may set it (the loop reads it per frame).
     void set_ego_motion(const EgoMotion &ego) {

@@ -23,7 +23,7 @@ extern "C" {
 #endif
 
 /* HW_CDEF_BEGIN */
-#define HW_ABI_VERSION 13
+#define HW_ABI_VERSION 14
 
 #define HW_MAX_TRACKS 64
 #define HW_MAX_LANES 8
@@ -157,6 +157,12 @@ typedef struct {
     int32_t road_motion;
     int32_t road_coast_frames;
     float road_homography[9];
+    /* how well road_homography aligns the road (homography.measure_residual true, else NaN; NaN without an
+     * estimate): mean |difference|, gray levels, over the road pixels (the ego lane up to 40 m, or the road area
+     * without a lane model; outside this frame's detections and the bonnet) between this frame and the previous
+     * one warped with it, their smooth brightness change taken out; the same without warping; and warped with
+     * the brightness change left in */
+    float road_residual, road_residual_unaligned, road_residual_raw;
     /* the camera as self-calibration has it (the configured one when self_calibration.enabled is false):
      * pitch (deg, down positive), yaw (deg, right positive), height (m) and their 1-sigma uncertainties,
      * the frames whose lane measurement was used, 1 when self-calibration runs */
@@ -229,10 +235,6 @@ typedef struct {
  * (parallax: two frames). */
 int hw_pipeline_detect(hw_pipeline *p, const char *detector, const uint8_t *gray, int32_t width, int32_t height,
                        int32_t stride, hw_box *out, int32_t cap, hw_detect_info *info);
-/* Units on frames without touching any tracking state, for tests and evaluation: stage "lanes" (lane markings of
- * this image alone), and the two-frame units "homography" and "parallax" (csrc/core/parallax_stage.hpp). */
-int hw_pipeline_run_stage(hw_pipeline *p, const char *stage, const uint8_t *gray, int32_t width,
-                          int32_t height, int32_t stride, hw_frame_result *out);
 /* The car's own motion from the vehicle bus (NaN = not available): used for the ego path when the
  * lanes are missing. Allowed while the loop runs; takes effect from the next frame. */
 int hw_pipeline_set_ego_motion(hw_pipeline *p, double speed_mps, double yaw_rate_rps);

@@ -44,6 +44,9 @@ void HomographyParams::bind(ParamMap &m) {
     m.add("fit_tilt", fit_tilt,
           "with road_model, fit the correspondences again with the road plane's tilt free (a sixth parameter): "
           "self-calibration's pitch and height from the road's motion (docs/calibration.md)");
+    m.add("measure_residual", measure_residual,
+          "report the road's alignment residual each frame (road_residual in the result; two full-frame warps, "
+          "for evaluation)");
 }
 
 RoadMotionStage::RoadMotionStage(const LaneFeatureParams &features, const HomographyParams &homography,

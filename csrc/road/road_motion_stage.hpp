@@ -33,10 +33,11 @@ struct HomographyParams {
     HomographyKalmanParams kalman;
     bool road_model = true;   // the measurement restricted to the road plane's motion (road_motion_fit.hpp)
     bool fit_tilt = true;     // also fit the plane's tilt (sixth parameter) for self-calibration's pitch and height
+    bool measure_residual = false;  // report how well the estimate aligns the road (two full-frame warps a frame)
     void bind(ParamMap &m);
 };
 
-// What the homography stage did in the last frame (for tests, run_stage and evaluation).
+// What the homography stage did in the last frame (for tests and evaluation).
 struct HomographyStep {
     HomographyKalman::Status status = HomographyKalman::Status::kNone;
     bool valid = false;          // an estimate exists after this frame

@@ -1,6 +1,7 @@
 // The road-motion stage on a rendered flat road driven along at a known speed: without a CAN speed it finds
 // the travel itself, its filter accepts the measurements, and the homography it reports moves the road points
-// where the travel moves them, within half a pixel.
+// where the travel moves them, within half a pixel; and it measures how well that homography aligns the road.
+#include "../road_scene.hpp"
 #include "geometry/flat_road.hpp"
 #include "geometry/homography_kalman.hpp"
 #include "road/road_motion_stage.hpp"
@@ -8,6 +9,7 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -81,4 +83,38 @@ TEST_CASE("road-motion stage: the homography of a known travel, found without th
     CHECK(median < 1.0);
     CHECK(p90 < 2.0);
     CHECK(accepted >= 0.9 * (frames - 1));
+}
+
+TEST_CASE("road-motion stage: the alignment residual over the ego lane, with and without a brightness change") {
+    // Ten frames at 20 m/s settle the filter; the last pair is judged over the ego lane up to 40 m. Aligned, the
+    // road's texture cancels (the residual is the interpolation's); unaligned it does not (0.67 m of travel moves
+    // the 0.6 m cells by about a cell). A brightness step of 20 gray levels on the last frame is taken out by the
+    // fitted brightness change and left in the raw residual. A detection's box is not road.
+    // Measured: aligned 2.60, unaligned 34.8, raw 2.60; with the step 2.51 / 34.8 / 20.8.
+    const hw::CameraParams cam;
+    const double speed = 20.0, dt = 1.0 / 30;
+    const hw::LaneModel lanes = hw_test::ego_lane(cam);
+    auto judged = [&](int brightness_step, const std::vector<cv::Rect2f> &detections) {
+        hw::RoadMotionStage stage({}, {}, {}, cam);
+        for (int k = 0; k < 10; ++k) {
+            hw::StageTimes times;
+            cv::Mat img = render(cam, speed * dt * k);
+            if (k == 9) img += cv::Scalar(brightness_step);
+            stage.update(img, k * dt, lanes, hw::EgoMotion{}, {}, times);
+        }
+        return stage.road_residual(lanes, detections);
+    };
+    const auto plain = judged(0, {});
+    INFO("aligned ", plain.aligned, ", unaligned ", plain.unaligned, ", raw ", plain.aligned_raw);
+    CHECK(plain.aligned < 0.25 * plain.unaligned);
+    CHECK(plain.aligned_raw == doctest::Approx(plain.aligned).epsilon(0.1));
+    const auto brighter = judged(20, {});
+    INFO("with a step of 20: aligned ", brighter.aligned, ", unaligned ", brighter.unaligned, ", raw ", brighter.aligned_raw);
+    CHECK(brighter.aligned == doctest::Approx(plain.aligned).epsilon(0.1));
+    CHECK(brighter.aligned_raw > plain.aligned_raw + 15.0);
+    // the whole image as a detection leaves no road to judge
+    const auto hidden = judged(0, {cv::Rect2f(0.f, 0.f, float(cam.width), float(cam.height))});
+    CHECK(std::isnan(hidden.aligned));
+    hw::RoadMotionStage fresh({}, {}, {}, cam);
+    CHECK(std::isnan(fresh.road_residual(lanes, {}).aligned));  // nothing aligned yet
 }
