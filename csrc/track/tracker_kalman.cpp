@@ -131,7 +131,7 @@ double KalmanTracker::accel_bound(const Track &t) const {
     // A vehicle of width W m at range Z spans w = fx W / Z px: a lateral acceleration a shows as
     // fx a / Z = a w / W px/s^2.
     const KalmanBox::Vec3 z = t.kf.measurement();
-    return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / shadow_.road.road.vehicle_width_m + kalman_.ego_accel_px_s2;
+    return kalman_.accel_mps2 * std::max(0.0, z[2] - z[0]) / shadow_.road.shape.width_m + kalman_.ego_accel_px_s2;
 }
 
 void KalmanTracker::predict_all(double dt, const cv::Point2f &vp) {
@@ -261,7 +261,7 @@ void KalmanTracker::start_tracks(const cv::Mat &gray, const std::vector<Hypothes
         const KalmanBox::Vec3 z(b.x, b.y + b.height, b.x + b.width);
         const double w = b.width;
         Track t(next_id_++, KalmanBox(z, std::max(kalman_.meas_sigma_px, kalman_.meas_sigma_frac * w),
-                                      kalman_.init_speed_mps * w / shadow_.road.road.vehicle_width_m));
+                                      kalman_.init_speed_mps * w / shadow_.road.shape.width_m));
         t.confidence = dets[i].score;
         t.height.start(dets[i], gray.cols, kalman_.height);
         note_width_per_depth(t, b);
