@@ -41,5 +41,6 @@ def test_a_tallest_vehicle_below_the_cascades_lowest_is_refused():
     """The cascade scans each window size in the rows between its lowest and tallest vehicle: a tallest one below
     the lowest (1.0 m) leaves no rows, and building the part says which keys to change."""
     values = {"pipeline": {"preset": "paper004"}, "vehicle_shape": {"max_height_m": 0.8}}
-    with pytest.raises(InvalidArgument, match=r"vehicle_shape\.max_height_m must exceed cascade\.min_vehicle_height_m"):
+    with pytest.raises(InvalidArgument, match=r"vehicle_shape\.max_height_m \(0\.8 m\) must exceed "
+                                              r"cascade\.min_vehicle_height_m \(1 m\).*raise the first or lower"):
         Pipeline(configuration.core_sections(configuration.load(None, values)))

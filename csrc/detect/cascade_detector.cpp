@@ -50,7 +50,10 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
         });
     if (verifier_) verifier_->set_pool(pool_.get());
     if (p_.road.shape.max_height_m <= p_.min_vehicle_height_m)
-        throw std::invalid_argument("vehicle_shape.max_height_m must exceed cascade.min_vehicle_height_m");
+        throw std::invalid_argument("vehicle_shape.max_height_m (" + cv::format("%g", p_.road.shape.max_height_m) +
+                                    " m) must exceed cascade.min_vehicle_height_m (" +
+                                    cv::format("%g", p_.min_vehicle_height_m) +
+                                    " m): no window size has rows to scan; raise the first or lower the second");
 }
 
 CascadeDetector::~CascadeDetector() = default;
