@@ -1,5 +1,5 @@
-"""Keys that moved (to one shared definition: the hood line in the camera section, lane and vehicle widths in the
-road section; or renamed: fuse.cue_weight) and presets that were removed: an old key or preset is refused with an
+"""Keys that moved (to one shared definition: the hood line in the camera section, lane widths in the road
+section, the vehicles' width, height and aspects in the vehicle_shape section; or renamed: fuse.cue_weight) and presets that were removed: an old key or preset is refused with an
 error naming what replaces it, by the configuration loader and by the core alike; the one key reaches the stages
 that read it. Keys and sections that were removed without a replacement are unknown keys."""
 from __future__ import annotations
@@ -25,9 +25,17 @@ MOVED = {
     "self_calibration.lane_width_m": "road.lane_width_m",
     "lead.min_lane_width_m": "road.min_lane_width_m",
     "lead.max_lane_width_m": "road.max_lane_width_m",
-    "shadow.vehicle_width_m": "road.vehicle_width_m",
-    "cascade.vehicle_width_m": "road.vehicle_width_m",
-    "parallax.vehicle_width_m": "road.vehicle_width_m",
+    "shadow.vehicle_width_m": "vehicle_shape.width_m",
+    "cascade.vehicle_width_m": "vehicle_shape.width_m",
+    "parallax.vehicle_width_m": "vehicle_shape.width_m",
+    "road.vehicle_width_m": "vehicle_shape.width_m",
+    "cascade.max_vehicle_height_m": "vehicle_shape.max_height_m",
+    "parallax.top_max_height_m": "vehicle_shape.max_height_m",
+    "verify.aspect_ratio": "vehicle_shape.aspect",
+    "verify.top_min_aspect": "vehicle_shape.top_min_aspect",
+    "parallax.top_min_aspect": "vehicle_shape.top_min_aspect",
+    "verify.top_max_aspect": "vehicle_shape.max_aspect",
+    "parallax.max_aspect": "vehicle_shape.max_aspect",
     "fuse.thesis_weight": "fuse.cue_weight",
 }
 

@@ -159,7 +159,7 @@ def test_a_car_keeps_its_identity_through_a_bridges_shadow():
 def test_a_truck_keeps_its_measured_height_against_car_shaped_guesses():
     """cut_in, the shadow detector tracked by phd: the truck 20-37 m ahead in the left lane (about 60 x 90 px, height 1.5
     widths). On many detection runs the verification finds no top on its side and guesses a car's height
-    (verify.aspect_ratio 0.8); averaged into the vehicle's box, those guesses halved it (IoU under 0.5 with the truck,
+    (vehicle_shape.aspect 0.8); averaged into the vehicle's box, those guesses halved it (IoU under 0.5 with the truck,
     and from frame 255 a second, car-shaped track). A vehicle whose measured tops said taller than
     vehicle_height.tall_aspect twice in a row keeps its height against guessed ones, and is matched to them as if
     they were as tall (track/vehicle_height.hpp; the Kalman tracker shares the rule)."""

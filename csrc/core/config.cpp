@@ -14,6 +14,7 @@ namespace {
 template <class C, class Fn> void for_each_pipeline_section(C &c, Fn &&fn) {
     fn("camera", c.camera);
     fn("road", c.road);
+    fn("vehicle_shape", c.vehicle_shape);
     fn("pipeline", c.pipeline);
     fn("lanes", c.lanes);
     fn("horizon", c.horizon);
@@ -49,9 +50,17 @@ constexpr MovedKey kMovedKeys[] = {
     {"self_calibration", "lane_width_m", "road.lane_width_m"},
     {"lead", "min_lane_width_m", "road.min_lane_width_m"},
     {"lead", "max_lane_width_m", "road.max_lane_width_m"},
-    {"shadow", "vehicle_width_m", "road.vehicle_width_m"},
-    {"cascade", "vehicle_width_m", "road.vehicle_width_m"},
-    {"parallax", "vehicle_width_m", "road.vehicle_width_m"},
+    {"shadow", "vehicle_width_m", "vehicle_shape.width_m"},
+    {"cascade", "vehicle_width_m", "vehicle_shape.width_m"},
+    {"parallax", "vehicle_width_m", "vehicle_shape.width_m"},
+    {"road", "vehicle_width_m", "vehicle_shape.width_m"},
+    {"cascade", "max_vehicle_height_m", "vehicle_shape.max_height_m"},
+    {"parallax", "top_max_height_m", "vehicle_shape.max_height_m"},
+    {"verify", "aspect_ratio", "vehicle_shape.aspect"},
+    {"verify", "top_min_aspect", "vehicle_shape.top_min_aspect"},
+    {"parallax", "top_min_aspect", "vehicle_shape.top_min_aspect"},
+    {"verify", "top_max_aspect", "vehicle_shape.max_aspect"},
+    {"parallax", "max_aspect", "vehicle_shape.max_aspect"},
     {"fuse", "thesis_weight", "fuse.cue_weight"},
 };
 

@@ -10,6 +10,7 @@
 #include "geometry/road_params.hpp"
 #include "geometry/self_calibration.hpp"
 #include "geometry/track_kinematics.hpp"
+#include "geometry/vehicle_shape.hpp"
 #include "lanes/lane_tracker.hpp"
 #include "road/road_motion_stage.hpp"
 
@@ -39,7 +40,8 @@ struct PipelineParams {
 // with get<Struct>("section").
 struct Config final : SectionLookup {
     CameraParams camera;              // also the hood line (camera.hood_frac) every stage stops at
-    RoadParams road;                  // lane and vehicle widths; handed to every unit's `road` by from_json
+    RoadParams road;                  // lane widths; handed to every unit's `road` by from_json
+    VehicleShapeParams vehicle_shape; // the vehicles' size and aspect; taken by every part's `share`
     PipelineParams pipeline;
     LaneParams lanes;
     HorizonParams horizon;

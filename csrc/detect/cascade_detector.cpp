@@ -49,8 +49,11 @@ CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
             return make_vehicle_verifier(p_.verifier, p_.verify_mirrored, p_.mirror_min_p, p_.verifier_dnn);
         });
     if (verifier_) verifier_->set_pool(pool_.get());
-    if (p_.max_vehicle_height_m <= p_.min_vehicle_height_m)
-        throw std::invalid_argument("cascade.max_vehicle_height_m must exceed cascade.min_vehicle_height_m");
+    if (p_.road.shape.max_height_m <= p_.min_vehicle_height_m)
+        throw std::invalid_argument("vehicle_shape.max_height_m (" + cv::format("%g", p_.road.shape.max_height_m) +
+                                    " m) must exceed cascade.min_vehicle_height_m (" +
+                                    cv::format("%g", p_.min_vehicle_height_m) +
+                                    " m): no window size has rows to scan; raise the first or lower the second");
 }
 
 CascadeDetector::~CascadeDetector() = default;
@@ -104,7 +107,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         const double hs = win_.height * f, ws = win_.width * f;
         if (hs < p_.min_window_px) continue;
         // rows where the window's bottom may lie (flat road, vehicle heights H_min..H_max)
-        const double yb0 = std::max<double>(prior.y_top, yh + hs * hc / p_.max_vehicle_height_m);
+        const double yb0 = std::max<double>(prior.y_top, yh + hs * hc / p_.road.shape.max_height_m);
         const double yb1 = std::min<double>(gray.rows, yh + hs * hc / p_.min_vehicle_height_m);
         if (yb1 <= yb0) continue;
         // columns: the road area at those rows, half a window wider each side

@@ -41,9 +41,10 @@ namespace hw {
 struct CascadeParams {
     std::string model;                  // path of the cascade XML; "" = the shipped model (filled in by Python)
     std::string verifier;               // path of the verifier model; "" = the shipped one (Python), "off" = none
-    RoadPriorParams road;               // scan area (keys in this section)
-    double min_vehicle_height_m = 1.0;  // m; lowest vehicle box (a low car, partly hidden)
-    double max_vehicle_height_m = 4.5;  // m; highest vehicle box (a truck)
+    RoadPriorParams road;               // scan area (keys in this section); the vehicle's size (vehicle_shape)
+    // m; lowest vehicle box (a low car, partly hidden); the tallest is vehicle_shape.max_height_m. Only the cascade
+    // bounds the height from below (the proposals' gate has its own, looser bounds), so the key stays here.
+    double min_vehicle_height_m = 1.0;
     double scale_factor = 1.12;         // ratio of successive window sizes
     double max_window_frac = 0.6;       // largest window height as a fraction of the image height
     double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
@@ -80,9 +81,7 @@ struct CascadeParams {
         road.bind(m);
         m.add("min_vehicle_height_m", min_vehicle_height_m, 0.3, 5.0,
               "m; lowest vehicle box on a flat road; with the camera height it bounds how far below the "
-              "horizon a window of each size is scanned; 1.0 m: a low car");
-        m.add("max_vehicle_height_m", max_vehicle_height_m, 0.5, 10.0,
-              "m; highest vehicle box; 4.5 m: a truck");
+              "horizon a window of each size is scanned (the highest: vehicle_shape.max_height_m); 1.0 m: a low car");
         m.add("scale_factor", scale_factor, 1.01, 2.0,
               "ratio between successive window sizes; smaller finds more sizes at more cost");
         m.add("max_window_frac", max_window_frac, 0.05, 1.0,

@@ -35,7 +35,7 @@ struct ParallaxSection {
     double search_max_speed_mps = 45.0;  // m/s; travel searched when there is no prediction
     int search_steps = 24;             // travels tried between 0 and that
 
-    void share(const SectionLookup &c) { detect.road = c.get<RoadParams>("road"); }
+    void share(const SectionLookup &c) { detect.shape = c.get<VehicleShapeParams>("vehicle_shape"); }
     void bind(ParamMap &m);
 };
 class ParallaxDifferenceDetector final : public Detector {

@@ -53,6 +53,7 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
     const double yh = horizon_row(gray.size(), ctx.lanes, ctx.camera), hc = ctx.camera.height_m;
     RoadPriorParams prior;
     prior.road = p_.road;
+    prior.shape = p_.shape;
     // every peak (top_k counts the candidates that pass the road checks)
     std::vector<Hypothesis> cand;
     for (const ProposalPeak &pk : net_.peaks(gray, p_.input_width, float(p_.min_heat), 4 * p_.top_k)) {

@@ -19,6 +19,7 @@
 #include "detect/detector.hpp"
 #include "detect/proposal_net.hpp"
 #include "geometry/road_params.hpp"
+#include "geometry/vehicle_shape.hpp"
 
 #include <memory>
 #include <string>
@@ -30,7 +31,8 @@ class VehicleVerifier;
 struct ProposalsParams {
     std::string model;              // path of the proposal network (ONNX); "" = the shipped model (filled in by Python)
     std::string verifier;           // path of the verifier; "" = the shipped CNN verifier (Python), "off" = none
-    RoadParams road;                // section "road" (vehicle and lane widths), taken by share
+    RoadParams road;                // section "road" (lane widths), taken by share
+    VehicleShapeParams shape;       // section "vehicle_shape" (the vehicle width), taken by share
     int input_width = 320;          // px of the network's input
     double min_heat = 0.05;         // peaks below are not candidates
     int top_k = 24;                 // strongest candidates verified (and output)
@@ -38,11 +40,16 @@ struct ProposalsParams {
     bool verify_mirrored = true;    // the verifier also judges each believed crop's mirror image (mean of the two)
     bool refine_boxes = true;       // a verifier with a box output moves each candidate's box onto the vehicle
     int refine_looks = 4;           // looks of the verifier at each candidate, each moving it again (min of the p)
+    // A gate on the height the network's box implies, with its own bounds (0.7 / 5.0 m), not the vehicle's size
+    // prior (vehicle_shape.max_height_m), so the keys stay here.
     double min_vehicle_height_m = 0.7, max_vehicle_height_m = 5.0;
     double min_width_ratio = 0.35, max_width_ratio = 3.0;
     double nms_iou = 0.5;
 
-    void share(const SectionLookup &c) { road = c.get<RoadParams>("road"); }  // the road section's widths
+    void share(const SectionLookup &c) {  // the lane widths and the vehicle width
+        road = c.get<RoadParams>("road");
+        shape = c.get<VehicleShapeParams>("vehicle_shape");
+    }
     void bind(ParamMap &m) {
         m.add("model", model, nullptr,
               "path of the proposal network (ONNX, `headway train proposals --out X.onnx`); empty = the model shipped "

@@ -52,24 +52,18 @@ void ParallaxParams::bind(ParamMap &m) {
           "the sides are taken from the region's body (above its bottom band) when the body's difference spans at "
           "least this share of the band's width; the band is widened by what moves beside the vehicle on the road "
           "(its cast shadow)");
-    m.add("max_aspect", max_aspect, 0.2, 5.0,
-          "expected widths; hot clusters up to this high above a region's bottom belong to its vehicle (trucks "
-          "are ~1.5 widths tall)");
     m.add("height_hot_frac", height_hot_frac, 0.0, 1.0,
           "share of a region's columns that must be hot for a row to count towards its height");
     m.add("height_gap_frac", height_gap_frac, 0.0, 2.0,
           "widths; rows without difference bridged while measuring the height (the flat back of a truck)");
     m.add("min_aspect", min_aspect, 0.1, 5.0,
-          "box height / width reported at least (a region whose upper edges showed no parallax)");
+          "box height / width reported at least (a region whose upper edges showed no parallax); at most: "
+          "vehicle_shape.max_aspect");
     m.add("find_top", find_top,
           "take a region's top from the current frame's side edges under a roof line when that is higher than "
-          "top_min_aspect widths (a truck's flat back shows no parallax; docs/tracking.md)");
-    m.add("top_min_aspect", top_min_aspect, 0.1, 5.0,
-          "height / width (between the sides found); a top found lower than this is not trusted and the region's "
-          "height is kept (cars' upper sides fade into the rear window; as the thesis preset's top_min_aspect)");
-    m.add("top_max_height_m", top_max_height_m, 0.5, 10.0,
-          "m above the road at the region's bottom row (flat road); the top search stops there: trucks are up to "
-          "4 m tall; in metres because a vehicle cut by the image's side shows only part of its width");
+          "vehicle_shape.top_min_aspect widths, up to vehicle_shape.max_height_m above the road at its bottom row (a "
+          "truck's flat back shows no parallax; a cut vehicle's visible width says nothing of its height; "
+          "docs/tracking.md)");
     m.add("top_keep_frac", top_keep_frac, 0.05, 1.0,
           "share of the side edges' strength on the lower body that still counts as a side going up (as the thesis "
           "preset's top_keep_frac)");
@@ -329,7 +323,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         return a.y1 != b.y1 ? a.y1 > b.y1 : a.x0 < b.x0;
     });
     // A cluster joins a region when it lies within the region's columns (+- join_gap_cells) and no
-    // higher above its bottom than max_aspect region widths (a vehicle is not wider above its bottom,
+    // higher above its bottom than vehicle_shape.max_aspect region widths (a vehicle is not wider above its bottom,
     // nor taller than that); a cluster at the region's bottom rows beside it widens it (one vehicle's
     // difference broken at the wheels). Any other cluster starts a region.
     std::vector<Region> regions;
@@ -337,7 +331,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
     for (const auto &c : comps) {
         Region *home = nullptr;
         for (auto &g : regions) {
-            const float tall = float(p.max_aspect) * float(g.x1 - g.x0 + 1) * rows_per_col;
+            const float tall = float(p.shape.max_aspect) * float(g.x1 - g.x0 + 1) * rows_per_col;
             const bool beside = c.y1 >= g.y1 - 1 && c.x1 >= g.x0 - p.join_gap_cells && c.x0 <= g.x1 + p.join_gap_cells;
             const bool above = c.x0 >= g.x0 - p.join_gap_cells && c.x1 <= g.x1 + p.join_gap_cells && c.y0 >= g.y1 - tall;
             if (beside || above) {
@@ -361,7 +355,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
 
     for (const auto &g : regions) {
         float yb = cell_y(float(g.y1 + 1));
-        const float w_exp = float(std::max(0.0, p.road.vehicle_width_m * cam.fx * (yb - horizon_row) / (cam.fy * cam.height_m)));
+        const float w_exp = float(std::max(0.0, p.shape.width_m * cam.fx * (yb - horizon_row) / (cam.fy * cam.height_m)));
         // The width is that of the region's bottom band (bottom_band_frac expected widths tall): the
         // contact zone spans the vehicle, while a guardrail or marking streak joined to it rises sideways.
         const int band_rows = std::max(1, int(std::lround(float(p.bottom_band_frac) * w_exp / cell_px_h)));
@@ -437,7 +431,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
         // (anywhere: the vehicle's top may stand above the road area), bridging gaps of up to
         // height_gap_frac widths (the flat back of a truck shows no difference).
         int top = g.y1, gap = 0;
-        const int max_rows = int(float(p.max_aspect) * w / cell_px_h);
+        const int max_rows = int(float(p.shape.max_aspect) * w / cell_px_h);
         const int max_gap = std::max(p.join_gap_cells, int(float(p.height_gap_frac) * w / cell_px_h));
         for (int r = g.y1; r >= std::max(0, g.y1 - max_rows) && gap <= max_gap; --r) {
             const int n_hot = cv::countNonZero(hot.row(r).colRange(bx0, bx1 + 1));
@@ -454,7 +448,7 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
                 w = x1 - x0;
             }
         }
-        float h = std::clamp(yb - cell_y(float(top)), float(p.min_aspect) * w, float(p.max_aspect) * w);
+        float h = std::clamp(yb - cell_y(float(top)), float(p.min_aspect) * w, float(p.shape.max_aspect) * w);
         // The top from the current frame where the difference cannot give it: the flat back of a truck shows
         // no parallax, and the road band ends band_above_horizon above the horizon, below the roof of any
         // near van or truck. The vehicle's sides are vertical edges up to its roof (vehicle_top.hpp); a side
@@ -470,8 +464,8 @@ ParallaxFrame detect_parallax(const cv::Mat &cur_band, const cv::Mat &prev_band,
                 const float r = cut_r ? x1 : snap_side(cur_full, x1, r0, r1, rad);
                 const float px_per_m = (yb - horizon_row) / float(cam.height_m);  // flat road, at the bottom row
                 const float t = vehicle_top_between(cur_full, l, r, yb, r - l,
-                                                    int(std::floor(yb - float(p.top_max_height_m) * px_per_m)),
-                                                    yb - float(p.top_min_aspect) * (r - l), !cut_l, !cut_r,
+                                                    int(std::floor(yb - float(p.shape.max_height_m) * px_per_m)),
+                                                    yb - float(p.shape.top_min_aspect) * (r - l), !cut_l, !cut_r,
                                                     p.top_keep_frac, p.top_max_gap);
                 if (std::isfinite(t)) h = yb - t;
             }

@@ -32,7 +32,7 @@
 #include "base/types.hpp"
 #include "detect/photometric.hpp"
 #include "geometry/camera.hpp"
-#include "geometry/road_params.hpp"
+#include "geometry/vehicle_shape.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -49,20 +49,22 @@ struct ParallaxParams {
     double edge_slack_px = 0.5;      // px at the level; hot only beyond this displacement of the local gradient
     bool photometric = true;         // take the smooth brightness change out of the difference
     double photometric_trim = 3.0;   // robust sigmas; road cells farther from the brightness surface are left out
-    RoadParams road;                 // section "road" (vehicle_width_m: width the scan expects), taken by the parallax section's share
+    // section "vehicle_shape" (the width the scan expects, the tallest box, the lowest top trusted, the top search's
+    // height), taken by the parallax section's share
+    VehicleShapeParams shape;
     double min_width_frac = 0.3;     // region narrower than this share of the expected width: no vehicle
     double max_width_frac = 2.2;     // wider: no single vehicle
     double inside_margin_m = 0.5;    // m; most of a region's bottom cells lie this far inside the road area
     double bottom_band_frac = 0.25;  // rows over which a region's width is measured, in expected widths
     double side_frac = 0.6;          // side columns reach this share of the band's strong columns
     double body_min_frac = 0.6;      // the body gives the sides when it spans this share of the band
-    double max_aspect = 1.6;         // tallest region (height / its width) a vehicle forms
-    double min_aspect = 0.6;         // box height / width reported at least
+    // box height / width reported at least: the floor of this detector's box for a region whose upper edges showed
+    // no parallax, not a vehicle's shape (vehicle_shape), so the key stays here
+    double min_aspect = 0.6;
     double height_hot_frac = 0.25;   // share of the columns hot for a row to count towards the height
     double height_gap_frac = 0.15;   // widths of rows without difference bridged for the height
-    bool find_top = true;            // top from the current frame's side edges (vehicle_top.hpp) when higher
-    double top_min_aspect = 0.9;     // ... than this many widths (cars keep the region's height)
-    double top_max_height_m = 4.5;   // m; the top search stops this high above the road at the bottom row
+    bool find_top = true;            // top from the current frame's side edges (vehicle_top.hpp) when higher than
+                                     // vehicle_shape.top_min_aspect widths (cars keep the region's height)
     double top_keep_frac = 0.35;     // side edge strength, relative to the lower body, that still counts
     int top_max_gap = 2;             // px; gaps in the side edges bridged going up
     double top_snap_frac = 0.1;      // widths; sides moved to the strongest vertical edge within this first

@@ -81,14 +81,14 @@ RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraPar
     const double x_vp = c.cx - c.fx * std::tan(c.yaw_rad);
     for (int i = 0; i < n; ++i) {
         const double y = r.y_top + i;
-        const float w_cam = flat_road_width(y, yh, c, p.road.vehicle_width_m);
+        const float w_cam = flat_road_width(y, yh, c, p.shape.width_m);
         double xl = 1e30, xr = -1e30;
         float w = w_cam;
         if (r.from_lanes) {
             const float el = lanes.ego_left.x_at(float(y)), er = lanes.ego_right.x_at(float(y));
             const float lw = er - el;
             if (std::isfinite(lw) && lw > 0.f) {
-                w = float(lw * p.road.vehicle_width_m / p.road.lane_width_m);
+                w = float(lw * p.shape.width_m / p.road.lane_width_m);
                 xl = el - p.adjacent_lanes * lw;
                 xr = er + p.adjacent_lanes * lw;
             }
@@ -97,7 +97,7 @@ RoadPrior make_road_prior(cv::Size size, const LaneModel &lanes, const CameraPar
                 xl = std::min(xl, pl); xr = std::max(xr, pr);
             }
         } else if (w_cam > 0.f) {
-            const double scale = w_cam / p.road.vehicle_width_m;  // px per metre at this row = fx / Z
+            const double scale = w_cam / p.shape.width_m;  // px per metre at this row = fx / Z
             xl = x_vp + scale * (-c.lateral_m - p.road_half_width_m);
             xr = x_vp + scale * (-c.lateral_m + p.road_half_width_m);
         }
@@ -126,9 +126,9 @@ float expected_vehicle_width(float y, cv::Size size, const LaneModel &lanes, con
     const ScaledCamera c = scale_camera(cam, size);
     if (lanes_usable(lanes)) {
         const float lw = lanes.lane_width_px(y);
-        if (std::isfinite(lw) && lw > 0.f) return float(lw * p.road.vehicle_width_m / p.road.lane_width_m);
+        if (std::isfinite(lw) && lw > 0.f) return float(lw * p.shape.width_m / p.road.lane_width_m);
     }
-    return flat_road_width(y, horizon_row(lanes, c, size), c, p.road.vehicle_width_m);
+    return flat_road_width(y, horizon_row(lanes, c, size), c, p.shape.width_m);
 }
 
 } // namespace hw

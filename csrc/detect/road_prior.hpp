@@ -3,7 +3,7 @@
 // Two sources, the lane model first and the flat-road camera model as fallback:
 //  - lanes valid: the scan area is the lane stage's road polygon, widened to at least the ego lane
 //    plus `adjacent_lanes` lane widths each side (so vehicles in the adjacent lanes are always
-//    scanned); expected vehicle width w(y) = lane_width_px(y) * road.vehicle_width_m / road.lane_width_m
+//    scanned); expected vehicle width w(y) = lane_width_px(y) * shape.width_m / road.lane_width_m
 //    (thesis 2.4.2.1: "the width of a vehicle in an image is related to the width of the lane").
 //  - lanes invalid: a trapezoid of half-width road_half_width_m around the camera's ego-lane
 //    centre line, and w(y) from the pinhole model of a level road:
@@ -16,18 +16,23 @@
 #include "base/types.hpp"
 #include "geometry/camera.hpp"
 #include "geometry/road_params.hpp"
+#include "geometry/vehicle_shape.hpp"
 
 #include <vector>
 
 namespace hw {
 
 struct RoadPriorParams {
-    RoadParams road;                  // section "road" (vehicle_width_m, lane_width_m), taken by share
+    RoadParams road;                  // section "road" (lane_width_m), taken by share
+    VehicleShapeParams shape;         // section "vehicle_shape" (width_m), taken by share
     double road_half_width_m = 9.0;   // m; fallback scan half-width around the ego-lane centre
     int adjacent_lanes = 2;           // lanes scanned each side of the ego lane at least
     double max_range_m = 120.0;       // m; the scan starts at the row of this range below the horizon
 
-    void share(const SectionLookup &c) { road = c.get<RoadParams>("road"); }  // the road section's widths
+    void share(const SectionLookup &c) {  // the lane width and the vehicle width
+        road = c.get<RoadParams>("road");
+        shape = c.get<VehicleShapeParams>("vehicle_shape");
+    }
     void bind(ParamMap &m) {
         m.add("road_half_width_m", road_half_width_m, 1.0, 50.0,
               "m; without a valid lane model the detector scans this far either side of the ego-lane "

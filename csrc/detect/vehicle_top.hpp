@@ -17,6 +17,8 @@
 // of the aligned difference, widened by the vehicle's cast shadow) onto the vertical edge it belongs to.
 #pragma once
 
+#include "geometry/vehicle_shape.hpp"
+
 #include <opencv2/core.hpp>
 
 #include <cmath>
@@ -25,8 +27,9 @@
 namespace hw {
 
 struct TopSearch {
-    double min_aspect = 0.9;   // height / width bounds of the search (cars: the fixed aspect)
-    double max_aspect = 1.6;
+    // height / width bounds of the search (a lower top: the caller's fallback); the vehicle's (vehicle_shape)
+    double min_aspect = VehicleShapeParams{}.top_min_aspect;
+    double max_aspect = VehicleShapeParams{}.max_aspect;
     double keep_frac = 0.35;   // side edge strength, relative to the lower body, that still counts
     int max_gap = 2;           // rows; gaps bridged going up
 };

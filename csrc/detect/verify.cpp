@@ -69,7 +69,7 @@ bool verify_one(const cv::Mat &gray, const ShadowHypothesis &h, const VerifyPara
     if (texture > p.road_texture_max) return false;  // not standing on a road
 
     const float top = p.find_top ? vehicle_top(gray, left, right, bottom, p.top) : kNaN;
-    const float box_h = std::isfinite(top) ? bottom - top : float(p.aspect_ratio) * width;
+    const float box_h = std::isfinite(top) ? bottom - top : float(p.shape.aspect) * width;
     out.box = cv::Rect2f(left, bottom - box_h, width, box_h);
     out.top_measured = std::isfinite(top);
     // Score: 0.5 when the weaker side just reaches its threshold, towards 1 as it grows, scaled

@@ -5,12 +5,14 @@
 // take the ROI above the edge, widened by margin_px each side, half the edge length high; project
 // its vertical edges onto the columns and take the strongest column left and right of the centre as
 // the sides. A vehicle is one bottom edge plus two sides that both stand out against the road, at a
-// width that fits the row, standing on smooth road. The top follows from an aspect ratio (no consistent cue marks the roof).
+// width that fits the row, standing on smooth road. The top follows from how far up both sides reach, else from a car's
+// aspect (vehicle_shape.aspect; the thesis: no consistent cue marks the roof).
 #pragma once
 
 #include "detect/detector.hpp"
 #include "detect/shadow.hpp"
 #include "detect/vehicle_top.hpp"
+#include "geometry/vehicle_shape.hpp"
 
 namespace hw {
 
@@ -24,12 +26,17 @@ struct VerifyParams {
     double box_max_ratio = 1.6;     // upper bound (trucks and vans are wider than a car)
     double side_rel = 0.06;         // a side's mean vertical-edge step / road gray level, at least
     double side_min_gray = 3.0;     // gray levels; floor of that step on dark roads
-    double aspect_ratio = 0.8;      // box height / width when the top is not found (thesis: 1)
-    bool find_top = true;           // top from how far up both sides reach (else always the aspect)
-    TopSearch top;                  // its bounds and thresholds
+    bool find_top = true;           // top from how far up both sides reach (else always shape.aspect)
+    TopSearch top;                  // its thresholds; its bounds are the vehicle's (share)
+    VehicleShapeParams shape;       // section "vehicle_shape" (aspect when no top is found, top bounds), taken by share
     double road_texture_max = 0.25; // texture of the strip under the bottom edge / its gray level, at most
     double nms_iou = 0.3;           // overlapping detections: the weaker is dropped
 
+    void share(const SectionLookup &c) {
+        shape = c.get<VehicleShapeParams>("vehicle_shape");
+        top.min_aspect = shape.top_min_aspect;
+        top.max_aspect = shape.max_aspect;
+    }
     void bind(ParamMap &m) {
         m.add("margin_px", margin_px, 0, 100,
               "px; the ROI is the bottom edge widened by this each side (thesis: 6 px at 640x480)");
@@ -52,18 +59,10 @@ struct VerifyParams {
               "fraction of the road gray level; each side's mean vertical-edge step over the ROI height "
               "must reach this, else the candidate lacks two sides and is rejected");
         m.add("side_min_gray", side_min_gray, 0.0, 100.0, "gray levels; floor of the side threshold");
-        m.add("aspect_ratio", aspect_ratio, 0.2, 3.0,
-              "box height / width used when the top is not found; the thesis used 1 for every "
-              "vehicle, rear views of cars measure about 0.8");
         m.add("find_top", find_top,
               "find the top as the row up to which both side edges reach (vans and trucks are taller "
-              "than the fixed aspect ratio says); false: always aspect_ratio");
-        m.add("top_min_aspect", top.min_aspect, 0.1, 3.0,
-              "height / width; a top found lower than this is not trusted and aspect_ratio is used: "
-              "0.9 leaves cars (whose upper sides fade into the rear window) to the fixed aspect and "
-              "measures vans and trucks");
-        m.add("top_max_aspect", top.max_aspect, 0.2, 5.0,
-              "height / width; the top search stops here (a truck's rear is about 1.6)");
+              "than a car's aspect says) between vehicle_shape.top_min_aspect and max_aspect widths; false: "
+              "always vehicle_shape.aspect");
         m.add("top_keep_frac", top.keep_frac, 0.05, 1.0,
               "fraction of the side edges' strength on the lower body that still counts as a side "
               "going up; lower follows faint upper sides further, higher stops at the first weak row");
@@ -79,7 +78,7 @@ struct VerifyParams {
 struct Detection {
     cv::Rect2f box;
     float score = 0.f;  // 0..1
-    bool top_measured = true;  // false: no top cue, the height is the fixed aspect's guess (aspect_ratio x width)
+    bool top_measured = true;  // false: no top cue, the height is the fixed aspect's guess (shape.aspect x width)
 };
 
 // A verified detection as a detector part's hypothesis (its score also its strength; whether its top was measured).

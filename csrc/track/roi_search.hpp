@@ -48,7 +48,7 @@ public:
     }
     // Expected image width of a vehicle whose bottom is at row y (0 when no vehicle stands there).
     float expected_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam) const;
-    double vehicle_width_m() const { return shadow_.road.road.vehicle_width_m; }  // m (section road)
+    double vehicle_width_m() const { return shadow_.road.shape.width_m; }  // m (section vehicle_shape)
 
 private:
     ShadowParams shadow_;

@@ -3,7 +3,7 @@
 // The trackers measure a vehicle's bottom and sides; its height comes from the detections, each a new estimate of
 // the aspect (height / width) blended in with the tracker's gain. A detection's top is either measured (the
 // verification found how far up both sides reach, detect/vehicle_top.hpp) or guessed: no top cue, and the
-// verification gives a car's aspect (verify.aspect_ratio, 0.8). For a car the guess is about right, and measured
+// verification gives a car's aspect (vehicle_shape.aspect, 0.8). For a car the guess is about right, and measured
 // tops are noisy (a near car's top search sometimes climbs onto what stands behind it: 1.0-1.6 widths on
 // successive runs for a car of 0.8, synthetic dense_traffic). For a truck (1.4-1.6 widths) the guess halves its box,
 // and a track whose box the guesses keep halving loses the truck (synthetic cut_in; docs/tracking.md).
@@ -15,6 +15,7 @@
 
 #include "base/params.hpp"
 #include "detect/detector.hpp"
+#include "geometry/vehicle_shape.hpp"
 
 #include <opencv2/core.hpp>
 
@@ -36,7 +37,7 @@ struct VehicleHeightParams {
 
 // The height a tracker keeps for one vehicle.
 struct VehicleHeight {
-    double aspect = 0.8;  // box height / width
+    double aspect = VehicleShapeParams{}.aspect;  // box height / width (start: the first detection's)
     int tall_run = 0;     // detections in a row whose measured top made it taller than tall_aspect
 
     // From the vehicle's first detection, in an image `cols` wide.
