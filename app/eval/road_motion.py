@@ -87,11 +87,13 @@ def fit_horizon(camera: dict, frames: list[np.ndarray], n: int = 15, lanes: Opti
 
 
 def window_config(config: dict) -> dict:
-    """`config` for judging the homography on windows: the road's alignment residual reported
-    (homography.measure_residual), and self-calibration off, so that the road-motion stage works around the
-    given camera throughout (a window of a few frames is too short for self-calibration to settle, and its
-    early corrections would move the camera the filter is judged with)."""
-    return {**config, "homography": {**config.get("homography", {}), "measure_residual": True},
+    """`config` for judging the homography on windows: the parallax composition, the one that runs the road-motion
+    stage (the stage is the same whatever preset `config` names, so every preset's row judges it), the road's
+    alignment residual reported (homography.measure_residual), and self-calibration off, so that the road-motion
+    stage works around the given camera throughout (a window of a few frames is too short for self-calibration to
+    settle, and its early corrections would move the camera the filter is judged with)."""
+    return {**config, "pipeline": {**config.get("pipeline", {}), "preset": "parallax", "detectors": [], "tracker": ""},
+            "homography": {**config.get("homography", {}), "measure_residual": True},
             "self_calibration": {**config.get("self_calibration", {}), "enabled": False}}
 
 
