@@ -27,6 +27,18 @@ def test_tme_motorway_homography_is_accepted_on_most_frames():
     assert h["aligned_pairs"] == h["pairs"], h  # an alignment on every window
 
 
+def test_the_homography_is_judged_alike_whatever_preset_is_evaluated():
+    """`headway eval --parts road_motion` judges the road-motion stage for every preset: a configuration naming the
+    default preset (whose parts do not need the road's motion) gives the same windows as the parallax preset."""
+    frames, _ = road_motion.read_tme(data_path("tme", "tme08"))
+    cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
+    base = {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}}
+    parallax = road_motion.homography_windows(frames, {**base, "pipeline": {"preset": "parallax"}}, window=6, step=9)
+    default = road_motion.homography_windows(frames, {**base, "pipeline": {"preset": "default"}}, window=6, step=9)
+    assert parallax["accepted_rate"] > 0.5, parallax
+    assert default == parallax
+
+
 def test_tme_motorway_alignment_leaves_less_than_no_alignment():
     """tme08: with the brightness change between the frames taken out (photometric.hpp), the aligned road
     differs far less than the unaligned one. Measured on these 15 windows: median 2.53 against 5.44 gray
