@@ -3,7 +3,7 @@
 
 #include "base/sections.hpp"
 #include "detect/fuse_hypotheses.hpp"
-#include "detect/lane_features.hpp"
+#include "road/lane_features.hpp"
 #include "fcw/lead_selection.hpp"
 #include "geometry/camera.hpp"
 #include "geometry/horizon.hpp"

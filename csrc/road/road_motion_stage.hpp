@@ -18,7 +18,7 @@
 #pragma once
 
 #include "detect/detector_parallax.hpp"
-#include "detect/lane_features.hpp"
+#include "road/lane_features.hpp"
 #include "geometry/homography_dlt.hpp"
 #include "geometry/homography_kalman.hpp"
 

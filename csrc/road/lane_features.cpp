@@ -1,4 +1,4 @@
-#include "detect/lane_features.hpp"
+#include "road/lane_features.hpp"
 
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
