@@ -82,24 +82,40 @@ def blocks_of(params: dict) -> int:
 
 
 def forward_jax(p: dict, z):
-    """(heat logits (n, 1, h, w), box (n, 4, h, w)) of the standardised input z (n, 1, H, W), in JAX."""
+    """(heat logits (n, 1, h, w), box (n, 4, h, w)) of the standardised input z (n, 1, H, W), in JAX.
+
+    The depthwise 3x3 convolutions are written as nine shifted products and the 1x1 as contractions: XLA's CPU
+    grouped convolution (feature_group_count) made a gradient step ~4x slower (docs/decisions.md)."""
     # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax.numpy as jnp
     from jax import lax
 
-    def conv(x, w, b, stride=1, groups=1):
+    def conv(x, w, b, stride=1):
         pad = w.shape[-1] // 2
         y = lax.conv_general_dilated(x, w, (stride, stride), ((pad, pad), (pad, pad)),
-                                     dimension_numbers=("NCHW", "OIHW", "NCHW"), feature_group_count=groups)
+                                     dimension_numbers=("NCHW", "OIHW", "NCHW"))
         return y + b[None, :, None, None]
+
+    def pointwise(x, w, b):
+        return jnp.einsum("nchw,oc->nohw", x, w[:, :, 0, 0]) + b[None, :, None, None]
+
+    def depthwise(x, w, b, stride=1):
+        h, wd = x.shape[2], x.shape[3]
+        ho, wo = (h + stride - 1) // stride, (wd + stride - 1) // stride
+        xp = jnp.pad(x, ((0, 0), (0, 0), (1, 1), (1, 1)))
+        acc = b[None, :, None, None]
+        for i in range(3):
+            for j in range(3):
+                acc = acc + xp[:, :, i:i + stride * (ho - 1) + 1:stride, j:j + stride * (wo - 1) + 1:stride] \
+                    * w[None, :, 0, i, j, None, None]
+        return acc
 
     relu = lambda x: jnp.maximum(x, 0)  # noqa: E731
     a = relu(conv(z, p["stem_w"], p["stem_b"], 2))
-    a = relu(conv(relu(conv(a, p["down_dw"], p["down_dwb"], 2, groups=a.shape[1])), p["down_pw"], p["down_pwb"]))
+    a = relu(pointwise(relu(depthwise(a, p["down_dw"], p["down_dwb"], 2)), p["down_pw"], p["down_pwb"]))
     for k in range(blocks_of(p)):
-        a = a + relu(conv(relu(conv(a, p[f"b{k}_dw"], p[f"b{k}_dwb"], 1, groups=a.shape[1])),
-                          p[f"b{k}_pw"], p[f"b{k}_pwb"]))
-    return conv(a, p["heat_w"], p["heat_b"]), conv(a, p["box_w"], p["box_b"])
+        a = a + relu(pointwise(relu(depthwise(a, p[f"b{k}_dw"], p[f"b{k}_dwb"])), p[f"b{k}_pw"], p[f"b{k}_pwb"]))
+    return pointwise(a, p["heat_w"], p["heat_b"]), pointwise(a, p["box_w"], p["box_b"])
 
 
 def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, min_heat: float,
