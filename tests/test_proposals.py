@@ -78,16 +78,20 @@ def trained(tmp_path_factory):
     folder = _folder(tmp_path_factory.mktemp("scenes"), 40, seed=1)
     out = tmp_path_factory.mktemp("model") / "p.onnx"
     lines = []
-    # a smaller network than the shipped one (16 channels, 3 blocks): the same code, trained in well under a minute
+    # a smaller network than the shipped one (16 channels, 3 blocks, output stride 4): the same code, trained in well
+    # under a minute
     proposals.train([str(folder)], str(out), epochs=15, seed=0, input_width=INPUT_WIDTH, batch=6, lr=1e-2, width=16,
-                    blocks=3, log=lines.append, threads=1)
+                    blocks=3, blocks8=0, log=lines.append, threads=1)
     return out, lines
 
 
-def test_onnx_computes_the_trainers_network_at_any_size(tmp_path):
+@pytest.mark.parametrize("blocks8,stride", [(po.BLOCKS8, 8), (0, 4)])
+def test_onnx_computes_the_trainers_network_at_any_size(tmp_path, blocks8, stride):
     """cv::dnn on the written file gives the JAX forward pass's heat (after the sigmoid) and box maps, at the
-    shipped input size and at an odd one (fully convolutional: every stride rounds up)."""
-    params = po.init_params(3)
+    shipped input size and at an odd one (fully convolutional: every stride rounds up), with the stride-8 level
+    and without it."""
+    params = po.init_params(3, blocks8=blocks8)
+    assert po.stride_of(params) == stride
     params["heat_b"] = np.float32([0.3])   # away from the 0.01 prior, so that the heat varies
     path = tmp_path / "n.onnx"
     po.save_onnx(params, str(path))
@@ -96,7 +100,7 @@ def test_onnx_computes_the_trainers_network_at_any_size(tmp_path):
         small = rng.integers(0, 256, (h, w), np.uint8)
         heat, box = po.run_onnx(str(path), small)
         logit, ref_box = po.forward_jax(params, po.standardise(small))
-        assert heat.shape == (-(-h // 4), -(-w // 4)) and box.shape == (4, *heat.shape)
+        assert heat.shape == (-(-h // stride), -(-w // stride)) and box.shape == (4, *heat.shape)
         np.testing.assert_allclose(heat, 1 / (1 + np.exp(-np.asarray(logit)[0, 0])), atol=1e-4)
         np.testing.assert_allclose(box, np.asarray(ref_box)[0], atol=1e-4)
 
@@ -128,7 +132,7 @@ def test_the_core_decodes_the_peaks_as_the_trainer(trained):
     img, _ = _scene(np.random.default_rng(5), 3)
     small = po.prepare(img, INPUT_WIDTH)
     heat, box = po.run_onnx(str(out), small)
-    ref = po.decode(heat, box, SIZE[0] / small.shape[1], SIZE[1] / small.shape[0], 0.05, top_k=64)
+    ref = po.decode(heat, box, SIZE[0] / small.shape[1], SIZE[1] / small.shape[0], 0.05, top_k=64, stride=4)
     ref[:, [0, 2]] = ref[:, [0, 2]].clip(0, SIZE[0])
     ref[:, [1, 3]] = ref[:, [1, 3]].clip(0, SIZE[1])
     with _pipeline(out, min_heat=0.05) as pipe:
@@ -137,6 +141,28 @@ def test_the_core_decodes_the_peaks_as_the_trainer(trained):
     assert len(r.boxes) == len(ref) > 0
     np.testing.assert_allclose(r.boxes[:, :4], ref[:, :4], atol=0.05)
     np.testing.assert_allclose(r.boxes[:, 4], ref[:, 4], atol=1e-5)
+
+
+@pytest.mark.parametrize("blocks8,stride", [(2, 8), (0, 4)])
+def test_the_core_reads_the_stride_from_the_network(tmp_path, blocks8, stride):
+    """A network with the stride-8 level and one without it: the core decodes each one's peaks at its own stride, as
+    proposals_onnx.decode does (box within 0.05 px)."""
+    params = po.init_params(4, width=16, blocks=1, width8=16, blocks8=blocks8)
+    params["heat_b"] = np.float32([0.3])
+    params["box_w"] *= 20   # boxes of varied sizes
+    path = tmp_path / "n.onnx"
+    po.save_onnx(params, str(path))
+    img, _ = _scene(np.random.default_rng(6), 3)
+    small = po.prepare(img, INPUT_WIDTH)
+    heat, box = po.run_onnx(str(path), small)
+    ref = po.decode(heat, box, SIZE[0] / small.shape[1], SIZE[1] / small.shape[0], 0.05, top_k=1000, stride=stride)
+    ref[:, [0, 2]] = ref[:, [0, 2]].clip(0, SIZE[0])
+    ref[:, [1, 3]] = ref[:, [1, 3]].clip(0, SIZE[1])
+    with _pipeline(path, min_heat=0.05) as pipe:
+        r = pipe.detect(img)
+    ref = ref[(ref[:, 3] > r.horizon_row + 1) & (ref[:, 2] - ref[:, 0] >= 2) & (ref[:, 3] - ref[:, 1] >= 2)]
+    assert len(r.boxes) == len(ref) > 0
+    np.testing.assert_allclose(r.boxes[:, :4], ref[:, :4], atol=0.05)
 
 
 def test_a_file_that_is_not_a_proposal_network_is_refused_by_name(tmp_path):

@@ -50,7 +50,7 @@ HELD_OUT = 10          # image k (in the folders' order) is held out when k % HE
 MIN_BOX_PX = 2.0       # input px: lower boxes are neither vehicles nor background (ignored)
 SIGMA_MIN, SIGMA_DIV = 0.6, 8.0
 REG_HEAT = 0.5
-CROP_ROWS, CROP_COLS = 96, 160   # input px of the window fitted (module docstring)
+CROP_ROWS, CROP_COLS = 128, 192  # input px of the window fitted (module docstring)
 BOX_WEIGHT = 1.0
 
 
@@ -127,7 +127,7 @@ def augment(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator, rows: 
     return img, c[kept], c[~kept & (inside > 0)]
 
 
-def targets(boxes: np.ndarray, out_w: int, out_h: int, ignored=()):
+def targets(boxes: np.ndarray, out_w: int, out_h: int, ignored=(), stride: int = 8):
     """(heat (h, w), box (4, h, w), weight (h, w), ignore (h, w) bool) of one image's boxes (input px); the cells
     of the `ignored` boxes (mostly outside the window) are neither vehicle nor background, as those of boxes lower
     than MIN_BOX_PX."""
@@ -135,7 +135,7 @@ def targets(boxes: np.ndarray, out_w: int, out_h: int, ignored=()):
     box = np.zeros((4, out_h, out_w), np.float32)
     owner = np.zeros((out_h, out_w), np.float32)   # the Gaussian of the box that owns each cell's regression
     ignore = np.zeros((out_h, out_w), bool)
-    S = po.STRIDE
+    S = stride
     X, Y = np.meshgrid(S * np.arange(out_w) + 0.5, S * np.arange(out_h) + 0.5)   # cell centres, input px
     ignored = np.asarray(ignored, np.float32).reshape(-1, 4)
     for k, (l, t, r, b) in enumerate(np.r_[ignored, np.asarray(boxes, np.float32).reshape(-1, 4)]):
@@ -159,12 +159,12 @@ def targets(boxes: np.ndarray, out_w: int, out_h: int, ignored=()):
     return heat, box, owner, ignore
 
 
-def batch_arrays(images, boxes, idx, rng, aug: bool):
+def batch_arrays(images, boxes, idx, rng, aug: bool, stride: int = 8):
     """The standardised inputs and the stacked targets of images[idx] (augmented with `aug`)."""
     xs, hs, bs, ws, igs = [], [], [], [], []
     for k in idx:
         img, bx, cut = augment(images[k], boxes[k], rng) if aug else (images[k], boxes[k], ())
-        t = targets(bx, *po.output_size(img.shape[1], img.shape[0]), cut)
+        t = targets(bx, *po.output_size(img.shape[1], img.shape[0], stride), cut, stride)
         xs.append(img)
         hs.append(t[0]), bs.append(t[1]), ws.append(t[2]), igs.append(t[3])
     return (po.standardise(np.stack(xs)), np.stack(hs)[:, None], np.stack(bs), np.stack(ws)[:, None],
@@ -172,14 +172,14 @@ def batch_arrays(images, boxes, idx, rng, aug: bool):
 
 
 def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3, decay: float = 1e-5,
-        width: int = po.WIDTH, blocks: int = po.BLOCKS, on_epoch: Callable[[int, dict, float, float], None] | None = None) -> dict:
+        width: int = po.WIDTH, blocks: int = po.BLOCKS, width8: int = po.WIDTH8, blocks8: int = po.BLOCKS8, on_epoch: Callable[[int, dict, float, float], None] | None = None) -> dict:
     """Parameters (numpy, proposals_onnx's names) fitted by Adam on the focal and box losses (module docstring)."""
     # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax
     import jax.numpy as jnp
 
     rng = np.random.default_rng(seed)
-    p = {k: jnp.asarray(v) for k, v in po.init_params(seed, width=width, blocks=blocks).items()}
+    p = {k: jnp.asarray(v) for k, v in po.init_params(seed, width=width, blocks=blocks, width8=width8, blocks8=blocks8).items()}
     decayed = [k for k in p if k.endswith("_w") or k.endswith("_dw") or k.endswith("_pw")]
 
     def loss(p, x, yh, yb, wb, ig):
@@ -212,7 +212,7 @@ def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3
             order = rng.permutation(len(images))
             for b in range(per_epoch):
                 idx = np.sort(order[b * batch:(b + 1) * batch])
-                arrays = batch_arrays(images, boxes, idx, rng, aug=True)
+                arrays = batch_arrays(images, boxes, idx, rng, aug=True, stride=po.stride_of(p))
                 t += 1
                 p, m, v, val, (f, bl) = step(p, m, v, t, *arrays, np.float32(lr * (1 - (t - 1) / steps)))
                 tot, tf, tb = tot + float(val), tf + float(f), tb + float(bl)
@@ -227,7 +227,8 @@ def finish(p) -> dict:
     return {k: np.asarray(v, np.float32) for k, v in p.items()}
 
 
-def held_out_recall(path: str, images, boxes, scale: float, min_height_px: float = 40.0, min_heat: float = 0.05):
+def held_out_recall(path: str, images, boxes, scale: float, stride: int = 8, min_height_px: float = 40.0,
+                    min_heat: float = 0.05):
     """On the held-out images: the share of annotated boxes >= min_height_px (image px) that some peak of the
     written ONNX (by cv2.dnn, as the core runs it) covers at IoU >= 0.5, and peaks per image; a quick check of the
     fit after each epoch (the detector's figures come from the core: docs/detection.md)."""
@@ -236,7 +237,7 @@ def held_out_recall(path: str, images, boxes, scale: float, min_height_px: float
     for img, bx in zip(images, boxes):
         net.setInput(po.standardise(img), "image")
         heat, box = net.forward(["heat", "box"])
-        det = po.decode(heat[0, 0], box[0], 1.0, 1.0, min_heat)
+        det = po.decode(heat[0, 0], box[0], 1.0, 1.0, min_heat, stride=stride)
         peaks += len(det)
         big = bx[(bx[:, 3] - bx[:, 1]) * scale >= min_height_px]
         if len(big):
@@ -247,7 +248,8 @@ def held_out_recall(path: str, images, boxes, scale: float, min_height_px: float
 
 
 def train(folders: list[str], out: str, epochs: int = 5, seed: int = 0, input_width: int = po.INPUT_WIDTH,
-          batch: int = 16, lr: float = 2e-3, width: int = po.WIDTH, blocks: int = po.BLOCKS, cache: str | None = None, limit: int = 0,
+          batch: int = 16, lr: float = 2e-3, width: int = po.WIDTH, blocks: int = po.BLOCKS, width8: int = po.WIDTH8,
+          blocks8: int = po.BLOCKS8, cache: str | None = None, limit: int = 0,
           log: Callable[[str], None] = print, threads: int = 2) -> dict:
     """Fit on the folders' images less the held-out ones (`limit` > 0: only the first `limit` images), log each
     epoch (losses, the held-out boxes >= 40 px a peak covers), write the ONNX to `out` after every epoch."""
@@ -269,19 +271,20 @@ def train(folders: list[str], out: str, epochs: int = 5, seed: int = 0, input_wi
     fit_i = np.flatnonzero(~held)
     held_i = np.flatnonzero(held)
     log(f"proposals: {len(images)} images ({', '.join(folders)}), {len(fit_i)} fitted, {len(held_i)} held out (every "
-        f"{HELD_OUT}th); input {images.shape[2]}x{images.shape[1]} gray, stride {po.STRIDE}, stem {po.STEM}, width "
-        f"{width}, {blocks} blocks; {epochs} epochs, batch {batch}, lr {lr:g}, seed "
+        f"{HELD_OUT}th); input {images.shape[2]}x{images.shape[1]} gray, stride {8 if blocks8 else 4}, stem {po.STEM}, width "
+        f"{width}, {blocks} blocks at stride 4, width {width8 if blocks8 else '-'}, {blocks8} blocks at stride 8; "
+        f"window {CROP_ROWS}x{CROP_COLS}; {epochs} epochs, batch {batch}, lr {lr:g}, seed "
         f"{seed}; {sum(len(boxes[k]) for k in fit_i)} boxes fitted; images {(time.perf_counter() - t0) / 60:.1f} min")
     t1 = time.perf_counter()
 
     def on_epoch(ep, params, loss, secs, parts):   # the ONNX after every epoch: a stopped run leaves the last one
         po.save_onnx(params, out, doc=f"headway train proposals --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
-        rec, peaks = held_out_recall(out, images[held_i], [boxes[k] for k in held_i], scale)
+        rec, peaks = held_out_recall(out, images[held_i], [boxes[k] for k in held_i], scale, po.stride_of(params))
         log(f"epoch {ep + 1}/{epochs}: loss {loss:.4f} ({parts}), held-out boxes >= 40 px a peak >= 0.05 covers at "
             f"IoU 0.5: {rec:.3f}, {peaks:.1f} peaks an image, {secs:.0f} s")
 
     params = fit(images[fit_i], [boxes[k] for k in fit_i], epochs, seed, batch, lr, width=width, blocks=blocks,
-                 on_epoch=on_epoch)
+                 width8=width8, blocks8=blocks8, on_epoch=on_epoch)
     po.save_onnx(params, out, doc=f"headway train proposals --out {Path(out).name}, seed {seed}, {epochs} epochs")
     log(f"fit {(time.perf_counter() - t1) / 60:.1f} min, total {(time.perf_counter() - t0) / 60:.1f} min -> {out} "
         f"({Path(out).stat().st_size / 1024:.0f} KiB)")

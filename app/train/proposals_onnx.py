@@ -4,20 +4,24 @@ runs through cv::dnn (csrc/detect/proposal_net.cpp) and the tests.
 Input (the same arithmetic as the core's `ProposalNet`): the gray image resized to `input_width` x floor(height *
 input_width / width + 0.5) by the pixel-area mean (cv2.resize INTER_AREA), then z = (g - INPUT_MEAN) / INPUT_SCALE.
 
-Network (ONNX opset 11, every node cv::dnn of OpenCV 4.6 reads), fully convolutional, output stride 4:
+Network (ONNX opset 11, every node cv::dnn of OpenCV 4.6 reads), fully convolutional, output stride 8 (4 for a
+network without the third level):
     a0 = relu(conv3x3/2(z, c))                                   (c, H/2, W/2)
     a1 = relu(conv1x1(relu(dwconv3x3/2(a0)), C))                 (C, H/4, W/4)
     a_{k+1} = a_k + relu(conv1x1(relu(dwconv3x3(a_k)), C))      k = 1 .. BLOCKS
-    heat = sigmoid(conv1x1(a, 1))        the objectness of each cell: a vehicle's centre is a peak
-    box  = conv1x1(a, 4)                 log(distance / STRIDE) from the cell's centre to the box's left, top,
+    b1 = relu(conv1x1(relu(dwconv3x3/2(a)), C8))                 (C8, H/8, W/8)
+    b_{k+1} = b_k + relu(conv1x1(relu(dwconv3x3(b_k)), C8))     k = 1 .. BLOCKS8
+    heat = sigmoid(conv1x1(b, 1))        the objectness of each cell: a vehicle's centre is a peak
+    box  = conv1x1(b, 4)                 log(distance / stride) from the cell's centre to the box's left, top,
                                          right and bottom edges
 ("/2": stride 2; convolutions pad to keep the size, ceil(n / 2) after a stride; "dw": depthwise.) Each output cell
-sees 71 px of the input (284 px of a 1280x720 image), at ~43 M multiply-adds for 320x180. Dilated depthwise layers
-would see farther for the same arithmetic, but cv::dnn runs them ~6x slower (docs/decisions.md).
+sees 211 px of the input (844 px of a 1280x720 image), at ~36 M multiply-adds for 320x180: the third level gives the
+large near vehicles' edges to the cell at their centre. Dilated depthwise layers would see farther for the same
+arithmetic, but cv::dnn runs them ~6x slower (docs/decisions.md).
 
 Decoding (`decode`, and the core's the same way): a cell is a peak when its heat is the largest of its 3x3
 neighbourhood and at least `min_heat`; its box in the input is
-    (x_c - e^{b0} S, y_c - e^{b1} S, x_c + e^{b2} S, y_c + e^{b3} S),   x_c = S j + 0.5, y_c = S i + 0.5,  S = STRIDE
+    (x_c - e^{b0} S, y_c - e^{b1} S, x_c + e^{b2} S, y_c + e^{b3} S),   x_c = S j + 0.5, y_c = S i + 0.5,  S = stride
 and the image's box is that times the image's size over the input's.
 """
 from __future__ import annotations
@@ -25,23 +29,24 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-STRIDE = 4               # input px per output cell
 INPUT_WIDTH = 320        # px: the shipped model's input width (the 1280x720 images at a quarter)
 INPUT_MEAN, INPUT_SCALE = 127.5, 64.0
-STEM, WIDTH = 16, 32     # channels of the first convolution and of every layer after it
-BLOCKS = 8               # residual depthwise-separable blocks at stride 4
+STEM, WIDTH = 16, 32     # channels of the first convolution and of the stride-4 layers
+BLOCKS = 2               # residual depthwise-separable blocks at stride 4
+WIDTH8, BLOCKS8 = 64, 6  # channels and blocks at stride 8 (BLOCKS8 = 0: no third level, output stride 4)
 OPSET = 11
 
 
 def input_size(width: int, height: int, input_width: int = INPUT_WIDTH) -> tuple[int, int]:
     """The network's input (width, height) for an image of `width` x `height`: the aspect kept."""
-    return input_width, max(STRIDE, int(np.floor(height * input_width / width + 0.5)))
+    return input_width, max(8, int(np.floor(height * input_width / width + 0.5)))
 
 
-def output_size(w_in: int, h_in: int) -> tuple[int, int]:
-    """(width, height) of the output maps: ceil twice by 2."""
-    half = lambda n: (n + 1) // 2  # noqa: E731
-    return half(half(w_in)), half(half(h_in))
+def output_size(w_in: int, h_in: int, stride: int = 8) -> tuple[int, int]:
+    """(width, height) of the output maps: ceil by 2, log2(stride) times."""
+    for _ in range(int(np.log2(stride))):
+        w_in, h_in = (w_in + 1) // 2, (h_in + 1) // 2
+    return w_in, h_in
 
 
 def prepare(gray: np.ndarray, input_width: int = INPUT_WIDTH) -> np.ndarray:
@@ -57,28 +62,51 @@ def standardise(small: np.ndarray) -> np.ndarray:
     return ((s - INPUT_MEAN) / INPUT_SCALE)[:, None]
 
 
-def init_params(seed: int, stem: int = STEM, width: int = WIDTH, blocks: int = BLOCKS) -> dict:
-    """He-normal weights, zero biases; the heat head's bias starts at a prior of 0.01 (CenterNet)."""
+def init_params(seed: int, stem: int = STEM, width: int = WIDTH, blocks: int = BLOCKS, width8: int = WIDTH8,
+                blocks8: int = BLOCKS8) -> dict:
+    """He-normal weights, zero biases; the heat head's bias starts at a prior of 0.01 (CenterNet). blocks8 = 0: no
+    third level (output stride 4)."""
     rng = np.random.default_rng(seed)
     he = lambda shape, fan: rng.normal(0, np.sqrt(2 / fan), shape).astype(np.float32)  # noqa: E731
-    p = {"stem_w": he((stem, 1, 3, 3), 9), "stem_b": np.zeros(stem, np.float32),
-         "down_dw": he((stem, 1, 3, 3), 9), "down_dwb": np.zeros(stem, np.float32),
-         "down_pw": he((width, stem, 1, 1), stem), "down_pwb": np.zeros(width, np.float32)}
+
+    def separable(name, c_in, c_out, residual):
+        p[f"{name}_dw"], p[f"{name}_dwb"] = he((c_in, 1, 3, 3), 9), np.zeros(c_in, np.float32)
+        p[f"{name}_pw"] = (he((c_out, c_in, 1, 1), c_in) * (0.5 if residual else 1.0)).astype(np.float32)
+        p[f"{name}_pwb"] = np.zeros(c_out, np.float32)   # residual: start small
+
+    p = {"stem_w": he((stem, 1, 3, 3), 9), "stem_b": np.zeros(stem, np.float32)}
+    separable("down", stem, width, False)
     for k in range(blocks):
-        p[f"b{k}_dw"] = he((width, 1, 3, 3), 9)
-        p[f"b{k}_dwb"] = np.zeros(width, np.float32)
-        p[f"b{k}_pw"] = (he((width, width, 1, 1), width) * 0.5).astype(np.float32)  # residual: start small
-        p[f"b{k}_pwb"] = np.zeros(width, np.float32)
-    p["heat_w"] = rng.normal(0, 0.01, (1, width, 1, 1)).astype(np.float32)
+        separable(f"b{k}", width, width, True)
+    head = width
+    if blocks8 > 0:
+        separable("down8", width, width8, False)
+        for k in range(blocks8):
+            separable(f"c{k}", width8, width8, True)
+        head = width8
+    p["heat_w"] = rng.normal(0, 0.01, (1, head, 1, 1)).astype(np.float32)
     p["heat_b"] = np.float32([-np.log(99.0)])
-    p["box_w"] = rng.normal(0, 0.01, (4, width, 1, 1)).astype(np.float32)
-    p["box_b"] = np.full(4, np.log(2.0), np.float32)   # 2 cells each way: a car of ~32 px at the start
+    p["box_w"] = rng.normal(0, 0.01, (4, head, 1, 1)).astype(np.float32)
+    p["box_b"] = np.full(4, np.log(2.0), np.float32)   # 2 cells each way at the start
     return p
 
 
-def blocks_of(params: dict) -> int:
-    """The number of residual blocks a parameter set holds."""
-    return sum(k.endswith("_dw") and k.startswith("b") for k in params)
+def blocks_of(params: dict, level: str = "b") -> int:
+    """The number of residual blocks a parameter set holds at stride 4 (level "b") or 8 ("c")."""
+    return sum(k.startswith(level) and k.endswith("_dw") and k[1:-3].isdigit() for k in params)
+
+
+def stride_of(params: dict) -> int:
+    """The output stride of a parameter set: 8 with the third level, else 4."""
+    return 8 if "down8_dw" in params else 4
+
+
+def layers(params: dict) -> list[tuple[str, int, bool]]:
+    """(name, stride, residual) of each depthwise-separable layer after the stem, in order."""
+    out = [("down", 2, False)] + [(f"b{k}", 1, True) for k in range(blocks_of(params, "b"))]
+    if "down8_dw" in params:
+        out += [("down8", 2, False)] + [(f"c{k}", 1, True) for k in range(blocks_of(params, "c"))]
+    return out
 
 
 def forward_jax(p: dict, z):
@@ -112,24 +140,25 @@ def forward_jax(p: dict, z):
 
     relu = lambda x: jnp.maximum(x, 0)  # noqa: E731
     a = relu(conv(z, p["stem_w"], p["stem_b"], 2))
-    a = relu(pointwise(relu(depthwise(a, p["down_dw"], p["down_dwb"], 2)), p["down_pw"], p["down_pwb"]))
-    for k in range(blocks_of(p)):
-        a = a + relu(pointwise(relu(depthwise(a, p[f"b{k}_dw"], p[f"b{k}_dwb"])), p[f"b{k}_pw"], p[f"b{k}_pwb"]))
+    for name, stride, residual in layers(p):
+        y = relu(pointwise(relu(depthwise(a, p[f"{name}_dw"], p[f"{name}_dwb"], stride)), p[f"{name}_pw"],
+                           p[f"{name}_pwb"]))
+        a = a + y if residual else y
     return pointwise(a, p["heat_w"], p["heat_b"]), pointwise(a, p["box_w"], p["box_b"])
 
 
 def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, min_heat: float,
-           top_k: int = 100) -> np.ndarray:
+           top_k: int = 100, stride: int = 8) -> np.ndarray:
     """(n, 6) left, top, right, bottom (image px), heat, and the peak's index (row * w + column): the peaks of one
     image's heat map (h, w) at least `min_heat`, strongest first, at most top_k; box (4, h, w) the box output;
-    scale_x, scale_y: image px per input px."""
+    scale_x, scale_y: image px per input px; stride: input px per output cell."""
     h, w = heat.shape
     peak = (heat >= cv2.dilate(heat, np.ones((3, 3), np.uint8))) & (heat >= min_heat)
     i, j = np.nonzero(peak)
     order = np.argsort(-heat[i, j], kind="stable")[:top_k]
     i, j = i[order], j[order]
-    d = np.exp(box[:, i, j]) * STRIDE
-    xc, yc = STRIDE * j + 0.5, STRIDE * i + 0.5
+    d = np.exp(box[:, i, j]) * stride
+    xc, yc = stride * j + 0.5, stride * i + 0.5
     return np.c_[(xc - d[0]) * scale_x, (yc - d[1]) * scale_y, (xc + d[2]) * scale_x, (yc + d[3]) * scale_y,
                  heat[i, j], i * w + j].astype(np.float64)
 
@@ -157,14 +186,14 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
         nodes.append(helper.make_node("Relu", [x], [x + "_r"]))
         return x + "_r"
 
-    stem, width = p["stem_w"].shape[0], p["down_pw"].shape[0]
     a = relu(conv("image", "stem_w", "stem_b", "stem", 2))
-    a = relu(conv(relu(conv(a, "down_dw", "down_dwb", "down_d", 2, group=stem)), "down_pw", "down_pwb", "down"))
-    for k in range(blocks_of(p)):
-        y = relu(conv(relu(conv(a, f"b{k}_dw", f"b{k}_dwb", f"b{k}_d", 1, group=width)), f"b{k}_pw", f"b{k}_pwb",
-                      f"b{k}_p"))
-        nodes.append(helper.make_node("Add", [a, y], [f"b{k}"]))
-        a = f"b{k}"
+    for name, stride, residual in layers(p):
+        y = relu(conv(relu(conv(a, f"{name}_dw", f"{name}_dwb", f"{name}_d", stride, group=p[f"{name}_dw"].shape[0])),
+                      f"{name}_pw", f"{name}_pwb", f"{name}_p"))
+        if residual:
+            nodes.append(helper.make_node("Add", [a, y], [name]))
+            y = name
+        a = y
     conv(a, "heat_w", "heat_b", "heat_logit")
     nodes.append(helper.make_node("Sigmoid", ["heat_logit"], ["heat"]))
     conv(a, "box_w", "box_b", "box")

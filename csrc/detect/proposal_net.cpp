@@ -36,7 +36,7 @@ ProposalNet::ProposalNet(const std::string &path, const std::string &key) {
 
 cv::Size ProposalNet::input_size(cv::Size size, int input_width) {
     const int h = int(std::floor(double(size.height) * input_width / size.width + 0.5));
-    return {input_width, std::max(kStride, h)};
+    return {input_width, std::max(8, h)};
 }
 
 std::vector<ProposalPeak> ProposalNet::peaks(const cv::Mat &gray, int input_width, float min_heat, int top_k) const {
@@ -48,10 +48,15 @@ std::vector<ProposalPeak> ProposalNet::peaks(const cv::Mat &gray, int input_widt
     std::vector<cv::Mat> outs;
     net_.forward(outs, std::vector<cv::String>{"heat", "box"});
     const cv::Mat &hb = outs[0], &bb = outs[1];
-    const int gh = (in.height + 1) / 2, oh = (gh + 1) / 2, gw = (in.width + 1) / 2, ow = (gw + 1) / 2;
-    if (hb.dims != 4 || hb.size[1] != 1 || hb.size[2] != oh || hb.size[3] != ow || bb.dims != 4 || bb.size[1] != 4 ||
-        bb.size[2] != oh || bb.size[3] != ow)
-        throw std::runtime_error("its outputs are not heat (1, 1, h, w) and box (1, 4, h, w) of stride 4");
+    // the output stride, 4 or 8, from the maps' size: each stride-2 layer rounds up
+    int stride = 0, oh = in.height, ow = in.width;
+    for (int s = 2; s <= 8 && !stride; s *= 2) {
+        oh = (oh + 1) / 2;
+        ow = (ow + 1) / 2;
+        if (s >= 4 && hb.dims == 4 && hb.size[2] == oh && hb.size[3] == ow) stride = s;
+    }
+    if (!stride || hb.size[1] != 1 || bb.dims != 4 || bb.size[1] != 4 || bb.size[2] != oh || bb.size[3] != ow)
+        throw std::runtime_error("its outputs are not heat (1, 1, h, w) and box (1, 4, h, w) of stride 4 or 8");
     const cv::Mat heat(oh, ow, CV_32F, const_cast<float *>(hb.ptr<float>()));
     cv::Mat local_max;
     cv::dilate(heat, local_max, cv::Mat::ones(3, 3, CV_8U));
@@ -71,9 +76,9 @@ std::vector<ProposalPeak> ProposalNet::peaks(const cv::Mat &gray, int input_widt
     std::vector<ProposalPeak> out;
     for (const Cell &c : cells) {
         const size_t at = size_t(c.i) * ow + c.j;
-        const float xc = kStride * c.j + 0.5f, yc = kStride * c.i + 0.5f;
-        const float l = xc - std::exp(b[at]) * kStride, t = yc - std::exp(b[plane + at]) * kStride;
-        const float r = xc + std::exp(b[2 * plane + at]) * kStride, bo = yc + std::exp(b[3 * plane + at]) * kStride;
+        const float xc = stride * c.j + 0.5f, yc = stride * c.i + 0.5f;
+        const float l = xc - std::exp(b[at]) * stride, t = yc - std::exp(b[plane + at]) * stride;
+        const float r = xc + std::exp(b[2 * plane + at]) * stride, bo = yc + std::exp(b[3 * plane + at]) * stride;
         out.push_back({cv::Rect2f(l * sx, t * sy, (r - l) * sx, (bo - t) * sy), c.v});
     }
     return out;
