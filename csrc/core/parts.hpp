@@ -29,6 +29,9 @@ const char *detector_choices();
 const char *tracker_choices();
 const char *preset_choices();
 
+// Headway's default composition, the preset of a configuration file that names none.
+const char *default_preset();
+
 // Which parts run: the preset's, with pipeline.detectors / pipeline.tracker replacing its own when
 // set. Throws ConfigError naming the key for a composition that cannot run.
 struct Composition {
