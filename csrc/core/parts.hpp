@@ -10,6 +10,7 @@
 #pragma once
 
 #include "detect/detector.hpp"
+#include "detect/fuse_hypotheses.hpp"
 #include "road/road_motion_stage.hpp"
 #include "track/tracker.hpp"
 

@@ -2,7 +2,7 @@
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
 #include "detect/vehicle_verifier.hpp"
 
 #include <algorithm>

@@ -4,7 +4,7 @@
 #pragma once
 
 #include "detect/detector.hpp"
-#include "detect/verify.hpp"
+#include "cues/verify.hpp"
 
 namespace hw {
 

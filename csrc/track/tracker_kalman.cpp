@@ -2,7 +2,7 @@
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
 #include "track/duplicate_pruning.hpp"
 #include "track/track_deletion.hpp"
 
@@ -308,7 +308,7 @@ TrackState KalmanTracker::report(const Track &t) const {
     return s;
 }
 
-void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+void KalmanTracker::step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks,
                         StageTimes &times, bool &full_detection) {
     CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
     Stopwatch track_time;
