@@ -4,7 +4,7 @@
 // the road's motion when the composition runs the road-motion stage) and returns vehicle hypotheses.
 // It does not decide when it runs: the tracker asks for a full detection when it needs one (the
 // Kalman tracker every detect_every_n frames, the particle tracker every frame). To add a detector:
-// write detect/detector_<name>.{hpp,cpp} with a class derived from Detector, and register it with its
+// write detect/<name>/part.{hpp,cpp} with a class derived from Detector, and register it with its
 // section at the end of its .cpp (base/part_registry.hpp; docs/ARCHITECTURE.md, "Adding a part").
 #pragma once
 

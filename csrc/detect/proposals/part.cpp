@@ -1,4 +1,4 @@
-#include "detect/detector_proposals.hpp"
+#include "detect/proposals/part.hpp"
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"

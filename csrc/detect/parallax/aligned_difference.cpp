@@ -1,4 +1,4 @@
-#include "detect/parallax_detector.hpp"
+#include "detect/parallax/aligned_difference.hpp"
 
 #include "detect/photometric.hpp"
 #include "cues/vehicle_top.hpp"
