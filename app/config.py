@@ -20,7 +20,8 @@ import yaml
 from app.can.config_schema import CAN_SCHEMA
 from app.contracts.config_key import key as _key
 from app.contracts.health_config import HEALTH_SCHEMA
-from app.core import core_detectors, core_moved_keys, core_presets, core_removed_presets, core_schema
+from app.core import (core_default_preset, core_detectors, core_moved_keys, core_presets, core_removed_presets,
+                      core_schema)
 from app.fcw import FCW_SCHEMA
 from app.recording import FPS_MAX, FPS_MIN
 from app.safe_yaml import YamlLimitError, key_lines, load_yaml, short, short_name, short_path
@@ -102,15 +103,18 @@ def _pitch_unknown(overrides: dict) -> bool:
 CROSS_FIELD_RULES = (_fcw_order, _mcu_timing, _source_path)
 
 
-# Headway's default composition. The core's own default, for a pipeline made through the C ABI without a preset,
-# is thesis: it needs no model file, and the shipped models' paths are filled in here (core_sections).
-DEFAULT_PRESET = "default"
+@functools.lru_cache(maxsize=1)
+def default_preset() -> str:
+    """Headway's default composition, as the core's preset table names it. A configuration handed to the core
+    without a preset runs the core's own, which needs no model file; a configuration file runs this one, with the
+    shipped models' paths filled in here (core_sections)."""
+    return core_default_preset()
 
 
 def schema() -> dict[str, dict[str, dict]]:
     """Every key of the configuration: {section: {key: {default, type, min, max, choices, doc}}}."""
     s = core_schema()
-    s["pipeline"]["preset"]["default"] = DEFAULT_PRESET
+    s["pipeline"]["preset"]["default"] = default_preset()
     s.update(copy.deepcopy(SUPERVISOR_SCHEMA))
     return s
 

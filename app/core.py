@@ -291,6 +291,7 @@ def core_schema() -> dict:
     described = _config_json(ffi.NULL)
     described.pop("moved_keys")
     described.pop("presets")
+    described.pop("default_preset")
     described.pop("removed_presets")
     described.pop("detectors")
     return described
@@ -300,6 +301,11 @@ def core_presets() -> dict[str, dict]:
     """The named compositions: {name: {"detectors": [...], "tracker": str, "keys": {section: {key: value}}}};
     "keys" are the preset's own defaults, which a configuration's own values override."""
     return _config_json(ffi.NULL)["presets"]
+
+
+def core_default_preset() -> str:
+    """The preset a configuration file that names none runs (the core's preset table names it)."""
+    return _config_json(ffi.NULL)["default_preset"]
 
 
 def core_detectors() -> dict[str, dict]:

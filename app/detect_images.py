@@ -108,7 +108,7 @@ def add_parser(subparsers) -> None:
     s.add_argument("--out", required=True, help="output JSON file")
     s.add_argument("--config", help="configuration YAML")
     s.add_argument("--preset", choices=configuration.single_image_presets(),
-                   help=f"the preset whose detection stage runs (default: the configuration's, `{configuration.DEFAULT_PRESET}`)")
+                   help=f"the preset whose detection stage runs (default: the configuration's, `{configuration.default_preset()}`)")
     s.add_argument("--min-score", type=float, default=None,
                    help="write only detections scoring at least this (0-1); default: the preset's operating point "
                         "(precision 0.85 on held-out training images: docs/detection.md; thesis: every detection); 0 "

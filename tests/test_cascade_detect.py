@@ -114,7 +114,7 @@ EVERY_GROUP = {"verifier": "off", "nms_iou": 1.0, "min_neighbors": 1}
 
 @pytest.mark.parametrize("lanes", [0, 4])
 def test_own_scanner_reports_what_opencv_reports_on_rendered_frames(lanes):
-    """The core scans with its own Haar evaluator (csrc/detect/haar_cascade.hpp: four or eight windows at once,
+    """The core scans with its own Haar evaluator (csrc/detect/cascade/haar_cascade.hpp: four or eight windows at once,
     any step); at OpenCV's step it must find exactly the windows cv::CascadeClassifier finds, with the same stage
     sums: the same groups, boxes and confidences, bit for bit (dense_traffic, where the cascade fires often).
     lanes 0: the widest this CPU has (AVX2 here); 4: the SSE2 code every x86-64 runs."""

@@ -44,7 +44,7 @@ def _cut(boxes, shape):
 
 def _refined_as_core(boxes, d, shape=None):
     """vo.refine with the core's rules: a box the output would turn inside out keeps its own (CnnVerifier::judge),
-    and the moved box is cut to the image of `shape` (cascade_detector.cpp; None: not cut)."""
+    and the moved box is cut to the image of `shape` (detect/cascade/cascade_scan.cpp; None: not cut)."""
     moved = vo.refine(boxes, d)
     flat = (moved[:, 2] - moved[:, 0] < 1) | (moved[:, 3] - moved[:, 1] < 1)
     moved[flat] = np.asarray(boxes, float)[flat]

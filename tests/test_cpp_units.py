@@ -11,7 +11,7 @@ import pytest
 from app import _build_core
 
 ROOT = Path(__file__).resolve().parent.parent
-ALGORITHM_FOLDERS = ("base", "capture", "detect", "fcw", "geometry", "lanes", "road", "track")
+ALGORITHM_FOLDERS = ("base", "capture", "cues", "detect", "fcw", "geometry", "lanes", "road", "track")
 
 
 def test_every_algorithm_folder_has_cpp_unit_tests():

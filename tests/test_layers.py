@@ -17,9 +17,9 @@ LAYERS = [
     ("base",),                  # parameter registry, plain types (EgoMotion, LaneModel, TrackState), errors, stopwatch
     ("geometry", "capture"),    # camera model, homographies, range; frame sources
     ("lanes",),                 # lane markings and the lane model
-    ("detect",),                # detector parts and what they are built from
+    ("cues",),                  # hypotheses, the detection stage a tracker asks, what both measure of a vehicle
+    ("detect", "track"),        # detector parts; tracker parts (which ask the detectors only through cues/)
     ("road",),                  # the road-motion stage (features, road-plane homography, its Kalman filter)
-    ("track",),                 # tracker parts
     ("fcw",),                   # lead selection
     ("core",),                  # config, composition, pipeline, real-time loop, ABI
 ]
@@ -66,6 +66,8 @@ def test_the_check_catches_upward_sideways_and_abi_includes():
     assert _violations([(Path("base/types.hpp"), "core/config.hpp")])
     assert _violations([(Path("track/tracker.hpp"), "fcw/lead_selection.hpp")])
     assert _violations([(Path("capture/frame_source.hpp"), "geometry/camera.hpp")])
+    assert _violations([(Path("track/roi_search.cpp"), "detect/fuse_hypotheses.hpp")])
+    assert _violations([(Path("detect/shadow/part.hpp"), "track/roi_search.hpp")])
     assert _violations([(Path("core/realtime_loop.hpp"), "include/headway.h")])
     assert not _violations([(Path("core/pipeline.hpp"), "base/types.hpp"), (Path("core/abi.cpp"), "include/headway.h")])
 

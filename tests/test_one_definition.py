@@ -184,7 +184,7 @@ SHARED_KEYS = {
     "max_aspect": "vehicle_shape",
 }
 # Earlier names of the same constants (the hood line was also called bottom_ignore_frac). proposals'
-# max_vehicle_height_m is not one: a looser gate on the network's boxes (detect/detector_proposals.hpp).
+# max_vehicle_height_m is not one: a looser gate on the network's boxes (detect/proposals/part.hpp).
 OLD_NAMES = {"bottom_ignore_frac": "hood_frac", "vehicle_width_m": "width_m", "top_max_height_m": "max_height_m",
              "aspect_ratio": "aspect", "top_max_aspect": "max_aspect"}
 

@@ -2,12 +2,17 @@
 a removed preset is refused with its replacement named, in the YAML loader and in the core alone."""
 from __future__ import annotations
 
+import cv2
+import numpy as np
 import pytest
+import yaml
 
 from app import config as configuration
 from app.config import SHIPPED_CASCADE, SHIPPED_VERIFIER
-from app.core import ConfigError, Pipeline
+from app import cli, detect_images, replay
+from app.core import ConfigError, Pipeline, core_default_preset
 from app.eval.lane_clips import lane_config
+from app.supervisor import service
 
 
 def _core(values: dict) -> dict:
@@ -30,11 +35,49 @@ def test_the_shipped_presets_and_their_parts():
 
 
 def test_headway_runs_the_default_preset_unless_told_otherwise(tmp_path):
-    assert configuration.DEFAULT_PRESET == "default"
+    assert configuration.default_preset() == core_default_preset() == "default"
     assert configuration.load(None)["pipeline"]["preset"] == "default"
     f = tmp_path / "c.yaml"
     f.write_text("pipeline: {preset: thesis}\n")
     assert configuration.load(f)["pipeline"]["preset"] == "thesis"
+
+
+class _Started(Exception):
+    """Raised by _RecordingPipeline once the pipeline a command builds exists: the test has what it asks."""
+
+
+def _recording_pipeline(ran: list):
+    """A Pipeline that notes the preset the core runs (its effective configuration), then stops the command."""
+    class _RecordingPipeline(Pipeline):
+        def __init__(self, config=None):
+            super().__init__(config)
+            ran.append(self.config["pipeline"]["preset"])
+            self.close()
+            raise _Started
+    return _RecordingPipeline
+
+
+def test_every_command_runs_the_one_default_preset(tmp_path, monkeypatch, capsys):
+    """The core's preset table names the default once: `headway config default` writes it, and `headway detect`,
+    replay and the service, given a configuration file that names no preset, build a core running it."""
+    name = core_default_preset()
+    assert cli.main(["config", "default"]) == 0
+    assert yaml.safe_load(capsys.readouterr().out)["pipeline"]["preset"] == name
+
+    f = tmp_path / "c.yaml"
+    f.write_text("fcw: {ttc_warning_s: 1.5}\n")  # a file that names no preset
+    image = tmp_path / "road.png"
+    cv2.imwrite(str(image), np.full((720, 1280), 90, np.uint8))
+    ran: list = []
+    for module in (detect_images, replay, service):
+        monkeypatch.setattr(module, "Pipeline", _recording_pipeline(ran))
+    with pytest.raises(_Started):
+        detect_images.detect_images([str(image)], str(f))
+    with pytest.raises(_Started):
+        replay.replay_scenario("empty_road", str(f), progress=False)
+    with pytest.raises(_Started):
+        service.Service(configuration.load(f)).run()
+    assert ran == [name, name, name]
 
 
 @pytest.mark.parametrize("removed, replacement", [

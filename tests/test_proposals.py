@@ -1,5 +1,5 @@
 """The learned first stage (app/train/proposals.py, proposals_onnx.py; the core's detector part "proposals",
-csrc/detect/detector_proposals.cpp, proposal_net.cpp): the ONNX file cv::dnn runs computes the trainer's network,
+csrc/detect/proposals/part.cpp, proposal_net.cpp): the ONNX file cv::dnn runs computes the trainer's network,
 the core decodes its peaks as the trainer does, and the whole path (train on a tiny set, export, load in the core,
 detect) finds the vehicles of a scene it never saw."""
 from __future__ import annotations

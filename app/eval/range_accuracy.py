@@ -70,7 +70,7 @@ def evaluate(preset: str, config_path: Optional[str] = None, scenarios: Optional
 
 def main(argv: Optional[list[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--pipeline", default=configuration.DEFAULT_PRESET)
+    p.add_argument("--pipeline", default=configuration.default_preset())
     p.add_argument("--set", action="append", default=[], help="SECTION.KEY=VALUE (YAML value); repeatable")
     p.add_argument("--scenarios", help="comma-separated scenario names (default: the whole suite)")
     p.add_argument("--out", help="write the JSON report here")

@@ -254,7 +254,7 @@ def _write_document(path: str, presets: list[str], parts: tuple, args, scenarios
 
 def add_parser(subparsers) -> None:
     s = subparsers.add_parser("eval", help="measure a pipeline on the synthetic suite and the real data; JSON + markdown")
-    s.add_argument("--pipeline", default=configuration.DEFAULT_PRESET,
+    s.add_argument("--pipeline", default=configuration.default_preset(),
                    help="preset to evaluate: default, thesis, parallax, paper004 (default: %(default)s); several separated "
                         "by commas (e.g. default,thesis,parallax,paper004) are evaluated one after another, each into "
                         "OUT/PRESET/, and set side by side in OUT/compare.md")

@@ -264,10 +264,12 @@ int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *need
         require(needed, "needed");
         nlohmann::json j;
         if (p) j = p->config.to_json();
-        else {  // no pipeline: describe every key with its default, the keys that moved, the presets, the detectors
+        else {  // no pipeline: describe every key with its default, the keys that moved, the presets (and
+                // which is Headway's default), the detectors
             j = hw::Config().describe();
             j["moved_keys"] = hw::Config::moved_keys();
             j["presets"] = hw::describe_presets();
+            j["default_preset"] = hw::default_preset();
             j["detectors"] = hw::describe_detectors();
             j["removed_presets"] = hw::describe_removed_presets();
         }

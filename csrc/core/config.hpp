@@ -20,9 +20,10 @@ namespace hw {
 
 // How the pipeline runs, independent of the method.
 struct PipelineParams {
-    std::string preset = "thesis";  // named composition of detector and tracker parts (core/parts.cpp); the core's own
-                                    // default needs no model file; Headway's configuration defaults to "default"
-                                    // (app/config.py, DEFAULT_PRESET), whose model paths Python fills in
+    std::string preset = "thesis";  // named composition of detector and tracker parts (core/parts.cpp); a configuration
+                                    // handed to the core without one runs this, which needs no model file; a
+                                    // configuration file runs default_preset() (core/parts.cpp), whose model paths
+                                    // Python fills in
     std::vector<std::string> detectors;  // detector parts replacing the preset's (empty: the preset's)
     std::string tracker;            // tracker part replacing the preset's (empty: the preset's)
     int queue_capacity = 8;         // results held for the caller before the oldest is dropped

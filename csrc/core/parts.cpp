@@ -36,6 +36,15 @@ const std::map<std::string, Preset> &presets() {
     return r;
 }
 
+} // namespace
+
+// Named here once: a configuration file that names no preset runs it (app/config.py reads it through
+// hw_pipeline_config(NULL, ...), "default_preset"). A configuration handed to the core alone without a preset
+// runs PipelineParams' own (core/config.hpp), which needs no model file.
+const char *default_preset() { return "default"; }
+
+namespace {
+
 // Presets that no longer exist, and what replaces each: a configuration naming one gets an error saying so.
 const std::map<std::string, std::string> &removed_presets() {
     static const std::map<std::string, std::string> r{

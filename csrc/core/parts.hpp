@@ -10,6 +10,7 @@
 #pragma once
 
 #include "detect/detector.hpp"
+#include "detect/fuse_hypotheses.hpp"
 #include "road/road_motion_stage.hpp"
 #include "track/tracker.hpp"
 
@@ -28,6 +29,9 @@ struct PipelineParams;
 const char *detector_choices();
 const char *tracker_choices();
 const char *preset_choices();
+
+// Headway's default composition, the preset of a configuration file that names none.
+const char *default_preset();
 
 // Which parts run: the preset's, with pipeline.detectors / pipeline.tracker replacing its own when
 // set. Throws ConfigError naming the key for a composition that cannot run.

@@ -21,6 +21,7 @@
 #pragma once
 
 #include "base/params.hpp"
+#include "cues/detection_stage.hpp"
 #include "detect/detection_worker.hpp"
 #include "detect/detector.hpp"
 
@@ -50,23 +51,23 @@ struct FuseParams {
 std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, const FuseParams &p);
 
 // The composition's detectors, asked together, on the calling thread (detect) or on a worker thread (start, then
-// finish some frames later: detect/detection_worker.hpp).
-struct DetectorSet {
+// finish some frames later: detect/detection_worker.hpp); the detection stage a tracker asks.
+struct DetectorSet final : DetectionStage {
     std::vector<std::unique_ptr<Detector>> parts;
     FuseParams fuse;  // how two or more parts' hypotheses become one list
     std::vector<Hypothesis> last;  // what the last detect() or finish() gave (the pipeline reports it with the frame)
     int64_t last_frame = -1;       // the frame `last` was found on (the pipeline sets it to the frame for detect())
 
     // The vehicles: one part's hypotheses as they are, several parts' fused; false if no part could run.
-    bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times);
+    bool detect(const RoadContext &ctx, std::vector<Hypothesis> &out, StageTimes &times) override;
     // Whether start() can run this composition: no part needs the road's motion (the parallax detector keeps the
     // previous frame's road band in end_frame, every frame, on the frame thread).
-    bool can_start() const;
+    bool can_start() const override;
     // detect() on the worker thread, on copies of the frame, its lane model and the camera.
-    void start(const RoadContext &ctx, int64_t frame_number);
+    void start(const RoadContext &ctx, int64_t frame_number) override;
     // Waits for the detection start() began and gives its vehicles as detect() does (also into last, last_frame),
     // its parts' stage times as "bg_<stage>", its wall time "bg_detect", its CPU time "bg_detect_cpu" and the wait "detect_wait".
-    bool finish(std::vector<Hypothesis> &out, StageTimes &times);
+    bool finish(std::vector<Hypothesis> &out, StageTimes &times) override;
     // Waits for a detection start() began; its result stays for finish(). (reset(): and drops it.)
     void settle();
     void reset();

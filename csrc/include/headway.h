@@ -208,7 +208,8 @@ void hw_pipeline_destroy(hw_pipeline *p);
  * into buf with its terminating zero. *needed receives the size required; HW_ERR_INVALID_ARGUMENT
  * if buf_len is smaller. p NULL: every key described ({section: {key: {default, type, min, max, doc}}})
  * "moved_keys": {"old_section.key": "new_section.key"} and "presets": {name: {"detectors": [...],
- * "tracker": "...", "keys": {section: {key: value}}}} (the keys a preset sets unless the configuration does). */
+ * "tracker": "...", "keys": {section: {key: value}}}} (the keys a preset sets unless the configuration does),
+ * "default_preset": the preset of a configuration file that names none. */
 int hw_pipeline_config(hw_pipeline *p, char *buf, int32_t buf_len, int32_t *needed);
 
 /* Offline: run the same per-frame code as the real-time loop on one 8-bit gray frame.

@@ -17,7 +17,7 @@
 // the parallax detector's pyramid level, this frame's and the previous one's, and hands both on.
 #pragma once
 
-#include "detect/detector_parallax.hpp"
+#include "detect/parallax/part.hpp"
 #include "road/lane_features.hpp"
 #include "geometry/homography_dlt.hpp"
 #include "geometry/homography_kalman.hpp"

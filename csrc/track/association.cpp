@@ -94,4 +94,13 @@ std::vector<int> associate(const cv::Mat_<float> &iou, const std::vector<float> 
     return out;
 }
 
+int take_best_unused(const std::vector<float> &iou, std::vector<bool> &used, float min_iou) {
+    int best = -1;
+    float best_iou = min_iou;
+    for (size_t i = 0; i < iou.size(); ++i)
+        if (!used[i] && iou[i] >= best_iou) { best_iou = iou[i]; best = int(i); }
+    if (best >= 0) used[size_t(best)] = true;
+    return best;
+}
+
 } // namespace hw

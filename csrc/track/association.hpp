@@ -42,4 +42,10 @@ std::vector<int> hungarian(const cv::Mat_<double> &cost, double forbidden);
 // iou: tracks x detections.
 std::vector<int> associate(const cv::Mat_<float> &iou, const std::vector<float> &scores, const AssociationParams &p);
 
+// Greedy pairing, one track at a time in the tracker's order (kalman, whose tracks the ROI search did not find):
+// of the detections not yet used, the one the track overlaps most at IoU >= min_iou (of equal overlaps the later),
+// marked used; -1 when none. iou: the track's overlap with every detection. Unlike associate(), an earlier track
+// may take the detection a later one overlaps more, and the scores play no part.
+int take_best_unused(const std::vector<float> &iou, std::vector<bool> &used, float min_iou);
+
 } // namespace hw

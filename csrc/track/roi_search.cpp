@@ -1,7 +1,7 @@
 #include "track/roi_search.hpp"
 
-#include "detect/edge_projection.hpp"
-#include "detect/road_prior.hpp"
+#include "cues/edge_projection.hpp"
+#include "cues/road_prior.hpp"
 
 #include <algorithm>
 #include <cmath>

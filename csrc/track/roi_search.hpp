@@ -9,8 +9,8 @@
 // and a width close to the predicted one.
 #pragma once
 
-#include "detect/shadow.hpp"
-#include "detect/verify.hpp"
+#include "cues/shadow.hpp"
+#include "cues/verify.hpp"
 
 namespace hw {
 

@@ -9,7 +9,7 @@
 #pragma once
 
 #include "base/types.hpp"
-#include "detect/fuse_hypotheses.hpp"
+#include "cues/detection_stage.hpp"
 #include "geometry/camera.hpp"
 
 #include <vector>
@@ -34,7 +34,7 @@ public:
     // Advance one frame. Asks `detectors` for a full detection when it needs one, writes every live
     // track (confirmed or not) into `tracks`, adds the wall time of its sub-stages to `times`, and sets
     // `full_detection` if a full detection ran this frame.
-    virtual void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+    virtual void step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks,
                       StageTimes &times, bool &full_detection) = 0;
     virtual void reset() = 0;
     // The camera as self-calibration has it (height, pitch, yaw), given after every frame while it runs. A

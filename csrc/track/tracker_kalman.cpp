@@ -2,7 +2,8 @@
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
+#include "track/association.hpp"
 #include "track/duplicate_pruning.hpp"
 #include "track/track_deletion.hpp"
 
@@ -189,14 +190,10 @@ bool KalmanTracker::measure_by_roi(const cv::Mat &gray, Track &t) {
 
 bool KalmanTracker::measure_by_detection(Track &t, std::vector<Hypothesis> &dets, std::vector<bool> &used) {
     const cv::Rect2f pred = box_of(t);
-    int best = -1;
-    float best_iou = float(kalman_.match_iou);
-    for (size_t i = 0; i < dets.size(); ++i) {
-        const float o = box_iou(pred, t.height.compared_box(dets[i], pred, kalman_.height));
-        if (!used[i] && o >= best_iou) { best_iou = o; best = int(i); }
-    }
+    std::vector<float> iou(dets.size());
+    for (size_t i = 0; i < dets.size(); ++i) iou[i] = box_iou(pred, t.height.compared_box(dets[i], pred, kalman_.height));
+    const int best = take_best_unused(iou, used, float(kalman_.match_iou));
     if (best < 0) return false;
-    used[size_t(best)] = true;
     take_shape(t, dets[size_t(best)]);
     const cv::Rect2f &b = dets[size_t(best)].box;
     apply(t, KalmanBox::Vec3(b.x, b.y + b.height, b.x + b.width), 1.f, dets[size_t(best)].score);
@@ -308,7 +305,7 @@ TrackState KalmanTracker::report(const Track &t) const {
     return s;
 }
 
-void KalmanTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+void KalmanTracker::step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks,
                         StageTimes &times, bool &full_detection) {
     CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
     Stopwatch track_time;

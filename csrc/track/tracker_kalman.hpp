@@ -19,7 +19,7 @@
 #pragma once
 
 #include "base/sections.hpp"
-#include "detect/verify.hpp"
+#include "cues/verify.hpp"
 #include "track/birth_gate.hpp"
 #include "track/frame_clock.hpp"
 #include "track/kalman_box.hpp"
@@ -75,7 +75,7 @@ public:
     // roi: the search around each prediction for the bottom edge and sides (as the shadow detector and its
     // verification find them), and the expected vehicle width at a row.
     KalmanTracker(const KalmanBoxParams &kalman, const RoiSearch &roi);
-    void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
+    void step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
 

@@ -2,7 +2,6 @@
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
-#include "detect/detector_parallax.hpp"
 
 namespace hw {
 
@@ -11,7 +10,7 @@ void ParticleTracker::reset() {
     clock_.reset();
 }
 
-void ParticleTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+void ParticleTracker::step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks,
                            StageTimes &times, bool &full_detection) {
     bool gap = false;
     const double dt = clock_.step(ctx.t_s, gap);

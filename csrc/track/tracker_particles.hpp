@@ -13,7 +13,7 @@ namespace hw {
 class ParticleTracker final : public Tracker {
 public:
     ParticleTracker(const ParticleParams &p, const CameraParams &cam) : pf_(p, cam), cam_(cam), clock_(p.max_dt_s) {}
-    void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
+    void step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
 

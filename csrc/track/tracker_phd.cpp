@@ -455,7 +455,7 @@ TrackState PhdTracker::report(const Vehicle &v) const {
     return s;
 }
 
-void PhdTracker::step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks,
+void PhdTracker::step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks,
                       StageTimes &times, bool &full_detection) {
     CV_Assert(!ctx.gray.empty() && ctx.gray.type() == CV_8UC1);
     Stopwatch track_time;

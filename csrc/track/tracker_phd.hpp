@@ -120,7 +120,7 @@ class PhdTracker final : public Tracker {
 public:
     // horizon: the lanes' horizon row followed over frames (the slow part of the car's pitch).
     PhdTracker(const PhdTrackerParams &p, const CameraParams &camera, const HorizonTracker &horizon);
-    void step(const FrameContext &ctx, DetectorSet &detectors, std::vector<TrackState> &tracks, StageTimes &times,
+    void step(const FrameContext &ctx, DetectionStage &detectors, std::vector<TrackState> &tracks, StageTimes &times,
               bool &full_detection) override;
     void reset() override;
     // Self-calibration's camera: the vehicles' range (UKF states rescaled to its height) and the horizon's limits.

@@ -2,7 +2,7 @@
 //
 // The trackers measure a vehicle's bottom and sides; its height comes from the detections, each a new estimate of
 // the aspect (height / width) blended in with the tracker's gain. A detection's top is either measured (the
-// verification found how far up both sides reach, detect/vehicle_top.hpp) or guessed: no top cue, and the
+// verification found how far up both sides reach, cues/vehicle_top.hpp) or guessed: no top cue, and the
 // verification gives a car's aspect (vehicle_shape.aspect, 0.8). For a car the guess is about right, and measured
 // tops are noisy (a near car's top search sometimes climbs onto what stands behind it: 1.0-1.6 widths on
 // successive runs for a car of 0.8, synthetic dense_traffic). For a truck (1.4-1.6 widths) the guess halves its box,
@@ -14,7 +14,7 @@
 #pragma once
 
 #include "base/params.hpp"
-#include "detect/detector.hpp"
+#include "cues/hypothesis.hpp"
 #include "geometry/vehicle_shape.hpp"
 
 #include <opencv2/core.hpp>

@@ -1,6 +1,7 @@
 // Association: the Hungarian method finds the assignment of least total cost (checked against every
 // permutation), never makes a forbidden pair, and the two-stage association pairs confident detections first,
-// lets a weak one only keep a track alive at a higher overlap.
+// lets a weak one only keep a track alive at a higher overlap; the greedy pairing (kalman) gives each track in turn
+// the unused detection it overlaps most.
 #include "track/association.hpp"
 
 #include <doctest/doctest.h>
@@ -52,4 +53,19 @@ TEST_CASE("two-stage association: confident first, a weak detection only keeps a
     // a weak detection at 0.55 keeps track 0 alive when no confident one is there
     cv::Mat_<float> iou3 = (cv::Mat_<float>(1, 1) << 0.55);
     CHECK(hw::associate(iou3, {0.2f}, p) == std::vector<int>{0});
+}
+
+TEST_CASE("take_best_unused: in the tracks' order, each takes the unused detection it overlaps most") {
+    std::vector<bool> used(3, false);
+    // the first track overlaps detection 1 most and takes it, though the second overlaps it more
+    CHECK(hw::take_best_unused({0.35f, 0.6f, 0.f}, used, 0.3f) == 1);
+    CHECK(used == std::vector<bool>{false, true, false});
+    CHECK(hw::take_best_unused({0.f, 0.9f, 0.4f}, used, 0.3f) == 2);
+    // nothing left at the overlap asked for: none, and nothing marked
+    CHECK(hw::take_best_unused({0.29f, 0.9f, 0.9f}, used, 0.3f) == -1);
+    CHECK(used == std::vector<bool>{false, true, true});
+    // the bound itself pairs; of equal overlaps the later detection
+    std::vector<bool> fresh(3, false);
+    CHECK(hw::take_best_unused({0.3f, 0.f, 0.f}, fresh, 0.3f) == 0);
+    CHECK(hw::take_best_unused({0.f, 0.5f, 0.5f}, fresh, 0.3f) == 2);
 }

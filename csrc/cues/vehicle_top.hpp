@@ -13,7 +13,7 @@
 // vehicle_top_between() is the same search with the bounds given as rows and a choice of sides: a
 // vehicle cut by the image's side (entering, overtaking) shows only its inner side, and its visible
 // width says nothing about its height, so the caller bounds the search by a height in metres on the
-// flat road instead (parallax_detector.cpp). snap_side() moves a side given to a few pixels (a region
+// flat road instead (detect/parallax/aligned_difference.cpp). snap_side() moves a side given to a few pixels (a region
 // of the aligned difference, widened by the vehicle's cast shadow) onto the vertical edge it belongs to.
 #pragma once
 

@@ -1,8 +1,8 @@
-#include "detect/detector_proposals.hpp"
+#include "detect/proposals/part.hpp"
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
 #include "detect/vehicle_verifier.hpp"
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// cascade_detector.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/detection.md).
+// cascade/cascade_scan.hpp - vehicles by the project's boosted Haar cascade (paper 004, docs/detection.md).
 //
 // The shipped OpenCV cascade XML (trained by `headway train cascade`) is run by HaarCascade
 // (haar_cascade.hpp: OpenCV's evaluation and scan, window for window, faster) only where a vehicle can stand. The
@@ -25,7 +25,7 @@
 
 #include "base/params.hpp"
 #include "base/types.hpp"
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
 #include "geometry/camera.hpp"
 
 #include <opencv2/core.hpp>
@@ -98,7 +98,7 @@ struct CascadeParams {
               "SSE2, 8 = AVX2; the same detections either way (for tests and CPUs without AVX2)");
         m.add("opencv_scan", opencv_scan,
               "true = every band is scanned by OpenCV's cv::CascadeClassifier (the reference the own scanner, "
-              "detect/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
+              "detect/cascade/haar_cascade.hpp, reproduces window for window; slower, step 2 only)");
         m.add("verifier_dnn", verifier_dnn,
               "true = run the CNN verifier by cv::dnn (the reference) instead of the core's own forward pass, with "
               "the same answers within 1e-5");

@@ -1,4 +1,4 @@
-// detector_proposals.hpp - detector part "proposals": the learned first stage (docs/detection.md).
+// proposals/part.hpp - detector part "proposals": the learned first stage (docs/detection.md).
 //
 // A small convolutional network run once on the reduced image (proposal_net.hpp) gives the vehicles' centres as
 // peaks of an objectness map, each with its box. Each peak's box is checked against the flat road like every other
@@ -17,7 +17,7 @@
 #include "base/params.hpp"
 #include "base/sections.hpp"
 #include "detect/detector.hpp"
-#include "detect/proposal_net.hpp"
+#include "detect/proposals/proposal_net.hpp"
 #include "geometry/road_params.hpp"
 #include "geometry/vehicle_shape.hpp"
 

@@ -1,4 +1,4 @@
-// parallax_detector.hpp - moving vehicles from the difference of two road-aligned frames (paper 000,
+// parallax/aligned_difference.hpp - moving vehicles from the difference of two road-aligned frames (paper 000,
 // section II-C).
 //
 // The previous frame is warped with the road homography H (previous -> current), so every road

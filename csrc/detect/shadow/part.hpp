@@ -1,10 +1,10 @@
-// detector_shadow.hpp - detector part "shadow" (the thesis): shadow hypotheses under vehicles
+// shadow/part.hpp - detector part "shadow" (the thesis): shadow hypotheses under vehicles
 // (shadow.hpp), each verified by the vertical edges of its sides (verify.hpp). Works on one image;
 // needs no road motion. Beside a learned detector its detections are cues (detect/fuse_hypotheses.hpp).
 #pragma once
 
 #include "detect/detector.hpp"
-#include "detect/verify.hpp"
+#include "cues/verify.hpp"
 
 namespace hw {
 

@@ -1,4 +1,4 @@
-#include "detect/vehicle_top.hpp"
+#include "cues/vehicle_top.hpp"
 
 #include "base/types.hpp"
 

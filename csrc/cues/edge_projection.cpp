@@ -1,4 +1,4 @@
-#include "detect/edge_projection.hpp"
+#include "cues/edge_projection.hpp"
 
 #include <opencv2/imgproc.hpp>
 

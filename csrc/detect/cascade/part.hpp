@@ -1,13 +1,13 @@
-// detector_cascade.hpp - detector part "cascade" (paper 004): the project's trained Haar cascade
-// (cascade_detector.hpp, docs/detection.md) over the road area, each detection a hypothesis with the
+// cascade/part.hpp - detector part "cascade" (paper 004): the project's trained Haar cascade
+// (cascade_scan.hpp, docs/detection.md) over the road area, each detection a hypothesis with the
 // cascade's score (its confidence: the grouped windows' n / (n + neighbors_half), or the verifier's
 // probability) as score and appearance, and the strongest window's last-stage sum as strength. Works on
 // one image; needs no road motion. Loading the model happens when the part is built. Tracked with
 // cascade.tracked_slices K > 1, each full detection scans one of K blocks of window sizes, in turn, so that no frame
-// pays the whole scan (cascade_detector.hpp, tracked_slices: measured to lose far vehicles).
+// pays the whole scan (cascade_scan.hpp, tracked_slices: measured to lose far vehicles).
 #pragma once
 
-#include "detect/cascade_detector.hpp"
+#include "detect/cascade/cascade_scan.hpp"
 #include "detect/detector.hpp"
 
 namespace hw {

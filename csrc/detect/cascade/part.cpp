@@ -1,4 +1,4 @@
-#include "detect/detector_cascade.hpp"
+#include "detect/cascade/part.hpp"
 
 #include "base/part_registry.hpp"
 namespace hw {

@@ -1,4 +1,4 @@
-#include "detect/proposal_net.hpp"
+#include "detect/proposals/proposal_net.hpp"
 
 #include <opencv2/imgproc.hpp>
 

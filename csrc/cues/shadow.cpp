@@ -1,6 +1,6 @@
-#include "detect/shadow.hpp"
+#include "cues/shadow.hpp"
 
-#include "detect/edge_projection.hpp"
+#include "cues/edge_projection.hpp"
 
 #include <opencv2/imgproc.hpp>
 

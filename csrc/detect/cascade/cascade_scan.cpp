@@ -1,7 +1,7 @@
-#include "detect/cascade_detector.hpp"
+#include "detect/cascade/cascade_scan.hpp"
 #include "base/stopwatch.hpp"
 #include "base/worker_pool.hpp"
-#include "detect/haar_cascade.hpp"
+#include "detect/cascade/haar_cascade.hpp"
 #include "detect/vehicle_verifier.hpp"
 
 #include <opencv2/imgproc.hpp>

@@ -1,4 +1,4 @@
-#include "detect/haar_cascade.hpp"
+#include "detect/cascade/haar_cascade.hpp"
 
 #include <opencv2/imgproc.hpp>
 

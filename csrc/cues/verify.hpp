@@ -9,9 +9,9 @@
 // aspect (vehicle_shape.aspect; the thesis: no consistent cue marks the roof).
 #pragma once
 
-#include "detect/detector.hpp"
-#include "detect/shadow.hpp"
-#include "detect/vehicle_top.hpp"
+#include "cues/hypothesis.hpp"
+#include "cues/shadow.hpp"
+#include "cues/vehicle_top.hpp"
 #include "geometry/vehicle_shape.hpp"
 
 namespace hw {

@@ -1,4 +1,4 @@
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,7 +1,7 @@
-#include "detect/parallax_detector.hpp"
+#include "detect/parallax/aligned_difference.hpp"
 
 #include "detect/photometric.hpp"
-#include "detect/vehicle_top.hpp"
+#include "cues/vehicle_top.hpp"
 #include "geometry/homography_warp.hpp"
 
 #include <opencv2/imgproc.hpp>

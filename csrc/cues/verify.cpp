@@ -1,7 +1,7 @@
-#include "detect/verify.hpp"
+#include "cues/verify.hpp"
 
 #include "base/sections.hpp"
-#include "detect/edge_projection.hpp"
+#include "cues/edge_projection.hpp"
 
 #include <opencv2/imgproc.hpp>
 

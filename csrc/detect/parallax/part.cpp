@@ -1,4 +1,4 @@
-#include "detect/detector_parallax.hpp"
+#include "detect/parallax/part.hpp"
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"

@@ -1,4 +1,4 @@
-#include "detect/detector_shadow.hpp"
+#include "detect/shadow/part.hpp"
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"

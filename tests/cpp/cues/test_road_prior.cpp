@@ -1,7 +1,7 @@
 // The road prior: without lanes a vehicle's expected width at a row is the pinhole model's
 // (fx / fy) W (y - y_h) / h and the scan covers road_half_width_m each side of the ego lane's centre; with a
 // believed lane model the width is the lane's share W / lane width, and the scan covers the adjacent lanes.
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
 #include "../road_scene.hpp"
 
 #include <doctest/doctest.h>

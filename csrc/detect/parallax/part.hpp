@@ -1,6 +1,6 @@
-// detector_parallax.hpp - detector part "parallax" (paper 000): the previous frame's road band warped
+// parallax/part.hpp - detector part "parallax" (paper 000): the previous frame's road band warped
 // onto the current one with the road-motion stage's homography, and the regions of differences over the
-// road area (parallax_detector.hpp) become hypotheses at their mid-lower point. Needs the road-motion
+// road area (aligned_difference.hpp) become hypotheses at their mid-lower point. Needs the road-motion
 // stage; cannot run before it holds an estimate.
 //
 // The road area is the lane model's, widened to road_lanes_each_side lane widths beside the ego lane,
@@ -14,7 +14,7 @@
 
 #include "base/sections.hpp"
 #include "detect/detector.hpp"
-#include "detect/parallax_detector.hpp"
+#include "detect/parallax/aligned_difference.hpp"
 
 #include <deque>
 #include <utility>

@@ -18,7 +18,7 @@
 
 #include "base/params.hpp"
 #include "base/types.hpp"
-#include "detect/road_prior.hpp"
+#include "cues/road_prior.hpp"
 #include "geometry/camera.hpp"
 
 #include <vector>
