@@ -1,6 +1,6 @@
 """`headway train proposals`: the learned first stage, a small fully convolutional network that finds where the
 vehicles are (an objectness heat map with each vehicle's box, CenterNet-style), trained here with JAX (CPU) and
-written as ONNX for cv::dnn in the core (csrc/detect/proposal_net.cpp). The network and its decoding:
+written as ONNX for cv::dnn in the core (csrc/detect/proposals/proposal_net.cpp). The network and its decoding:
 proposals_onnx.py.
 
 Data: the annotated training folders (annotation.json, every vehicle boxed), each image resized to the input

@@ -1,5 +1,5 @@
 """The proposal network's input, layers and decoding, shared by its trainer (proposals.py), the ONNX file the core
-runs through cv::dnn (csrc/detect/proposal_net.cpp) and the tests.
+runs through cv::dnn (csrc/detect/proposals/proposal_net.cpp) and the tests.
 
 Input (the same arithmetic as the core's `ProposalNet`): the gray image resized to `input_width` x floor(height *
 input_width / width + 0.5) by the pixel-area mean (cv2.resize INTER_AREA), then z = (g - INPUT_MEAN) / INPUT_SCALE.
