@@ -54,18 +54,25 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
     RoadPriorParams prior;
     prior.road = p_.road;
     prior.shape = p_.shape;
-    // every peak (top_k counts the candidates that pass the road checks)
+    // A box standing on the road: the vehicle height it implies and its width against the row's expected one.
+    const auto on_road = [&](const cv::Rect2f &box) {
+        const float yb = box.br().y;
+        if (yb <= yh + 1.0) return false;
+        const double implied = implied_vehicle_height(box, yh, hc);
+        if (implied < p_.min_vehicle_height_m || implied > p_.max_vehicle_height_m) return false;
+        const double ratio = box.width / std::max(1e-3f, expected_vehicle_width(yb, gray.size(), ctx.lanes, ctx.camera, prior));
+        const bool cut = box.x <= 0.5f || box.br().x >= image.width - 0.5f;
+        return ratio <= p_.max_width_ratio && (cut || ratio >= p_.min_width_ratio);
+    };
+    // The verifier's box output moves each candidate onto its vehicle; the network's own boxes are coarser (stride
+    // 8), so with that output the size checks judge the moved box, and before it only "standing below the horizon".
+    const bool moves = verifier_ && p_.refine_boxes;
+    // every peak (top_k counts the candidates that pass the checks made before the verifier)
     std::vector<Hypothesis> cand;
     for (const ProposalPeak &pk : net_.peaks(gray, p_.input_width, float(p_.min_heat), 4 * p_.top_k)) {
         const cv::Rect2f box = pk.box & image;
         if (box.width < 2.f || box.height < 2.f) continue;
-        const float yb = box.br().y;
-        if (yb <= yh + 1.0) continue;
-        const double implied = implied_vehicle_height(box, yh, hc);
-        if (implied < p_.min_vehicle_height_m || implied > p_.max_vehicle_height_m) continue;
-        const double ratio = box.width / std::max(1e-3f, expected_vehicle_width(yb, gray.size(), ctx.lanes, ctx.camera, prior));
-        const bool cut = box.x <= 0.5f || box.br().x >= image.width - 0.5f;
-        if (ratio > p_.max_width_ratio || (!cut && ratio < p_.min_width_ratio)) continue;
+        if (moves ? box.br().y <= yh + 1.0 : !on_road(box)) continue;
         cand.push_back(proposal(box, pk.heat, pk.heat));
         if (int(cand.size()) >= p_.top_k) break;
     }
@@ -83,10 +90,13 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
             const std::vector<float> again = verifier_->judge(gray, boxes, n, yc, hc);
             for (size_t k = 0; k < p.size(); ++k) p[k] = std::min(p[k], again[k]);
         }
+        std::vector<Hypothesis> judged;
         for (size_t k = 0; k < cand.size(); ++k) {
             const cv::Rect2f moved = boxes[k] & image;  // the box output's, in the image (unmoved without one)
-            cand[k] = proposal(moved.width >= 2.f && moved.height >= 2.f ? moved : cand[k].box, p[k], cand[k].strength);
+            const cv::Rect2f box = moved.width >= 2.f && moved.height >= 2.f ? moved : cand[k].box;
+            if (!moves || on_road(box)) judged.push_back(proposal(box, p[k], cand[k].strength));
         }
+        cand.swap(judged);
         times.add("prop_verifier", sv.ms());
     }
     // most confident first; a candidate overlapping a kept one at nms_iou is a second look at the same vehicle

@@ -1,13 +1,14 @@
 // proposals/part.hpp - detector part "proposals": the learned first stage (docs/detection.md).
 //
 // A small convolutional network run once on the reduced image (proposal_net.hpp) gives the vehicles' centres as
-// peaks of an objectness map, each with its box. Each peak's box is checked against the flat road like every other
-// hypothesis: its bottom below the horizon, the vehicle height it implies (h_cam h / (y_b - y_h)) within
-// [min_vehicle_height_m, max_vehicle_height_m], and its width against the vehicle width expected at its bottom row
-// (road_prior.hpp: lane model, else the camera) within [min_width_ratio, max_width_ratio] (a box cut by the image's
-// left or right border is not held to the lower bound). The CNN verifier (vehicle_verifier_cnn.hpp, the cascade's)
-// then judges the top_k strongest candidates in one batch, and with refine_boxes its box output moves each onto the
-// vehicle; a candidate overlapping a more confident one at IoU >= nms_iou is dropped.
+// peaks of an objectness map, each with its box. The top_k strongest peaks whose box stands below the horizon are
+// judged by the CNN verifier (vehicle_verifier_cnn.hpp, the cascade's) in one batch, and with refine_boxes its box
+// output moves each onto the vehicle. Each box (the moved one; the peak's own without refine_boxes or a verifier,
+// checked then before the verifier) is then checked against the flat road like every other hypothesis: the vehicle
+// height it implies (h_cam h / (y_b - y_h)) within [min_vehicle_height_m, max_vehicle_height_m], and its width against
+// the vehicle width expected at its bottom row (road_prior.hpp: lane model, else the camera) within [min_width_ratio,
+// max_width_ratio] (a box cut by the image's left or right border is not held to the lower bound). A candidate
+// overlapping a more confident one at IoU >= nms_iou is dropped.
 // Each output: box cut to the image, foot = bottom centre, score = the verifier's probability (the peak's heat without
 // a verifier), appearance = that same learned score, strength = the peak's heat, source "proposals".
 // Stage times: "proposals" (resize, network, decoding, geometry) and "prop_verifier" (the ABI keeps 15 characters of a
@@ -61,7 +62,7 @@ struct ProposalsParams {
               "px; the image is reduced to this width (aspect kept) for the network; the shipped model was trained at "
               "320 on 1280x720 images");
         m.add("min_heat", min_heat, 0.0, 1.0, "objectness; peaks of the heat map below this are not candidates");
-        m.add("top_k", top_k, 1, 200, "candidates; the strongest peaks that pass the road checks, verified and output");
+        m.add("top_k", top_k, 1, 200, "candidates; the strongest peaks standing below the horizon (and passing the road checks when no verifier moves them), verified");
         m.add("verifier_windows", verifier_windows, 1, 200,
               "windows; the verifier was trained on the cascade's groups and reads log(1 + n) of their raw windows: "
               "a candidate is handed this n");
