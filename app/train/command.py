@@ -84,7 +84,7 @@ def add_parser(subparsers) -> None:
                       "vehicles' centres and boxes (ONNX for the detector part proposals; needs pip install '.[train]')")
     t.add_argument("--data", nargs="+", required=True, help="training folders (annotation.json, every vehicle boxed)")
     t.add_argument("--out", required=True, help="the network's ONNX, written after every epoch")
-    t.add_argument("--epochs", type=int, default=6, help="passes over the fitted images (default 6)")
+    t.add_argument("--epochs", type=int, default=30, help="passes over the fitted images (default 30, the shipped model's)")
     t.add_argument("--batch", type=int, default=16, help="images a batch (default 16)")
     t.add_argument("--lr", type=float, default=2e-3, help="Adam's first learning rate, falling linearly to 0 (default 2e-3)")
     t.add_argument("--input-width", type=int, default=320, help="px: the images reduced to this width (default 320)")

@@ -15,8 +15,8 @@ network without the third level):
     box  = conv1x1(b, 4)                 log(distance / stride) from the cell's centre to the box's left, top,
                                          right and bottom edges
 ("/2": stride 2; convolutions pad to keep the size, ceil(n / 2) after a stride; "dw": depthwise.) Each output cell
-sees 211 px of the input (844 px of a 1280x720 image), at ~36 M multiply-adds for 320x180: the third level gives the
-large near vehicles' edges to the cell at their centre. Dilated depthwise layers would see farther for the same
+sees 127 px of the input (508 px of a 1280x720 image), at ~42 M multiply-adds for 320x180: the third level gives the
+large near vehicles' edges to the cell at their centre (eight blocks at stride 4 alone see 71 px for as much). Dilated depthwise layers would see farther for the same
 arithmetic, but cv::dnn runs them ~6x slower (docs/decisions.md).
 
 Decoding (`decode`, and the core's the same way): a cell is a peak when its heat is the largest of its 3x3
