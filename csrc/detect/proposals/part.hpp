@@ -41,7 +41,7 @@ struct ProposalsParams {
     bool verify_mirrored = true;    // the verifier also judges each believed crop's mirror image (mean of the two)
     bool refine_boxes = true;       // a verifier with a box output moves each candidate's box onto the vehicle
     int refine_looks = 4;           // looks of the verifier at each candidate, each moving it again (min of the p)
-    // A gate on the height the network's box implies, with its own bounds (0.7 / 5.0 m), not the vehicle's size
+    // A gate on the height the candidate's box implies, with its own bounds (0.7 / 5.0 m), not the vehicle's size
     // prior (vehicle_shape.max_height_m), so the keys stay here.
     double min_vehicle_height_m = 0.7, max_vehicle_height_m = 5.0;
     double min_width_ratio = 0.35, max_width_ratio = 3.0;
