@@ -124,23 +124,31 @@ def test_training_logs_every_epoch_and_the_core_finds_the_vehicles_of_unseen_sce
     assert others <= 10, others
 
 
+def _core_and_trainer_boxes(model, scene_seed: int, stride: int, top_k: int):
+    """The core's boxes (pipeline {detectors: [proposals]}, min_heat 0.05) and proposals_onnx.decode's of the same
+    network's maps on one scene, cut to the image and kept where the core's checks would keep them (standing below
+    the horizon, at least 2 px each way)."""
+    img, _ = _scene(np.random.default_rng(scene_seed), 3)
+    small = po.prepare(img, INPUT_WIDTH)
+    heat, box = po.run_onnx(str(model), small)
+    ref = po.decode(heat, box, SIZE[0] / small.shape[1], SIZE[1] / small.shape[0], 0.05, top_k=top_k, stride=stride)
+    ref[:, [0, 2]] = ref[:, [0, 2]].clip(0, SIZE[0])
+    ref[:, [1, 3]] = ref[:, [1, 3]].clip(0, SIZE[1])
+    with _pipeline(model, min_heat=0.05) as pipe:
+        r = pipe.detect(img)
+    ref = ref[(ref[:, 3] > r.horizon_row + 1) & (ref[:, 2] - ref[:, 0] >= 2) & (ref[:, 3] - ref[:, 1] >= 2)]
+    return r.boxes, ref
+
+
 def test_the_core_decodes_the_peaks_as_the_trainer(trained):
     """Every hypothesis the core reports is a peak of the network's heat map decoded as proposals_onnx.decode does
     (box within 0.05 px, score = heat), strongest first, when no check but "standing below the horizon" and no
     verifier removes any."""
     out, _ = trained
-    img, _ = _scene(np.random.default_rng(5), 3)
-    small = po.prepare(img, INPUT_WIDTH)
-    heat, box = po.run_onnx(str(out), small)
-    ref = po.decode(heat, box, SIZE[0] / small.shape[1], SIZE[1] / small.shape[0], 0.05, top_k=64, stride=4)
-    ref[:, [0, 2]] = ref[:, [0, 2]].clip(0, SIZE[0])
-    ref[:, [1, 3]] = ref[:, [1, 3]].clip(0, SIZE[1])
-    with _pipeline(out, min_heat=0.05) as pipe:
-        r = pipe.detect(img)
-    ref = ref[ref[:, 3] > r.horizon_row + 1]
-    assert len(r.boxes) == len(ref) > 0
-    np.testing.assert_allclose(r.boxes[:, :4], ref[:, :4], atol=0.05)
-    np.testing.assert_allclose(r.boxes[:, 4], ref[:, 4], atol=1e-5)
+    boxes, ref = _core_and_trainer_boxes(out, 5, stride=4, top_k=64)
+    assert len(boxes) == len(ref) > 0
+    np.testing.assert_allclose(boxes[:, :4], ref[:, :4], atol=0.05)
+    np.testing.assert_allclose(boxes[:, 4], ref[:, 4], atol=1e-5)
 
 
 @pytest.mark.parametrize("blocks8,stride", [(2, 8), (0, 4)])
@@ -152,17 +160,9 @@ def test_the_core_reads_the_stride_from_the_network(tmp_path, blocks8, stride):
     params["box_w"] *= 20   # boxes of varied sizes
     path = tmp_path / "n.onnx"
     po.save_onnx(params, str(path))
-    img, _ = _scene(np.random.default_rng(6), 3)
-    small = po.prepare(img, INPUT_WIDTH)
-    heat, box = po.run_onnx(str(path), small)
-    ref = po.decode(heat, box, SIZE[0] / small.shape[1], SIZE[1] / small.shape[0], 0.05, top_k=1000, stride=stride)
-    ref[:, [0, 2]] = ref[:, [0, 2]].clip(0, SIZE[0])
-    ref[:, [1, 3]] = ref[:, [1, 3]].clip(0, SIZE[1])
-    with _pipeline(path, min_heat=0.05) as pipe:
-        r = pipe.detect(img)
-    ref = ref[(ref[:, 3] > r.horizon_row + 1) & (ref[:, 2] - ref[:, 0] >= 2) & (ref[:, 3] - ref[:, 1] >= 2)]
-    assert len(r.boxes) == len(ref) > 0
-    np.testing.assert_allclose(r.boxes[:, :4], ref[:, :4], atol=0.05)
+    boxes, ref = _core_and_trainer_boxes(path, 6, stride=stride, top_k=1000)
+    assert len(boxes) == len(ref) > 0
+    np.testing.assert_allclose(boxes[:, :4], ref[:, :4], atol=0.05)
 
 
 def test_a_file_that_is_not_a_proposal_network_is_refused_by_name(tmp_path):
