@@ -140,6 +140,19 @@ def _core_and_trainer_boxes(model, scene_seed: int, stride: int, top_k: int):
     return r.boxes, ref
 
 
+@pytest.mark.parametrize("pred,target,expected", [
+    ((1, 1, 1, 1), (1, 1, 1, 1), 1.0),          # the same box
+    ((1, 1, 1, 1), (1, 1, 3, 1), 0.5),          # 2x2 inside 4x2: IoU 0.5, the hull is the union
+    ((1, 1, 1, 1), (0.5, 3, 0.5, 3), -1 / 12),  # a cross: IoU 2/8, hull 12, union 8
+])
+def test_the_box_loss_compares_the_boxes_by_generalised_iou(pred, target, expected):
+    """The box loss's GIoU, at one cell, of the boxes its four distances (l, t, r, b) give about the cell's centre."""
+    from app.train.proposals import giou
+
+    cell = lambda d: np.log(np.float32(d)).reshape(1, 4, 1, 1)
+    assert float(np.asarray(giou(cell(pred), cell(target))).ravel()[0]) == pytest.approx(expected, abs=1e-6)
+
+
 def test_the_core_decodes_the_peaks_as_the_trainer(trained):
     """Every hypothesis the core reports is a peak of the network's heat map decoded as proposals_onnx.decode does
     (box within 0.05 px, score = heat), strongest first, when no check but "standing below the horizon" and no
@@ -192,13 +205,13 @@ def test_image_bench_times_the_network_and_its_verifier_apart(tmp_path):
 def test_the_shipped_network_scores_on_the_validation_split_what_its_card_says():
     """docs/detection.md ("The proposals part"): the shipped network with the CNN verifier, `pipeline: {detectors:
     [proposals]}`, on the 600 validation images (boxes >= 40 px, IoU 0.5) at the operating point chosen on held-out
-    training images (score >= 0.16): recall 0.649, precision 0.900; every detection kept: recall 0.752."""
+    training images (score >= 0.15): recall 0.666, precision 0.908; every detection kept: recall 0.753."""
     from app.eval.detector_points import composition_config, scored_images, summary
     from app.eval.tusimple_boxes import load_entries
 
     folder = data_path("tusimple", "supp")
     entries = load_entries(str(folder))
     assert len(entries) == 600
-    r = summary(entries, scored_images(str(folder), entries, composition_config(["proposals"])), at=0.16)
-    assert r["at"]["recall"] == pytest.approx(0.649, abs=0.01) and r["at"]["precision"] == pytest.approx(0.900, abs=0.01)
-    assert r["every_detection"]["recall"] == pytest.approx(0.752, abs=0.01)
+    r = summary(entries, scored_images(str(folder), entries, composition_config(["proposals"])), at=0.15)
+    assert r["at"]["recall"] == pytest.approx(0.666, abs=0.01) and r["at"]["precision"] == pytest.approx(0.908, abs=0.01)
+    assert r["every_detection"]["recall"] == pytest.approx(0.753, abs=0.01)

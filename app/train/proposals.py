@@ -25,7 +25,8 @@ are cut to the window; one less than half inside is neither vehicle nor backgrou
 
 Loss (CenterNet): L = focal + BOX_WEIGHT * box + decay |W|^2 / 2 with
     focal = -1/N sum_cells [y = 1] (1 - p)^2 log p + [y < 1] (1 - y)^4 p^2 log(1 - p),   N = the peaks
-    box   = sum_cells g |b - t| / sum g    (L1 on the four log-distances, g the cell's Gaussian)
+    box   = sum_cells g (1 - GIoU(b, t)) / sum g    (the generalised IoU of the box the cell's four predicted
+            log-distances give with its target box, g the cell's Gaussian)
 Adam (beta 0.9, 0.999; the learning rate falls linearly to 0), batches of `batch` images: the same command gives
 the same file.
 """
@@ -171,6 +172,22 @@ def batch_arrays(images, boxes, idx, rng, aug: bool, stride: int = 8):
             np.stack(igs)[:, None].astype(np.float32))
 
 
+def giou(pb, yb):
+    """(n, 1, h, w) generalised IoU of the boxes that two maps (n, 4, h, w) of log-distances (l, t, r, b) give about
+    each cell (both boxes hold the cell's centre; the stride cancels)."""
+    import jax.numpy as jnp
+
+    dp, dt = jnp.exp(pb), jnp.exp(yb)
+    inter = ((jnp.minimum(dp[:, 0], dt[:, 0]) + jnp.minimum(dp[:, 2], dt[:, 2]))
+             * (jnp.minimum(dp[:, 1], dt[:, 1]) + jnp.minimum(dp[:, 3], dt[:, 3])))
+    area_p = (dp[:, 0] + dp[:, 2]) * (dp[:, 1] + dp[:, 3])
+    area_t = (dt[:, 0] + dt[:, 2]) * (dt[:, 1] + dt[:, 3])
+    union = area_p + area_t - inter
+    hull = ((jnp.maximum(dp[:, 0], dt[:, 0]) + jnp.maximum(dp[:, 2], dt[:, 2]))
+            * (jnp.maximum(dp[:, 1], dt[:, 1]) + jnp.maximum(dp[:, 3], dt[:, 3])))
+    return (inter / union - (hull - union) / hull)[:, None]
+
+
 def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3, decay: float = 1e-5,
         width: int = po.WIDTH, blocks: int = po.BLOCKS, width8: int = po.WIDTH8, blocks8: int = po.BLOCKS8, on_epoch: Callable[[int, dict, float, float], None] | None = None) -> dict:
     """Parameters (numpy, proposals_onnx's names) fitted by Adam on the focal and box losses (module docstring)."""
@@ -189,7 +206,7 @@ def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3
         pos = (yh >= 1.0).astype(jnp.float32)
         neg = (1 - pos) * (1 - ig)
         focal = -(pos * (1 - pr) ** 2 * logp + neg * (1 - yh) ** 4 * pr ** 2 * log1mp).sum() / jnp.maximum(pos.sum(), 1)
-        box = (wb * jnp.abs(pb - yb)).sum() / jnp.maximum(4 * wb.sum(), 1e-6)
+        box = (wb * (1 - giou(pb, yb))).sum() / jnp.maximum(wb.sum(), 1e-6)
         return focal + BOX_WEIGHT * box + 0.5 * decay * sum(jnp.sum(p[k] ** 2) for k in decayed), (focal, box)
 
     @jax.jit
