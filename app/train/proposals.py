@@ -20,10 +20,10 @@ about a random point with a shift of up to 10 % of the size, and brightness and 
 b in -30..30 grey levels). The fit sees a window of CROP_ROWS x CROP_COLS of each (the network is fully
 convolutional): its rows centred on the median row of the image's vehicles, moved by up to +-24 rows at random (the
 vehicles of a road scene stand in a band; its sky and bonnet hold none), its columns anywhere; a full 320x180 image
-costs 2.3x the arithmetic of a 192x128 window (the shipped model's 30 epochs took 49 min of the two cores, shared). Boxes
+costs 2.3x the arithmetic of a 192x128 window (the shipped model's 30 epochs took 35 min of the two cores). Boxes
 are cut to the window; one less than half inside is neither vehicle nor background.
 
-Loss (CenterNet): L = focal + BOX_WEIGHT * box + decay |W|^2 / 2 with
+Loss (CenterNet's focal loss, a generalised-IoU box loss): L = focal + BOX_WEIGHT * box + decay |W|^2 / 2 with
     focal = -1/N sum_cells [y = 1] (1 - p)^2 log p + [y < 1] (1 - y)^4 p^2 log(1 - p),   N = the peaks
     box   = sum_cells g (1 - GIoU(b, t)) / sum g    (the generalised IoU of the box the cell's four predicted
             log-distances give with its target box, g the cell's Gaussian)

@@ -54,10 +54,11 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
     RoadPriorParams prior;
     prior.road = p_.road;
     prior.shape = p_.shape;
+    const auto below_horizon = [&](const cv::Rect2f &box) { return box.br().y > yh + 1.0; };
     // A box standing on the road: the vehicle height it implies and its width against the row's expected one.
     const auto on_road = [&](const cv::Rect2f &box) {
+        if (!below_horizon(box)) return false;
         const float yb = box.br().y;
-        if (yb <= yh + 1.0) return false;
         const double implied = implied_vehicle_height(box, yh, hc);
         if (implied < p_.min_vehicle_height_m || implied > p_.max_vehicle_height_m) return false;
         const double ratio = box.width / std::max(1e-3f, expected_vehicle_width(yb, gray.size(), ctx.lanes, ctx.camera, prior));
@@ -72,7 +73,7 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
     for (const ProposalPeak &pk : net_.peaks(gray, p_.input_width, float(p_.min_heat), 4 * p_.top_k)) {
         const cv::Rect2f box = pk.box & image;
         if (box.width < 2.f || box.height < 2.f) continue;
-        if (moves ? box.br().y <= yh + 1.0 : !on_road(box)) continue;
+        if (!(moves ? below_horizon(box) : on_road(box))) continue;
         cand.push_back(proposal(box, pk.heat, pk.heat));
         if (int(cand.size()) >= p_.top_k) break;
     }
