@@ -25,6 +25,21 @@ int best_match(const cv::Rect2f &box, const std::vector<const Hypothesis *> &cue
     return best;
 }
 
+// Whether `inner` lies within `outer`: at least 90 % of its area inside.
+bool holds(const cv::Rect2f &outer, const cv::Rect2f &inner) { return (outer & inner).area() >= 0.9f * inner.area(); }
+
+// The largest shadow cue not yet taken that `box` holds; -1 when none.
+int held_shadow(const cv::Rect2f &box, const std::vector<const Hypothesis *> &cues, const std::vector<char> &taken) {
+    int best = -1;
+    float best_area = 0.f;
+    for (size_t j = 0; j < cues.size(); ++j) {
+        const float area = cues[j]->box.area();
+        if (taken[j] || std::strcmp(cues[j]->source, "shadow") != 0 || area <= best_area) continue;
+        if (holds(box, cues[j]->box)) { best = int(j); best_area = area; }
+    }
+    return best;
+}
+
 } // namespace
 
 std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, const FuseParams &p) {
@@ -46,12 +61,19 @@ std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, co
             continue;
         }
         Hypothesis v = *c;
-        const int j = best_match(c->box, cues, taken, float(p.match_iou));
+        // a box lower than small_box_px takes the box of a shadow cue it holds (the cue confirming it, or else the
+        // largest it holds): the cascade's smallest window is larger than a far car
+        const bool small = c->box.height < float(p.small_box_px);
+        int j = best_match(c->box, cues, taken, float(p.match_iou));
+        if (small && j < 0) j = held_shadow(c->box, cues, taken);
         if (j >= 0) {
             const Hypothesis &cue = *cues[size_t(j)];
             taken[size_t(j)] = 1;
             v.score = std::min(1.f, std::max(c->score, cue.score) + bonus);
-            if (p.shadow_bottom && std::strcmp(cue.source, "shadow") == 0) {
+            if (small && std::strcmp(cue.source, "shadow") == 0 && holds(c->box, cue.box)) {
+                v.box = cue.box;
+                v.foot = cue.foot;
+            } else if (p.shadow_bottom && std::strcmp(cue.source, "shadow") == 0) {
                 const float bottom = cue.box.y + cue.box.height;
                 v.box.height = std::max(1.f, bottom - v.box.y);
                 v.foot = {v.box.x + 0.5f * v.box.width, bottom};

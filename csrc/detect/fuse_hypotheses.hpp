@@ -8,6 +8,10 @@
 //     strongest first, takes its best-overlapping cue not yet taken): the box is the learned one (trained on
 //     whole-vehicle boxes, as the annotations draw them), with its bottom edge moved onto a matched shadow edge
 //     when shadow_bottom is set; the score min(1, max(c, t) + agree_bonus).
+//   - A learned box lower than small_box_px (0 = off, the default: docs/decisions.md) comes from the cascade's
+//     smallest windows (20 px high), larger than a far car: a shadow cue it holds (>= 90 % of the cue's area
+//     inside; the matched one, else the largest one not taken) confirms it and gives it its box, which the
+//     shadow's edges measure to the pixel.
 //   - A learned hypothesis no cue confirms keeps its score c.
 //   - Two learned parts' hypotheses on one vehicle (IoU >= match_iou) are one: the stronger one, with the
 //     agreement bonus.
@@ -35,6 +39,7 @@ struct FuseParams {
     double agree_bonus = 0.3;    // score added when a cue confirms a vehicle
     double cue_weight = 0.5;     // share of its score a vehicle only a cue finds keeps
     bool shadow_bottom = false;  // a learned box confirmed by a shadow edge takes the shadow's bottom row
+    double small_box_px = 0.0;   // px; a learned box lower than this takes the box of a shadow cue it holds
 
     void bind(ParamMap &m) {
         m.add("match_iou", match_iou, 0.05, 0.95,
@@ -44,6 +49,9 @@ struct FuseParams {
               "share of its score kept by a vehicle that only a cue (shadow or parallax detector) finds");
         m.add("shadow_bottom", shadow_bottom,
               "a learned box confirmed by a shadow edge takes the shadow's bottom row (where the tyres meet the road)");
+        m.add("small_box_px", small_box_px, 0.0, 200.0,
+              "px; a learned box lower than this that holds a shadow cue takes the cue's box (a far car is smaller "
+              "than the cascade's smallest window, 20 px high; the shadow's edges measure it); 0 = never");
     }
 };
 

@@ -54,6 +54,32 @@ TEST_CASE("a learned detection no cue confirms keeps its score, and shadow_botto
     CHECK(out[0].score == doctest::Approx(0.85f));
 }
 
+TEST_CASE("a learned box lower than small_box_px takes the box of the shadow cue it holds") {
+    hw::FuseParams p;
+    p.small_box_px = 24;
+    // a car 90 m ahead at 640x480: 14 x 11 px, boxed 22 x 18 by the cascade's smallest window, to the pixel by the
+    // shadow's edges; the two overlap at IoU 0.39, below match_iou
+    const cv::Rect2f window(335, 222, 22, 18), shadow(339, 227, 14, 11);
+    auto out = hw::fuse_hypotheses({learned(window, 0.84f), cue(shadow, 0.4f)}, p);
+    REQUIRE(out.size() == 1);
+    CHECK(out[0].box == shadow);
+    CHECK(out[0].foot.y == doctest::Approx(238.f));
+    CHECK(out[0].score == doctest::Approx(1.0f));  // min(1, 0.84 + 0.3)
+    // a larger learned box keeps its own, and a cue only partly inside a small one is another vehicle
+    p.small_box_px = 18;
+    out = hw::fuse_hypotheses({learned(window, 0.84f), cue(shadow, 0.4f)}, p);
+    REQUIRE(out.size() == 2);
+    CHECK(out[0].box == window);
+    p.small_box_px = 24;
+    out = hw::fuse_hypotheses({learned(window, 0.84f), cue({350, 227, 14, 11}, 0.4f)}, p);
+    REQUIRE(out.size() == 2);
+    CHECK(out[0].box == window);
+    // a cue that confirms a small box (IoU >= match_iou) but reaches beyond it leaves the learned box as it is
+    out = hw::fuse_hypotheses({learned(window, 0.84f), cue({333, 222, 22, 20}, 0.4f)}, p);
+    REQUIRE(out.size() == 1);
+    CHECK(out[0].box == window);
+}
+
 TEST_CASE("the detection stage gives a tracker the same vehicles at once and from the worker thread") {
     hw::DetectorSet set;
     set.parts.push_back(std::make_unique<FixedDetector>(std::vector<hw::Hypothesis>{learned({100, 200, 60, 48}, 0.6f)}));
