@@ -66,8 +66,8 @@ def test_the_check_catches_upward_sideways_and_abi_includes():
     assert _violations([(Path("base/types.hpp"), "core/config.hpp")])
     assert _violations([(Path("track/tracker.hpp"), "fcw/lead_selection.hpp")])
     assert _violations([(Path("capture/frame_source.hpp"), "geometry/camera.hpp")])
-    assert _violations([(Path("track/roi_search.cpp"), "detect/fuse_hypotheses.hpp")])
-    assert _violations([(Path("detect/shadow/part.hpp"), "track/roi_search.hpp")])
+    assert _violations([(Path("track/kalman/roi_search.cpp"), "detect/fuse_hypotheses.hpp")])
+    assert _violations([(Path("detect/shadow/part.hpp"), "track/kalman/roi_search.hpp")])
     assert _violations([(Path("core/realtime_loop.hpp"), "include/headway.h")])
     assert not _violations([(Path("core/pipeline.hpp"), "base/types.hpp"), (Path("core/abi.cpp"), "include/headway.h")])
 

@@ -1,7 +1,7 @@
 // The GM-PHD filter on 2-D image points (paper 004, eq. 3-12): prediction and update agree with the equations
 // worked out here, merging follows eq. 9-11, the weight sum counts the features under clutter and missed
 // detections, a feature seen once never becomes stable, and merging and pruning keep the components under the cap.
-#include "track/gmphd.hpp"
+#include "track/phd/gmphd.hpp"
 
 #include <doctest/doctest.h>
 #include <opencv2/core.hpp>

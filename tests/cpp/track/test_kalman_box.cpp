@@ -1,6 +1,6 @@
 // The thesis's Kalman filter on a vehicle's bottom corners: the Singer process noise is the closed form, the
 // covariance shrinks with each measurement, and a box moving at constant velocity is followed with its velocity.
-#include "track/kalman_box.hpp"
+#include "track/kalman/kalman_box.hpp"
 
 #include <doctest/doctest.h>
 

@@ -3,7 +3,7 @@
 // flat-road inversion and as good as inverting each row and Kalman-filtering the range (what the box trackers'
 // range filter does); the image-expansion observation halves the rate bias of a contact row one pixel low.
 #include "geometry/flat_road.hpp"
-#include "track/ukf.hpp"
+#include "track/phd/ukf.hpp"
 
 #include <doctest/doctest.h>
 

@@ -1,11 +1,11 @@
-// tracker_particles.hpp - tracker part "particles" (paper 000, section III): the joint SIR particle
+// particles/part.hpp - tracker part "particles" (paper 000, section III): the joint SIR particle
 // filter of particle_filter.hpp, with entries confirmed through its transitory period and exits
 // managed by the filter. It asks the detector parts every frame; each hypothesis is a measurement at
 // its foot point (the mid-lower point of a parallax region, the bottom centre of a shadow box).
 #pragma once
 
 #include "track/frame_clock.hpp"
-#include "track/particle_filter.hpp"
+#include "track/particles/particle_filter.hpp"
 #include "track/tracker.hpp"
 
 namespace hw {

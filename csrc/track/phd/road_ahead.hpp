@@ -1,4 +1,4 @@
-// road_ahead.hpp - whether a point of the image (a vehicle's bottom centre) stands on the road ahead: on the ego
+// phd/road_ahead.hpp - whether a point of the image (a vehicle's bottom centre) stands on the road ahead: on the ego
 // lane or at most `lanes_beside` lane widths beside it. The tracker starts vehicles only there, so the roadside's
 // bushes, signs and barriers start no track.
 //

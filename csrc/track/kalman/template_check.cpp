@@ -1,4 +1,4 @@
-#include "track/template_check.hpp"
+#include "track/kalman/template_check.hpp"
 
 #include <opencv2/imgproc.hpp>
 

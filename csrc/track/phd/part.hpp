@@ -1,4 +1,4 @@
-// tracker_phd.hpp - tracker part "phd" (paper 004): the feature points inside each vehicle followed by a GM-PHD
+// phd/part.hpp - tracker part "phd" (paper 004): the feature points inside each vehicle followed by a GM-PHD
 // filter, the vehicle's position from its stable features (eq. 13-15), and its range and velocity
 // from a UKF through the pinhole observation (eq. 16-21).
 //
@@ -56,14 +56,14 @@
 #include "geometry/horizon.hpp"
 #include "geometry/road_params.hpp"
 #include "track/association.hpp"
-#include "track/box_features.hpp"
+#include "track/phd/box_features.hpp"
 #include "track/frame_clock.hpp"
-#include "track/gmphd.hpp"
-#include "track/road_ahead.hpp"
-#include "track/scene_pitch.hpp"
+#include "track/phd/gmphd.hpp"
+#include "track/phd/road_ahead.hpp"
+#include "track/phd/scene_pitch.hpp"
 #include "track/tracker.hpp"
 #include "track/vehicle_height.hpp"
-#include "track/vehicle_ukf.hpp"
+#include "track/phd/vehicle_ukf.hpp"
 
 #include <memory>
 #include <vector>

@@ -1,4 +1,4 @@
-// ukf.hpp - unscented Kalman filter with scaled sigma points (Julier 2002; Wan & van der Merwe 2000),
+// phd/ukf.hpp - unscented Kalman filter with scaled sigma points (Julier 2002; Wan & van der Merwe 2000),
 // for any transition x' = f(x, dt) and observation z = h(x); paper 004 (eq. 16-21) uses it with the
 // state [lateral X, range Z, dX/dt, dZ/dt], constant velocity (eq. 19) and the pinhole observation.
 //

@@ -1,4 +1,4 @@
-#include "track/gmphd.hpp"
+#include "track/phd/gmphd.hpp"
 
 #include <algorithm>
 #include <cmath>

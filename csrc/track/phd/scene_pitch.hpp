@@ -1,4 +1,4 @@
-// scene_pitch.hpp - the horizon row frame by frame from the far scene's vertical image motion (the car's
+// phd/scene_pitch.hpp - the horizon row frame by frame from the far scene's vertical image motion (the car's
 // pitch), blended with the lane horizon for the slow part (the phd tracker's horizon).
 //
 // A bump, a sag or braking turns the camera by a fraction of a degree within a few frames: every far point
@@ -16,7 +16,7 @@
 #pragma once
 
 #include "base/params.hpp"
-#include "track/box_features.hpp"
+#include "track/phd/box_features.hpp"
 
 #include <opencv2/core.hpp>
 

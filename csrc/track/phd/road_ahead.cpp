@@ -1,4 +1,4 @@
-#include "track/road_ahead.hpp"
+#include "track/phd/road_ahead.hpp"
 
 #include "geometry/flat_road.hpp"
 

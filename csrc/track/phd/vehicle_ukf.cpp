@@ -1,4 +1,4 @@
-#include "track/vehicle_ukf.hpp"
+#include "track/phd/vehicle_ukf.hpp"
 
 #include "geometry/flat_road.hpp"
 

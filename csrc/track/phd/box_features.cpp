@@ -1,4 +1,4 @@
-#include "track/box_features.hpp"
+#include "track/phd/box_features.hpp"
 
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>

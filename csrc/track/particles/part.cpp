@@ -1,4 +1,4 @@
-#include "track/tracker_particles.hpp"
+#include "track/particles/part.hpp"
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"

@@ -1,4 +1,4 @@
-// template_check.hpp - "is the vehicle still there?" by normalised correlation (thesis 3.6).
+// kalman/template_check.hpp - "is the vehicle still there?" by normalised correlation (thesis 3.6).
 //
 // Before a vehicle that the edge search did not re-find is dropped, the thesis correlates the
 // image region of its last box with the same region now; a high normalised correlation means the

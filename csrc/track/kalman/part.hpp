@@ -1,4 +1,4 @@
-// tracker_kalman.hpp - tracker part "kalman" (the thesis's box tracker): the detector parts every N
+// kalman/part.hpp - tracker part "kalman" (the thesis's box tracker): the detector parts every N
 // frames, one Kalman filter per vehicle on its bottom corners, ROI search in between.
 //
 // Per frame (thesis 3.6): predict every vehicle; search the ROI around each prediction for its
@@ -22,9 +22,9 @@
 #include "cues/verify.hpp"
 #include "track/birth_gate.hpp"
 #include "track/frame_clock.hpp"
-#include "track/kalman_box.hpp"
-#include "track/roi_search.hpp"
-#include "track/template_check.hpp"
+#include "track/kalman/kalman_box.hpp"
+#include "track/kalman/roi_search.hpp"
+#include "track/kalman/template_check.hpp"
 #include "track/tracker.hpp"
 #include "track/vehicle_height.hpp"
 

@@ -1,4 +1,4 @@
-// particle_filter.hpp - one SIR particle filter over the joint state of all vehicles, with entries
+// particles/particle_filter.hpp - one SIR particle filter over the joint state of all vehicles, with entries
 // and exits managed by the filter itself (paper 000, section III).
 //
 // State of a particle: (x, y, vx, vy) of each of the N vehicles stacked, x/y the image position of

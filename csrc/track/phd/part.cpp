@@ -1,4 +1,4 @@
-#include "track/tracker_phd.hpp"
+#include "track/phd/part.hpp"
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"

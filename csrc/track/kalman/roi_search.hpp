@@ -1,4 +1,4 @@
-// roi_search.hpp - re-finding a tracked vehicle around its predicted bottom corners (thesis 3.6.1).
+// kalman/roi_search.hpp - re-finding a tracked vehicle around its predicted bottom corners (thesis 3.6.1).
 //
 // Bottom: project the shadow edges (bright road below, dark shadow above) of the vehicle's inner
 // columns onto the rows inside the Kalman gate around the predicted bottom row; the largest value

@@ -1,4 +1,4 @@
-#include "track/roi_search.hpp"
+#include "track/kalman/roi_search.hpp"
 
 #include "cues/edge_projection.hpp"
 #include "cues/road_prior.hpp"

@@ -1,4 +1,4 @@
-#include "track/tracker_kalman.hpp"
+#include "track/kalman/part.hpp"
 
 #include "base/part_registry.hpp"
 #include "base/stopwatch.hpp"

@@ -1,4 +1,4 @@
-// gmphd.hpp - Gaussian-mixture probability hypothesis density (GM-PHD) filter on 2-D image points
+// phd/gmphd.hpp - Gaussian-mixture probability hypothesis density (GM-PHD) filter on 2-D image points
 // (paper 004, eq. 3-12; Vo & Ma 2006 for the recursion the paper follows).
 //
 // The intensity of "a feature point here" is a sum of weighted Gaussians w_j N(x; m_j, P_j) over the

@@ -1,4 +1,4 @@
-#include "track/ukf.hpp"
+#include "track/phd/ukf.hpp"
 
 #include <cmath>
 

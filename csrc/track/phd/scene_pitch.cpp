@@ -1,4 +1,4 @@
-#include "track/scene_pitch.hpp"
+#include "track/phd/scene_pitch.hpp"
 
 #include <opencv2/imgproc.hpp>
 

@@ -1,4 +1,4 @@
-#include "track/kalman_box.hpp"
+#include "track/kalman/kalman_box.hpp"
 
 #include <Eigen/Dense>
 

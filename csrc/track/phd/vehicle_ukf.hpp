@@ -1,4 +1,4 @@
-// vehicle_ukf.hpp - one vehicle's position and velocity on the road by the UKF (paper 004, eq. 16-21).
+// phd/vehicle_ukf.hpp - one vehicle's position and velocity on the road by the UKF (paper 004, eq. 16-21).
 //
 // State x = [X lateral, Z range, dX/dt, dZ/dt] (m, m/s). Transition, constant velocity (eq. 19):
 //     x' = F x,  F = [1 0 dt 0; 0 1 0 dt; 0 0 1 0; 0 0 0 1],
@@ -15,7 +15,7 @@
 
 #include "base/params.hpp"
 #include "geometry/camera.hpp"
-#include "track/ukf.hpp"
+#include "track/phd/ukf.hpp"
 
 #include <opencv2/core.hpp>
 

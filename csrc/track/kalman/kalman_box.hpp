@@ -1,4 +1,4 @@
-// kalman_box.hpp - the thesis's Kalman filter on a vehicle's two bottom corners (thesis 3.5).
+// kalman/kalman_box.hpp - the thesis's Kalman filter on a vehicle's two bottom corners (thesis 3.5).
 //
 // State x = [x1, y1, x2, vx1, vy1, vx2]: bottom-left corner (x1, y1), right corner column x2 (the
 // two corners share the bottom row), and their image velocities in px/s. Constant velocity:

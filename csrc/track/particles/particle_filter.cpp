@@ -1,4 +1,4 @@
-#include "track/particle_filter.hpp"
+#include "track/particles/particle_filter.hpp"
 
 #include "track/duplicate_pruning.hpp"
 

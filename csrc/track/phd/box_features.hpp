@@ -1,4 +1,4 @@
-// box_features.hpp - corner points inside a vehicle's box, and their frame-to-frame motion.
+// phd/box_features.hpp - corner points inside a vehicle's box, and their frame-to-frame motion.
 //
 // Corners: Shi-Tomasi (min eigenvalue of the structure tensor), Harris (det - k trace^2) or FAST,
 // the strongest ones at least min_distance apart, found only in the inner part of the box (its
