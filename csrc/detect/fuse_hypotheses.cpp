@@ -70,10 +70,11 @@ std::vector<Hypothesis> fuse_hypotheses(const std::vector<Hypothesis> &found, co
             const Hypothesis &cue = *cues[size_t(j)];
             taken[size_t(j)] = 1;
             v.score = std::min(1.f, std::max(c->score, cue.score) + bonus);
-            if (small && std::strcmp(cue.source, "shadow") == 0 && holds(c->box, cue.box)) {
+            const bool shadow = std::strcmp(cue.source, "shadow") == 0;
+            if (small && shadow && holds(c->box, cue.box)) {
                 v.box = cue.box;
                 v.foot = cue.foot;
-            } else if (p.shadow_bottom && std::strcmp(cue.source, "shadow") == 0) {
+            } else if (p.shadow_bottom && shadow) {
                 const float bottom = cue.box.y + cue.box.height;
                 v.box.height = std::max(1.f, bottom - v.box.y);
                 v.foot = {v.box.x + 0.5f * v.box.width, bottom};

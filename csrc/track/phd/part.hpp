@@ -56,14 +56,14 @@
 #include "geometry/horizon.hpp"
 #include "geometry/road_params.hpp"
 #include "track/association.hpp"
-#include "track/phd/box_features.hpp"
 #include "track/frame_clock.hpp"
+#include "track/phd/box_features.hpp"
 #include "track/phd/gmphd.hpp"
 #include "track/phd/road_ahead.hpp"
 #include "track/phd/scene_pitch.hpp"
+#include "track/phd/vehicle_ukf.hpp"
 #include "track/tracker.hpp"
 #include "track/vehicle_height.hpp"
-#include "track/phd/vehicle_ukf.hpp"
 
 #include <memory>
 #include <vector>
