@@ -111,6 +111,9 @@ struct TrackState {
     // Filled by the geometry stage (NaN until then).
     float range_m = kNaN, range_sigma_m = kNaN, lateral_m = kNaN, range_rate_mps = kNaN;
     float range_accel_mps2 = kNaN;   // relative acceleration d2(range)/dt2
+    // A tracker that estimates the range rate itself (phd's UKF) gives its estimate in range_rate_mps and its
+    // 1-sigma here; the geometry stage keeps the rate only once this is below 2 m/s (track_kinematics.hpp).
+    float range_rate_sigma_mps = kNaN;
     float ttc_s = kNaN, ttc_scale_s = kNaN;
     int lane_index = -1000;          // -1000 unknown
     int in_path = -1;                // -1 unknown

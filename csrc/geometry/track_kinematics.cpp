@@ -9,6 +9,10 @@ namespace hw {
 
 namespace {
 
+// The UKF's rate, before it settles, lags a sudden closing by more than its sigma says: up to 3.5 sigma on the
+// stopped car of stopped_lead_100kmh, whose scale TTC is right. A scale TTC further than this from it is refused.
+constexpr double kUnsettledRateSigmas = 4.0;
+
 // Least-squares slope of y over t, and its standard error (from the residuals).
 double slope(const std::deque<std::pair<double, double>> &pts, double &std_error) {
     double st = 0, sy = 0;
@@ -53,12 +57,22 @@ double TrackKinematics::scale_fit(const TrackState &tr, State &s, double t_s, do
 }
 
 void TrackKinematics::given_range_ttcs(TrackState &tr, State &s, double t_s) const {
-    const double z = tr.range_m, rate = tr.range_rate_mps;  // rate NaN until the tracker trusts it
-    if (std::isfinite(rate) && -rate > p_.min_closing_mps) tr.ttc_s = float(std::max(0.0, z - p_.ego_front_m) / -rate);
+    const double z = tr.range_m, estimate = tr.range_rate_mps, sigma = tr.range_rate_sigma_mps;
+    // the tracker's rate is reported once it has settled (sigma NaN: the tracker vouches for it)
+    const bool rate_known = std::isfinite(estimate) && !(sigma >= kRateKnownSigma);
+    if (!rate_known) tr.range_rate_mps = NAN;
+    if (rate_known && -estimate > p_.min_closing_mps) tr.ttc_s = float(std::max(0.0, z - p_.ego_front_m) / -estimate);
     double se = NAN;
     const double scale_rate = scale_fit(tr, s, t_s, z, se);
-    // the scale TTC as below, checked against the tracker's rate when it has one
-    const bool agrees = !std::isfinite(rate) || std::fabs(-z * scale_rate - rate) <= 3.0 * (z * se + 1.0);
+    // The scale TTC as below, checked against the tracker's rate: once settled within 3 (z se + 1 m/s); before,
+    // within kUnsettledRateSigmas sigma of both. A far car's box growing by 3 px in 0.4 s (solidWhiteRight with
+    // fuse.small_box_px 24, 77 m ahead: 21 m/s of closing, TTC 3.5 s) is then refused by a rate of -4.6 +- 2.4
+    // m/s (6-7 sigma).
+    const double innov = -z * scale_rate - estimate;
+    const double k = kUnsettledRateSigmas;
+    const bool agrees = !std::isfinite(estimate) ||
+                        (rate_known ? std::fabs(innov) <= 3.0 * (z * se + 1.0)
+                                    : innov * innov <= k * k * (sigma * sigma + z * se * z * se));
     if (std::isfinite(scale_rate) && z * scale_rate > p_.min_closing_mps && scale_rate > 3.0 * se && agrees)
         tr.ttc_scale_s = float(std::max(0.0, z - p_.ego_front_m) / z / scale_rate);
 }
@@ -146,7 +160,7 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
         // Range rate and acceleration only once the filter has converged: variance down to (2 m/s)^2,
         // and for the acceleration to (1.5 m/s^2)^2 with the estimate clear of zero by two sigma
         // (a noisy acceleration would turn every wobble of the box into a braking lead).
-        const bool rate_known = s.P(1, 1) < 4.0;
+        const bool rate_known = s.P(1, 1) < kRateKnownSigma * kRateKnownSigma;
         if (rate_known) tr.range_rate_mps = float(s.x(1));
         if (rate_known && s.P(2, 2) < 2.25 && std::fabs(s.x(2)) > 2.0 * std::sqrt(s.P(2, 2)))
             tr.range_accel_mps2 = float(s.x(2));

@@ -11,7 +11,8 @@
 // with the filter's within 3 sigma of both, or no scale TTC is given (a far box's pixel of jitter).
 // Optionally (scale_rate_fusion) the fit also updates the filter's rate.
 // A tracker that estimates range and range rate itself (the phd preset's UKF) reports range_m already
-// set: its range, lateral and rate are kept and only the two TTCs are added here.
+// set: its range and lateral are kept, its rate once its sigma is below kRateKnownSigma, and the two TTCs
+// are added here; its unsettled rate still judges the scale TTC, within 3 sigma of both.
 #pragma once
 
 #include "base/params.hpp"
@@ -25,6 +26,9 @@
 #include <vector>
 
 namespace hw {
+
+// A range rate is reported (and the range TTC given) once its 1-sigma is below this, m/s.
+constexpr double kRateKnownSigma = 2.0;
 
 struct KinematicsParams {
     double jerk_sigma_mps3 = 2.0;    // white-jerk process noise of the range filter

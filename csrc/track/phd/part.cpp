@@ -450,8 +450,10 @@ TrackState PhdTracker::report(const Vehicle &v) const {
     s.range_m = float(v.ukf->range());
     s.range_sigma_m = float(v.ukf->range_sigma());
     s.lateral_m = float(v.ukf->lateral());
-    // the rate once the filter has settled on it, as the box trackers' range filter does
-    if (v.ukf->range_rate_sigma() < 2.0) s.range_rate_mps = float(v.ukf->range_rate());
+    // the estimate and its sigma: the geometry stage reports the rate once it has settled, and checks the
+    // scale TTC against it before (track_kinematics.cpp)
+    s.range_rate_mps = float(v.ukf->range_rate());
+    s.range_rate_sigma_mps = float(v.ukf->range_rate_sigma());
     return s;
 }
 

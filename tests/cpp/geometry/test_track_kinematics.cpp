@@ -1,0 +1,60 @@
+// The TTCs of a track whose tracker estimates range and range rate itself (the phd tracker's UKF): the rate is
+// reported once its sigma is below 2 m/s, and before that it still judges the scale TTC of the box's growth.
+#include "geometry/track_kinematics.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+namespace {
+
+// A car `range_m` ahead whose box widens from `w0` to `w1` px over 12 frames at 30 fps, the tracker giving
+// `rate` +- `sigma` m/s; returns the last frame's track.
+hw::TrackState grow(double range_m, float w0, float w1, float rate, float sigma) {
+    hw::KinematicsParams p;
+    hw::TrackKinematics kin(p, hw::CameraParams{});
+    hw::TrackState out;
+    for (int k = 0; k < p.scale_window; ++k) {
+        hw::TrackState tr;
+        tr.id = 4;
+        tr.confirmed = true;
+        const float w = w0 + (w1 - w0) * float(k) / float(p.scale_window - 1);
+        tr.box = cv::Rect2f(320.f - 0.5f * w, 200.f, w, 0.8f * w);
+        tr.range_m = float(range_m);
+        tr.range_rate_mps = rate;
+        tr.range_rate_sigma_mps = sigma;
+        std::vector<hw::TrackState> tracks{tr};
+        kin.update(tracks, 230.0, k / 30.0);
+        out = tracks[0];
+    }
+    return out;
+}
+
+} // namespace
+
+TEST_CASE("an unsettled rate is not reported, a settled one is, with its range TTC") {
+    const hw::TrackState unsettled = grow(40.0, 30.f, 30.f, -5.f, 2.5f);
+    CHECK(std::isnan(unsettled.range_rate_mps));
+    CHECK(std::isnan(unsettled.ttc_s));
+    const hw::TrackState settled = grow(40.0, 30.f, 30.f, -5.f, 1.5f);
+    CHECK(settled.range_rate_mps == doctest::Approx(-5.0));
+    CHECK(settled.ttc_s == doctest::Approx((40.0 - 2.0) / 5.0));
+}
+
+TEST_CASE("a far box's growth that the unsettled rate denies gives no scale TTC") {
+    // solidWhiteRight's lead 77 m ahead (fuse.small_box_px 24), its box 18 -> 21 px in 12 frames (32 m/s of
+    // closing, TTC 2.3 s), while the UKF says -4.6 +- 2.4 m/s
+    CHECK(std::isnan(grow(77.0, 18.f, 21.f, -4.6f, 2.4f).ttc_scale_s));
+    // the same growth with no rate from the tracker: the scale TTC stands in
+    const hw::TrackState alone = grow(77.0, 18.f, 21.f, NAN, NAN);
+    REQUIRE(std::isfinite(alone.ttc_scale_s));
+    const double scale_rate = std::log(21.0 / 18.0) / (11.0 / 30.0);  // d(ln w)/dt
+    CHECK(alone.ttc_scale_s == doctest::Approx((77.0 - 2.0) / 77.0 / scale_rate).epsilon(0.01));
+}
+
+TEST_CASE("a stopped car closing at 28 m/s keeps its scale TTC while the UKF's rate still lags") {
+    // stopped_lead_100kmh at 2.8 s: 72 m ahead, the box 19.4 -> 22.4 px in 0.37 s, the UKF at -7.1 +- 6.1 m/s
+    const hw::TrackState tr = grow(72.6, 19.4f, 22.4f, -7.1f, 6.1f);
+    REQUIRE(std::isfinite(tr.ttc_scale_s));
+    CHECK(tr.ttc_scale_s < 3.0f);
+}
