@@ -31,3 +31,15 @@ def test_no_warning_nor_pre_warning_with_the_trained_cascade(preset):
     rows = evaluate(str(DATA), preset)
     assert len(rows) == 6 and sum(r["frames"] for r in rows) >= 550, rows
     assert [(r["clip"], r["warnings"], r["prewarnings"]) for r in rows if r["warnings"] or r["prewarnings"]] == [], rows
+
+
+def test_far_box_growth_the_range_denies_gives_no_pre_warning(tmp_path):
+    """solidWhiteRight's lead 77 m ahead, boxed by its shadow (`fuse.small_box_px: 24`), widens 18 -> 21 px in 0.4 s:
+    a scale TTC of 3.5 s, while the phd tracker's range rate (-4.6 +- 2.4 m/s, not yet settled) says it is barely
+    closing. The scale TTC is refused (csrc/geometry/track_kinematics.cpp), so nothing lights the display."""
+    data_path("udacity", "clips", "solidWhiteRight.mp4")
+    config = tmp_path / "small_boxes.yaml"
+    config.write_text("fuse: {small_box_px: 24}\n")
+    rows = evaluate(str(DATA), "default", str(config), only="solidWhiteRight.mp4")
+    assert len(rows) == 1 and rows[0]["frames"] >= 200, rows
+    assert (rows[0]["warnings"], rows[0]["prewarnings"]) == (0, 0), rows
