@@ -1,4 +1,6 @@
 #include "detect/vehicle_verifier_cnn.hpp"
+
+#include "base/worker_pool.hpp"
 #include "detect/verifier_net.hpp"
 
 #include <opencv2/imgproc.hpp>
@@ -144,16 +146,23 @@ void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxe
     const int sz[4] = {n, 1, kCropH, kCropW};
     cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F), ii;
     if (!plain) cv::integral(gray, ii, CV_32S);  // once for all the crops of the batch (area_cells)
-    for (int k = 0; k < n; ++k) {
-        const size_t i = size_t(which[size_t(k)]);
-        cv::Mat c(kCropH, kCropW, CV_32F, crops.ptr<float>(k));
-        if (plain)  // the crop is centred on the box, so its mirror image is the mirrored image's crop
-            cv::flip(cv::Mat(kCropH, kCropW, CV_32F, const_cast<float *>(plain->ptr<float>(int(i)))), c, 1);
-        else
-            crop(gray, boxes[i], margin_, &ii).copyTo(c);
-        extra.at<float>(k, 0) = float(std::log1p(double(neighbors[i])));
-        extra.at<float>(k, 1) = implied_vehicle_height(boxes[i], horizon_row, cam_height_m);
-    }
+    const auto cut = [&](int k0, int k1) {  // each crop on its own: the same values on any thread
+        for (int k = k0; k < k1; ++k) {
+            const size_t i = size_t(which[size_t(k)]);
+            cv::Mat c(kCropH, kCropW, CV_32F, crops.ptr<float>(k));
+            if (plain)  // the crop is centred on the box, so its mirror image is the mirrored image's crop
+                cv::flip(cv::Mat(kCropH, kCropW, CV_32F, const_cast<float *>(plain->ptr<float>(int(i)))), c, 1);
+            else
+                crop(gray, boxes[i], margin_, &ii).copyTo(c);
+            extra.at<float>(k, 0) = float(std::log1p(double(neighbors[i])));
+            extra.at<float>(k, 1) = implied_vehicle_height(boxes[i], horizon_row, cam_height_m);
+        }
+    };
+    const int pieces = pool_ ? std::min(pool_->threads(), n / 8) : 1;
+    if (pieces > 1)
+        pool_->run(pieces, [&](int j, int) { cut(n * j / pieces, n * (j + 1) / pieces); });
+    else
+        cut(0, n);
     if (has_box_ && offsets) offsets->create(n, 4, CV_32F);
     forward(crops, extra, p, offsets);
     if (crops_out) *crops_out = crops;
@@ -188,6 +197,7 @@ void CnnVerifier::forward(const cv::Mat &crops, const cv::Mat &extra, float *p, 
 }
 
 void CnnVerifier::set_pool(WorkerPool *pool) {
+    pool_ = pool;
     if (own_) own_->set_pool(pool);  // cv::dnn keeps its own threading
 }
 

@@ -75,6 +75,7 @@ private:
     double own_disagreement() const;
 
     std::unique_ptr<VerifierNet> own_;  // null: cv::dnn runs the network
+    WorkerPool *pool_ = nullptr;         // the stage's threads: the crops are cut on them too
     mutable cv::dnn::Net net_;  // forward() is not const; one verifier serves one pipeline thread
     bool has_box_ = false;      // the file has the box output ("box", N x 4)
     bool mirrored_ = false;     // crops the plain look believes judged with their mirror image, answers averaged
