@@ -158,9 +158,12 @@ void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxe
             extra.at<float>(k, 1) = implied_vehicle_height(boxes[i], horizon_row, cam_height_m);
         }
     };
-    const int pieces = pool_ ? std::min(pool_->threads(), n / 8) : 1;
-    if (pieces > 1)
-        pool_->run(pieces, [&](int j, int) { cut(n * j / pieces, n * (j + 1) / pieces); });
+    // pieces of kPiece crops taken one at a time, as VerifierNet::forward shares the network's work: a worker that
+    // wakes late leaves the caller nothing to wait for (base/worker_pool.hpp)
+    constexpr int kPiece = 8;
+    const int pieces = (n + kPiece - 1) / kPiece;
+    if (pool_ && pool_->threads() > 1 && pieces > 1)
+        pool_->run(pieces, [&](int j, int) { cut(j * kPiece, std::min(n, (j + 1) * kPiece)); });
     else
         cut(0, n);
     if (has_box_ && offsets) offsets->create(n, 4, CV_32F);

@@ -12,7 +12,7 @@
 // Optionally (scale_rate_fusion) the fit also updates the filter's rate.
 // A tracker that estimates range and range rate itself (the phd preset's UKF) reports range_m already
 // set: its range and lateral are kept, its rate once its sigma is below kRateKnownSigma, and the two TTCs
-// are added here; its unsettled rate still judges the scale TTC, within 3 sigma of both.
+// are added here; its unsettled rate still judges the scale TTC, within 4 sigma of both (kUnsettledRateSigmas).
 #pragma once
 
 #include "base/params.hpp"
