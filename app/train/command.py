@@ -88,6 +88,9 @@ def add_parser(subparsers) -> None:
     t.add_argument("--batch", type=int, default=16, help="images a batch (default 16)")
     t.add_argument("--lr", type=float, default=2e-3, help="Adam's first learning rate, falling linearly to 0 (default 2e-3)")
     t.add_argument("--input-width", type=int, default=320, help="px: the images reduced to this width (default 320)")
+    t.add_argument("--subcells", type=int, choices=(1, 2), default=2,
+                   help="sub-cells a side of each stride-8 cell: 2 = heat and boxes on a stride-4 grid (default 2, the "
+                   "shipped model's); 1 = one a cell")
     t.add_argument("--limit", type=int, default=0, help="only the first N images (0 = all; for a quick check)")
     t.add_argument("--threads", type=int, default=2, help="CPU threads JAX may use (default 2)")
     t.add_argument("--cache", help=".npz keeping the reduced images between runs (made if absent; outside the repository)")
@@ -163,7 +166,7 @@ def run_proposals(args) -> int:
     log = _line_logger(args.log)
     try:
         proposals.train(args.data, args.out, epochs=args.epochs, seed=args.seed, input_width=args.input_width,
-                        batch=args.batch, lr=args.lr, cache=args.cache, limit=args.limit, log=log,
+                        batch=args.batch, lr=args.lr, subcells=args.subcells, cache=args.cache, limit=args.limit, log=log,
                         threads=args.threads)
     finally:
         log.close()

@@ -160,12 +160,12 @@ def targets(boxes: np.ndarray, out_w: int, out_h: int, ignored=(), stride: int =
     return heat, box, owner, ignore
 
 
-def batch_arrays(images, boxes, idx, rng, aug: bool, stride: int = 8):
+def batch_arrays(images, boxes, idx, rng, aug: bool, stride: int = 8, subcells: int = 1):
     """The standardised inputs and the stacked targets of images[idx] (augmented with `aug`)."""
     xs, hs, bs, ws, igs = [], [], [], [], []
     for k in idx:
         img, bx, cut = augment(images[k], boxes[k], rng) if aug else (images[k], boxes[k], ())
-        t = targets(bx, *po.output_size(img.shape[1], img.shape[0], stride), cut, stride)
+        t = targets(bx, *po.output_size(img.shape[1], img.shape[0], stride, subcells), cut, stride)
         xs.append(img)
         hs.append(t[0]), bs.append(t[1]), ws.append(t[2]), igs.append(t[3])
     return (po.standardise(np.stack(xs)), np.stack(hs)[:, None], np.stack(bs), np.stack(ws)[:, None],
@@ -189,14 +189,16 @@ def giou(pb, yb):
 
 
 def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3, decay: float = 1e-5,
-        width: int = po.WIDTH, blocks: int = po.BLOCKS, width8: int = po.WIDTH8, blocks8: int = po.BLOCKS8, on_epoch: Callable[[int, dict, float, float], None] | None = None) -> dict:
+        width: int = po.WIDTH, blocks: int = po.BLOCKS, width8: int = po.WIDTH8, blocks8: int = po.BLOCKS8,
+        subcells: int = po.SUBCELLS, on_epoch: Callable[[int, dict, float, float], None] | None = None) -> dict:
     """Parameters (numpy, proposals_onnx's names) fitted by Adam on the focal and box losses (module docstring)."""
     # JAX is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import jax
     import jax.numpy as jnp
 
     rng = np.random.default_rng(seed)
-    p = {k: jnp.asarray(v) for k, v in po.init_params(seed, width=width, blocks=blocks, width8=width8, blocks8=blocks8).items()}
+    p = {k: jnp.asarray(v) for k, v in po.init_params(seed, width=width, blocks=blocks, width8=width8, blocks8=blocks8,
+                                                     subcells=subcells).items()}
     decayed = [k for k in p if k.endswith("_w") or k.endswith("_dw") or k.endswith("_pw")]
 
     def loss(p, x, yh, yb, wb, ig):
@@ -229,7 +231,8 @@ def fit(images, boxes, epochs: int, seed: int, batch: int = 16, lr: float = 2e-3
             order = rng.permutation(len(images))
             for b in range(per_epoch):
                 idx = np.sort(order[b * batch:(b + 1) * batch])
-                arrays = batch_arrays(images, boxes, idx, rng, aug=True, stride=po.stride_of(p))
+                arrays = batch_arrays(images, boxes, idx, rng, aug=True, stride=po.stride_of(p),
+                                      subcells=po.subcells_of(p))
                 t += 1
                 p, m, v, val, (f, bl) = step(p, m, v, t, *arrays, np.float32(lr * (1 - (t - 1) / steps)))
                 tot, tf, tb = tot + float(val), tf + float(f), tb + float(bl)
@@ -253,8 +256,8 @@ def held_out_recall(path: str, images, boxes, scale: float, stride: int = 8, min
     found = total = peaks = 0
     for img, bx in zip(images, boxes):
         net.setInput(po.standardise(img), "image")
-        heat, box = net.forward(["heat", "box"])
-        det = po.decode(heat[0, 0], box[0], 1.0, 1.0, min_heat, stride=stride)
+        heat, box = po.to_grid(*(m[0] for m in net.forward(["heat", "box"])))
+        det = po.decode(heat, box, 1.0, 1.0, min_heat, stride=stride)
         peaks += len(det)
         big = bx[(bx[:, 3] - bx[:, 1]) * scale >= min_height_px]
         if len(big):
@@ -266,7 +269,7 @@ def held_out_recall(path: str, images, boxes, scale: float, stride: int = 8, min
 
 def train(folders: list[str], out: str, epochs: int = 5, seed: int = 0, input_width: int = po.INPUT_WIDTH,
           batch: int = 16, lr: float = 2e-3, width: int = po.WIDTH, blocks: int = po.BLOCKS, width8: int = po.WIDTH8,
-          blocks8: int = po.BLOCKS8, cache: str | None = None, limit: int = 0,
+          blocks8: int = po.BLOCKS8, subcells: int = po.SUBCELLS, cache: str | None = None, limit: int = 0,
           log: Callable[[str], None] = print, threads: int = 2) -> dict:
     """Fit on the folders' images less the held-out ones (`limit` > 0: only the first `limit` images), log each
     epoch (losses, the held-out boxes >= 40 px a peak covers), write the ONNX to `out` after every epoch."""
@@ -288,7 +291,8 @@ def train(folders: list[str], out: str, epochs: int = 5, seed: int = 0, input_wi
     fit_i = np.flatnonzero(~held)
     held_i = np.flatnonzero(held)
     log(f"proposals: {len(images)} images ({', '.join(folders)}), {len(fit_i)} fitted, {len(held_i)} held out (every "
-        f"{HELD_OUT}th); input {images.shape[2]}x{images.shape[1]} gray, stride {8 if blocks8 else 4}, stem {po.STEM}, width "
+        f"{HELD_OUT}th); input {images.shape[2]}x{images.shape[1]} gray, stride {(8 if blocks8 else 4) // subcells} "
+        f"({subcells}x{subcells} sub-cells), stem {po.STEM}, width "
         f"{width}, {blocks} blocks at stride 4, width {width8 if blocks8 else '-'}, {blocks8} blocks at stride 8; "
         f"window {CROP_ROWS}x{CROP_COLS}; {epochs} epochs, batch {batch}, lr {lr:g}, seed "
         f"{seed}; {sum(len(boxes[k]) for k in fit_i)} boxes fitted; images {(time.perf_counter() - t0) / 60:.1f} min")
@@ -301,7 +305,7 @@ def train(folders: list[str], out: str, epochs: int = 5, seed: int = 0, input_wi
             f"IoU 0.5: {rec:.3f}, {peaks:.1f} peaks an image, {secs:.0f} s")
 
     params = fit(images[fit_i], [boxes[k] for k in fit_i], epochs, seed, batch, lr, width=width, blocks=blocks,
-                 width8=width8, blocks8=blocks8, on_epoch=on_epoch)
+                 width8=width8, blocks8=blocks8, subcells=subcells, on_epoch=on_epoch)
     po.save_onnx(params, out, doc=f"headway train proposals --out {Path(out).name}, seed {seed}, {epochs} epochs")
     log(f"fit {(time.perf_counter() - t1) / 60:.1f} min, total {(time.perf_counter() - t0) / 60:.1f} min -> {out} "
         f"({Path(out).stat().st_size / 1024:.0f} KiB)")

@@ -4,16 +4,19 @@ runs through cv::dnn (csrc/detect/proposals/proposal_net.cpp) and the tests.
 Input (the same arithmetic as the core's `ProposalNet`): the gray image resized to `input_width` x floor(height *
 input_width / width + 0.5) by the pixel-area mean (cv2.resize INTER_AREA), then z = (g - INPUT_MEAN) / INPUT_SCALE.
 
-Network (ONNX opset 11, every node cv::dnn of OpenCV 4.6 reads), fully convolutional, output stride 8 (4 for a
-network without the third level):
+Network (ONNX opset 11, every node cv::dnn of OpenCV 4.6 reads), fully convolutional, its last level at stride 8 (4
+for a network without the third level):
     a0 = relu(conv3x3/2(z, c))                                   (c, H/2, W/2)
     a1 = relu(conv1x1(relu(dwconv3x3/2(a0)), C))                 (C, H/4, W/4)
     a_{k+1} = a_k + relu(conv1x1(relu(dwconv3x3(a_k)), C))      k = 1 .. BLOCKS
     b1 = relu(conv1x1(relu(dwconv3x3/2(a)), C8))                 (C8, H/8, W/8)
     b_{k+1} = b_k + relu(conv1x1(relu(dwconv3x3(b_k)), C8))     k = 1 .. BLOCKS8
-    heat = sigmoid(conv1x1(b, 1))        the objectness of each cell: a vehicle's centre is a peak
-    box  = conv1x1(b, 4)                 log(distance / stride) from the cell's centre to the box's left, top,
+    heat = sigmoid(conv1x1(b, s^2))      the objectness of each cell: a vehicle's centre is a peak
+    box  = conv1x1(b, 4 s^2)             log(distance / stride) from the cell's centre to the box's left, top,
                                          right and bottom edges
+With s = 2 sub-cells (the shipped model; `train(subcells=2)`) each cell of the last level carries its s x s sub-cells (heat channel s di + dj, box channel
+s^2 k + s di + dj for edge k: the sub-cell at row s i + di, column s j + dj), so the grid's stride is the last
+level's over s: two vehicles one cell apart give two peaks. `to_grid` lays the maps out on that grid, as the core does.
 ("/2": stride 2; convolutions pad to keep the size, ceil(n / 2) after a stride; "dw": depthwise.) Each output cell
 sees 127 px of the input (508 px of a 1280x720 image), at ~42 M multiply-adds for 320x180: the third level gives the
 large near vehicles' edges to the cell at their centre (eight blocks at stride 4 alone see 71 px for as much). Dilated depthwise layers would see farther for the same
@@ -21,7 +24,8 @@ arithmetic, but cv::dnn runs them ~6x slower (docs/decisions.md).
 
 Decoding (`decode`, and the core's the same way): a cell is a peak when its heat is the largest of its 3x3
 neighbourhood and at least `min_heat`; its box in the input is
-    (x_c - e^{b0} S, y_c - e^{b1} S, x_c + e^{b2} S, y_c + e^{b3} S),   x_c = S j + 0.5, y_c = S i + 0.5,  S = stride
+    (x_c - e^{b0} S, y_c - e^{b1} S, x_c + e^{b2} S, y_c + e^{b3} S),   x_c = S j + 0.5, y_c = S i + 0.5,  S = the
+grid's stride
 and the image's box is that times the image's size over the input's.
 """
 from __future__ import annotations
@@ -34,6 +38,7 @@ INPUT_MEAN, INPUT_SCALE = 127.5, 64.0
 STEM, WIDTH = 16, 32     # channels of the first convolution and of the stride-4 layers
 BLOCKS = 2               # residual depthwise-separable blocks at stride 4
 WIDTH8, BLOCKS8 = 64, 6  # channels and blocks at stride 8 (BLOCKS8 = 0: no third level, output stride 4)
+SUBCELLS = 1             # sub-cells a side of each last-level cell (module docstring): 1 or 2 (`--subcells`)
 OPSET = 11
 
 
@@ -42,11 +47,12 @@ def input_size(width: int, height: int, input_width: int = INPUT_WIDTH) -> tuple
     return input_width, max(8, int(np.floor(height * input_width / width + 0.5)))
 
 
-def output_size(w_in: int, h_in: int, stride: int = 8) -> tuple[int, int]:
-    """(width, height) of the output maps: ceil by 2, log2(stride) times."""
-    for _ in range(int(np.log2(stride))):
+def output_size(w_in: int, h_in: int, stride: int = 8, subcells: int = 1) -> tuple[int, int]:
+    """(width, height) of the grid (to_grid) of a network whose grid has this stride: the last level's maps (ceil
+    by 2, log2(stride * subcells) times) times the sub-cells."""
+    for _ in range(int(np.log2(stride * subcells))):
         w_in, h_in = (w_in + 1) // 2, (h_in + 1) // 2
-    return w_in, h_in
+    return w_in * subcells, h_in * subcells
 
 
 def prepare(gray: np.ndarray, input_width: int = INPUT_WIDTH) -> np.ndarray:
@@ -63,7 +69,7 @@ def standardise(small: np.ndarray) -> np.ndarray:
 
 
 def init_params(seed: int, stem: int = STEM, width: int = WIDTH, blocks: int = BLOCKS, width8: int = WIDTH8,
-                blocks8: int = BLOCKS8) -> dict:
+                blocks8: int = BLOCKS8, subcells: int = SUBCELLS) -> dict:
     """He-normal weights, zero biases; the heat head's bias starts at a prior of 0.01 (CenterNet). blocks8 = 0: no
     third level (output stride 4)."""
     rng = np.random.default_rng(seed)
@@ -84,10 +90,13 @@ def init_params(seed: int, stem: int = STEM, width: int = WIDTH, blocks: int = B
         for k in range(blocks8):
             separable(f"c{k}", width8, width8, True)
         head = width8
-    p["heat_w"] = rng.normal(0, 0.01, (1, head, 1, 1)).astype(np.float32)
-    p["heat_b"] = np.float32([-np.log(99.0)])
-    p["box_w"] = rng.normal(0, 0.01, (4, head, 1, 1)).astype(np.float32)
-    p["box_b"] = np.full(4, np.log(2.0), np.float32)   # 2 cells each way at the start
+    if subcells not in (1, 2):
+        raise ValueError(f"subcells={subcells}: 1 or 2")
+    n = subcells * subcells
+    p["heat_w"] = rng.normal(0, 0.01, (n, head, 1, 1)).astype(np.float32)
+    p["heat_b"] = np.full(n, -np.log(99.0), np.float32)
+    p["box_w"] = rng.normal(0, 0.01, (4 * n, head, 1, 1)).astype(np.float32)
+    p["box_b"] = np.full(4 * n, np.log(2.0), np.float32)   # 2 cells each way at the start
     return p
 
 
@@ -96,9 +105,24 @@ def blocks_of(params: dict, level: str = "b") -> int:
     return sum(k.startswith(level) and k.endswith("_dw") and k[1:-3].isdigit() for k in params)
 
 
+def subcells_of(params: dict) -> int:
+    """Sub-cells a side of each last-level cell (1 or 2)."""
+    return int(round(np.sqrt(params["heat_w"].shape[0])))
+
+
 def stride_of(params: dict) -> int:
-    """The output stride of a parameter set: 8 with the third level, else 4."""
-    return 8 if "down8_dw" in params else 4
+    """The grid's stride in input px: the last level's (8 with the third level, else 4) over the sub-cells."""
+    return (8 if "down8_dw" in params else 4) // subcells_of(params)
+
+
+def to_grid(heat: np.ndarray, box: np.ndarray):
+    """(heat (s h, s w), box (4, s h, s w)) of one image's maps as the network gives them, heat (s^2, h, w) and box
+    (4 s^2, h, w) (module docstring)."""
+    n, h, w = heat.shape
+    s = int(round(np.sqrt(n)))
+    grid = heat.reshape(s, s, h, w).transpose(2, 0, 3, 1).reshape(s * h, s * w)
+    b = box.reshape(4, s, s, h, w).transpose(0, 3, 1, 4, 2).reshape(4, s * h, s * w)
+    return grid, b
 
 
 def layers(params: dict) -> list[tuple[str, int, bool]]:
@@ -110,7 +134,8 @@ def layers(params: dict) -> list[tuple[str, int, bool]]:
 
 
 def forward_jax(p: dict, z):
-    """(heat logits (n, 1, h, w), box (n, 4, h, w)) of the standardised input z (n, 1, H, W), in JAX.
+    """(heat logits (n, 1, s h, s w), box (n, 4, s h, s w)) on the grid (to_grid) of the standardised input z
+    (n, 1, H, W), in JAX.
 
     The depthwise 3x3 convolutions are written as nine shifted products and the 1x1 as contractions: XLA's CPU
     grouped convolution (feature_group_count) made a gradient step ~4x slower (docs/decisions.md)."""
@@ -144,7 +169,13 @@ def forward_jax(p: dict, z):
         y = relu(pointwise(relu(depthwise(a, p[f"{name}_dw"], p[f"{name}_dwb"], stride)), p[f"{name}_pw"],
                            p[f"{name}_pwb"]))
         a = a + y if residual else y
-    return pointwise(a, p["heat_w"], p["heat_b"]), pointwise(a, p["box_w"], p["box_b"])
+    heat, box = pointwise(a, p["heat_w"], p["heat_b"]), pointwise(a, p["box_w"], p["box_b"])
+    s = subcells_of(p)
+    if s == 1:
+        return heat, box
+    n, _, h, w = heat.shape
+    return (heat.reshape(n, s, s, h, w).transpose(0, 3, 1, 4, 2).reshape(n, 1, s * h, s * w),
+            box.reshape(n, 4, s, s, h, w).transpose(0, 1, 4, 2, 5, 3).reshape(n, 4, s * h, s * w))
 
 
 def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, min_heat: float,
@@ -167,7 +198,7 @@ def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, mi
 
 def save_onnx(params: dict, path: str, doc: str = "") -> None:
     """Write the network as ONNX (opset 11): input `image` (1, 1, H, W) (any size: fully convolutional), outputs
-    `heat` (1, 1, h, w) after the sigmoid and `box` (1, 4, h, w)."""
+    `heat` (1, s^2, h, w) after the sigmoid and `box` (1, 4 s^2, h, w) (s sub-cells a side, module docstring)."""
     # onnx is optional (pip install '.[train]'): imported only where a network is fitted, written or read
     import onnx
     from onnx import TensorProto, helper, numpy_helper
@@ -200,8 +231,8 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
     graph = helper.make_graph(
         nodes, "headway_vehicle_proposals",
         [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 1, "H", "W"])],
-        [helper.make_tensor_value_info("heat", TensorProto.FLOAT, [1, 1, "h", "w"]),
-         helper.make_tensor_value_info("box", TensorProto.FLOAT, [1, 4, "h", "w"])], init)
+        [helper.make_tensor_value_info("heat", TensorProto.FLOAT, [1, p["heat_w"].shape[0], "h", "w"]),
+         helper.make_tensor_value_info("box", TensorProto.FLOAT, [1, p["box_w"].shape[0], "h", "w"])], init)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)], producer_name="headway",
                               doc_string=doc)
     model.ir_version = 7
@@ -210,8 +241,9 @@ def save_onnx(params: dict, path: str, doc: str = "") -> None:
 
 
 def run_onnx(path: str, small: np.ndarray):
-    """(heat (h, w), box (4, h, w)) of one resized image (H_in, W_in) uint8 by cv2.dnn, as the core runs it."""
+    """(heat (h, w), box (4, h, w)) on the grid (to_grid) of one resized image (H_in, W_in) uint8 by cv2.dnn, as the
+    core runs it."""
     net = cv2.dnn.readNetFromONNX(path)
     net.setInput(standardise(small), "image")
     heat, box = net.forward(["heat", "box"])
-    return heat[0, 0], box[0]
+    return to_grid(heat[0], box[0])

@@ -36,7 +36,7 @@ struct ProposalsParams {
     VehicleShapeParams shape;       // section "vehicle_shape" (the vehicle width), taken by share
     int input_width = 320;          // px of the network's input
     double min_heat = 0.05;         // peaks below are not candidates
-    int top_k = 12;                 // strongest candidates verified (and output)
+    int top_k = 24;                 // strongest candidates verified (and output)
     int verifier_windows = 8;       // the window count handed to the verifier's log(1 + n) feature
     bool verify_mirrored = true;    // the verifier also judges each believed crop's mirror image (mean of the two)
     bool refine_boxes = true;       // a verifier with a box output moves each candidate's box onto the vehicle

@@ -2,10 +2,11 @@
 //
 // A small fully convolutional network (`headway train proposals`, app/train/proposals.py; its layers and decoding in
 // app/train/proposals_onnx.py) read from ONNX and run by cv::dnn. Input: the gray image resized to `input_width` x
-// round(rows * input_width / cols) by the pixel-area mean (INTER_AREA), z = (g - 127.5) / 64. Outputs on a grid of
-// stride S (8, or 4 for a network without the third level; read from the maps' size): "heat" (1, 1, h, w), each
-// cell's objectness (a vehicle's centre is a peak), and "box" (1, 4, h, w), log(distance / S) from the cell's centre
-// (S j + 0.5, S i + 0.5) to the box's left, top, right and bottom edges.
+// round(rows * input_width / cols) by the pixel-area mean (INTER_AREA), z = (g - 127.5) / 64. Outputs of the last
+// level, of stride 8 (or 4 for a network without the third level; read from the maps' size), each cell carrying s x s
+// sub-cells (s = 1 or 2, from the channels): "heat" (1, s^2, h, w), each sub-cell's objectness (a vehicle's centre is
+// a peak), and "box" (1, 4 s^2, h, w), log(distance / S) from the sub-cell's centre (S j + 0.5, S i + 0.5 on the
+// grid of stride S = the level's over s) to the box's left, top, right and bottom edges.
 // Decoding: a cell is a peak when its heat is the largest of its 3x3 neighbourhood and at least min_heat; the
 // strongest top_k peaks are kept, each with its box scaled back to the image.
 #pragma once
