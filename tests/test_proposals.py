@@ -81,7 +81,7 @@ def trained(tmp_path_factory):
     # a smaller network than the shipped one (16 channels, 3 blocks, output stride 4): the same code, trained in well
     # under a minute
     proposals.train([str(folder)], str(out), epochs=15, seed=0, input_width=INPUT_WIDTH, batch=6, lr=1e-2, width=16,
-                    blocks=3, blocks8=0, log=lines.append, threads=1)
+                    blocks=3, blocks8=0, subcells=1, log=lines.append, threads=1)
     return out, lines
 
 

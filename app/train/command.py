@@ -88,9 +88,9 @@ def add_parser(subparsers) -> None:
     t.add_argument("--batch", type=int, default=16, help="images a batch (default 16)")
     t.add_argument("--lr", type=float, default=2e-3, help="Adam's first learning rate, falling linearly to 0 (default 2e-3)")
     t.add_argument("--input-width", type=int, default=320, help="px: the images reduced to this width (default 320)")
-    t.add_argument("--subcells", type=int, choices=(1, 2), default=2,
-                   help="sub-cells a side of each stride-8 cell: 2 = heat and boxes on a stride-4 grid (default 2, the "
-                   "shipped model's); 1 = one a cell")
+    t.add_argument("--subcells", type=int, choices=(1, 2), default=proposals.po.SUBCELLS,
+                   help="sub-cells a side of each stride-8 cell: 2 = heat and boxes on a stride-4 grid (default "
+                   f"{proposals.po.SUBCELLS}, the shipped model's); 1 = one a cell")
     t.add_argument("--limit", type=int, default=0, help="only the first N images (0 = all; for a quick check)")
     t.add_argument("--threads", type=int, default=2, help="CPU threads JAX may use (default 2)")
     t.add_argument("--cache", help=".npz keeping the reduced images between runs (made if absent; outside the repository)")

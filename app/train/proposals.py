@@ -160,7 +160,7 @@ def targets(boxes: np.ndarray, out_w: int, out_h: int, ignored=(), stride: int =
     return heat, box, owner, ignore
 
 
-def batch_arrays(images, boxes, idx, rng, aug: bool, stride: int = 8, subcells: int = 1):
+def batch_arrays(images, boxes, idx, rng, aug: bool, stride: int = 8, subcells: int = po.SUBCELLS):
     """The standardised inputs and the stacked targets of images[idx] (augmented with `aug`)."""
     xs, hs, bs, ws, igs = [], [], [], [], []
     for k in idx:
@@ -257,7 +257,7 @@ def held_out_recall(path: str, images, boxes, scale: float, stride: int = 8, min
     for img, bx in zip(images, boxes):
         net.setInput(po.standardise(img), "image")
         heat, box = po.to_grid(*(m[0] for m in net.forward(["heat", "box"])))
-        det = po.decode(heat, box, 1.0, 1.0, min_heat, stride=stride)
+        det = po.decode(heat[0], box, 1.0, 1.0, min_heat, stride=stride)
         peaks += len(det)
         big = bx[(bx[:, 3] - bx[:, 1]) * scale >= min_height_px]
         if len(big):

@@ -14,7 +14,7 @@ for a network without the third level):
     heat = sigmoid(conv1x1(b, s^2))      the objectness of each cell: a vehicle's centre is a peak
     box  = conv1x1(b, 4 s^2)             log(distance / stride) from the cell's centre to the box's left, top,
                                          right and bottom edges
-With s = 2 sub-cells (the shipped model; `train(subcells=2)`) each cell of the last level carries its s x s sub-cells (heat channel s di + dj, box channel
+With s = SUBCELLS = 2 sub-cells (the shipped model) each cell of the last level carries its s x s sub-cells (heat channel s di + dj, box channel
 s^2 k + s di + dj for edge k: the sub-cell at row s i + di, column s j + dj), so the grid's stride is the last
 level's over s: two vehicles one cell apart give two peaks. `to_grid` lays the maps out on that grid, as the core does.
 ("/2": stride 2; convolutions pad to keep the size, ceil(n / 2) after a stride; "dw": depthwise.) Each output cell
@@ -38,7 +38,7 @@ INPUT_MEAN, INPUT_SCALE = 127.5, 64.0
 STEM, WIDTH = 16, 32     # channels of the first convolution and of the stride-4 layers
 BLOCKS = 2               # residual depthwise-separable blocks at stride 4
 WIDTH8, BLOCKS8 = 64, 6  # channels and blocks at stride 8 (BLOCKS8 = 0: no third level, output stride 4)
-SUBCELLS = 1             # sub-cells a side of each last-level cell (module docstring): 1 or 2 (`--subcells`)
+SUBCELLS = 2             # sub-cells a side of each last-level cell (module docstring): 1 or 2
 OPSET = 11
 
 
@@ -115,13 +115,15 @@ def stride_of(params: dict) -> int:
     return (8 if "down8_dw" in params else 4) // subcells_of(params)
 
 
-def to_grid(heat: np.ndarray, box: np.ndarray):
-    """(heat (s h, s w), box (4, s h, s w)) of one image's maps as the network gives them, heat (s^2, h, w) and box
-    (4 s^2, h, w) (module docstring)."""
-    n, h, w = heat.shape
+def to_grid(heat, box):
+    """(heat (..., 1, s h, s w), box (..., 4, s h, s w)): the maps as the network gives them, heat (..., s^2, h, w)
+    and box (..., 4 s^2, h, w), laid out on the grid (module docstring); numpy or JAX arrays, any leading axes."""
+    *lead, n, h, w = heat.shape
     s = int(round(np.sqrt(n)))
-    grid = heat.reshape(s, s, h, w).transpose(2, 0, 3, 1).reshape(s * h, s * w)
-    b = box.reshape(4, s, s, h, w).transpose(0, 3, 1, 4, 2).reshape(4, s * h, s * w)
+    k = len(lead)
+    order = tuple(range(k)) + (k, k + 3, k + 1, k + 4, k + 2)   # (..., c, di, dj, i, j) -> (..., c, i, di, j, dj)
+    grid = heat.reshape(*lead, 1, s, s, h, w).transpose(order).reshape(*lead, 1, s * h, s * w)
+    b = box.reshape(*lead, 4, s, s, h, w).transpose(order).reshape(*lead, 4, s * h, s * w)
     return grid, b
 
 
@@ -169,13 +171,7 @@ def forward_jax(p: dict, z):
         y = relu(pointwise(relu(depthwise(a, p[f"{name}_dw"], p[f"{name}_dwb"], stride)), p[f"{name}_pw"],
                            p[f"{name}_pwb"]))
         a = a + y if residual else y
-    heat, box = pointwise(a, p["heat_w"], p["heat_b"]), pointwise(a, p["box_w"], p["box_b"])
-    s = subcells_of(p)
-    if s == 1:
-        return heat, box
-    n, _, h, w = heat.shape
-    return (heat.reshape(n, s, s, h, w).transpose(0, 3, 1, 4, 2).reshape(n, 1, s * h, s * w),
-            box.reshape(n, 4, s, s, h, w).transpose(0, 1, 4, 2, 5, 3).reshape(n, 4, s * h, s * w))
+    return to_grid(pointwise(a, p["heat_w"], p["heat_b"]), pointwise(a, p["box_w"], p["box_b"]))
 
 
 def decode(heat: np.ndarray, box: np.ndarray, scale_x: float, scale_y: float, min_heat: float,
@@ -245,5 +241,5 @@ def run_onnx(path: str, small: np.ndarray):
     core runs it."""
     net = cv2.dnn.readNetFromONNX(path)
     net.setInput(standardise(small), "image")
-    heat, box = net.forward(["heat", "box"])
-    return to_grid(heat[0], box[0])
+    heat, box = to_grid(*(m[0] for m in net.forward(["heat", "box"])))
+    return heat[0], box
