@@ -25,6 +25,67 @@ template <class Load> auto load_keyed(const std::string &key, const std::string 
     }
 }
 
+// The second looks at the boxes the first look believes (p >= min_p), by look_again(which), which lowers p[k] and
+// moves boxes[k] of each k in `which`. With nms_iou < 1 (the suppression that follows) a believed box that overlaps
+// (nms_iou) one already judged twice and still more confident than this box's first look would be dropped by the
+// suppression whatever its second look says, as long as that one is kept: it is left unjudged. The believed boxes
+// are judged again in rounds, most confident first, a box overlapping one judged in the same round waiting for the
+// next (most rounds: one box a vehicle); then a box left unjudged that the suppression as it stands would keep (its
+// cover was itself suppressed) is judged after all, until none is. With nms_iou >= 1 every believed box is judged.
+template <class Look>
+void judge_again(std::vector<float> &p, const std::vector<cv::Rect2f> &boxes, double min_p, double nms_iou,
+                 Look &&look_again) {
+    std::vector<size_t> believed;
+    for (size_t k = 0; k < p.size(); ++k)
+        if (p[k] >= min_p) believed.push_back(k);
+    std::stable_sort(believed.begin(), believed.end(), [&](size_t a, size_t b) { return p[a] > p[b]; });
+    const bool lazy = nms_iou < 1.0;
+    std::vector<char> twice(p.size(), 0), left(p.size(), 0), skipped(p.size(), 0);
+    for (const size_t k : believed) left[k] = 1;
+    for (;;) {
+        for (;;) {
+            std::vector<size_t> which;
+            for (const size_t k : believed) {
+                if (!left[k]) continue;
+                bool covered = false, wait = false;
+                for (size_t j = 0; lazy && !skipped[k] && j < p.size() && !covered; ++j)
+                    covered = twice[j] && p[j] > p[k] && box_iou(boxes[j], boxes[k]) >= nms_iou;
+                for (size_t i = 0; lazy && !covered && i < which.size() && !wait; ++i)
+                    wait = box_iou(boxes[which[i]], boxes[k]) >= nms_iou;
+                if (covered) {
+                    left[k] = 0;
+                    skipped[k] = 1;
+                } else if (!wait) {
+                    which.push_back(k);
+                }
+            }
+            if (which.empty()) break;
+            look_again(which);
+            for (const size_t k : which) {
+                twice[k] = 1;
+                left[k] = 0;
+            }
+        }
+        if (!lazy) return;
+        // the suppression, on the boxes as they stand: a skipped box it keeps is judged after all
+        std::vector<size_t> order(p.size()), kept;
+        for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+        std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return p[a] > p[b]; });
+        bool again = false;
+        for (const size_t k : order) {
+            bool dup = false;
+            for (size_t i = 0; i < kept.size() && !dup; ++i) dup = box_iou(boxes[kept[i]], boxes[k]) >= nms_iou;
+            if (dup) continue;
+            kept.push_back(k);
+            if (skipped[k] && !twice[k]) {
+                left[k] = 1;  // skipped stays set: no cover is looked for again
+                again = true;
+            }
+        }
+        if (!again) return;
+    }
+}
+
 } // namespace
 
 CascadeDetector::CascadeDetector(const CascadeParams &p) : p_(p) {
@@ -271,16 +332,13 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         for (auto &b : boxes) b &= image;  // moved past a border: the part in the image (judged, if again, there)
         if (refine && p_.rejudge_refined) {
             // only what the first look believes: the second can only lower a probability (min of the two)
-            std::vector<cv::Rect2f> second;
-            std::vector<int> second_n;
-            std::vector<size_t> which;
-            for (size_t k = 0; k < p.size(); ++k)
-                if (p[k] >= p_.rejudge_min_p) {
-                    which.push_back(k);
+            const auto look_again = [&](const std::vector<size_t> &which) {
+                std::vector<cv::Rect2f> second;
+                std::vector<int> second_n;
+                for (const size_t k : which) {
                     second.push_back(boxes[k]);
                     second_n.push_back(ns[k]);
                 }
-            if (!which.empty()) {
                 // the second look's box output, where rejudge_move asks for it: a second, damped step (the output
                 // learned one step from a group's box; on a moved box its offsets are a second estimate of what
                 // is left)
@@ -296,7 +354,8 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                                                  a.width + s * (b.width - a.width), a.height + s * (b.height - a.height)) &
                                       image;
                 }
-            }
+            };
+            judge_again(p, boxes, p_.rejudge_min_p, p_.lazy_rejudge ? p_.nms_iou : 1.0, look_again);
         }
         for (size_t k = 0; k < judged.size(); ++k) {
             out[judged[k]].confidence = p[k];

@@ -63,6 +63,7 @@ struct CascadeParams {
     bool rejudge_refined = true;        // a moved box is judged again where it now stands (min of the two)
     double rejudge_min_p = 0.5;         // only boxes the first look gives at least this are judged again
     double rejudge_move = 0.5;          // the second look moves the box again by this share of its offsets
+    bool lazy_rejudge = true;           // no second look at a box a more confident one judged twice will suppress
     bool verify_mirrored = true;        // the verifier also judges each crop's mirror image (mean of the two)
     double mirror_min_p = 0.5;          // ... of the crops it gives at least this
     double nms_iou = 0.3;               // a detection overlapping a more confident one this much is dropped (1 = none)
@@ -126,6 +127,10 @@ struct CascadeParams {
         m.add("rejudge_move", rejudge_move, 0.0, 1.0,
               "share of the second look's box offsets applied to a moved box (0 = keep the first look's box, 1 = "
               "the whole second step; docs/detection.md)");
+        m.add("lazy_rejudge", lazy_rejudge,
+              "true = with rejudge_refined and the suppression, a moved box that overlaps (nms_iou) a box already "
+              "judged twice and still more confident than it gets no second look: the suppression drops it anyway "
+              "(docs/detection.md); false = every believed box judged again");
         m.add("verify_mirrored", verify_mirrored,
               "true = the CNN verifier also judges the mirror image of each believed crop (mirror_min_p) and "
               "averages the two answers (docs/detection.md)");
