@@ -25,6 +25,22 @@ template <class Load> auto load_keyed(const std::string &key, const std::string 
     }
 }
 
+// The suppression: indices of the boxes kept, most confident first (ties in index order), each box dropped that
+// overlaps a kept more confident one at IoU >= nms_iou (two groups on one vehicle). (cues/verify.hpp's
+// strongest_apart drops only above its threshold.)
+std::vector<size_t> kept_apart(const std::vector<float> &confidence, const std::vector<cv::Rect2f> &boxes,
+                               double nms_iou) {
+    std::vector<size_t> order(confidence.size()), kept;
+    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return confidence[a] > confidence[b]; });
+    for (const size_t k : order) {
+        bool dup = false;
+        for (size_t i = 0; i < kept.size() && !dup; ++i) dup = box_iou(boxes[kept[i]], boxes[k]) >= nms_iou;
+        if (!dup) kept.push_back(k);
+    }
+    return kept;
+}
+
 // The second looks at the boxes the first look believes (p >= min_p), by look_again(which), which lowers p[k] and
 // moves boxes[k] of each k in `which`. With nms_iou < 1 (the suppression that follows) a believed box that overlaps
 // (nms_iou) one already judged twice and still more confident than this box's first look would be dropped by the
@@ -68,20 +84,12 @@ void judge_again(std::vector<float> &p, const std::vector<cv::Rect2f> &boxes, do
         }
         if (!lazy) return;
         // the suppression, on the boxes as they stand: a skipped box it keeps is judged after all
-        std::vector<size_t> order(p.size()), kept;
-        for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-        std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return p[a] > p[b]; });
         bool again = false;
-        for (const size_t k : order) {
-            bool dup = false;
-            for (size_t i = 0; i < kept.size() && !dup; ++i) dup = box_iou(boxes[kept[i]], boxes[k]) >= nms_iou;
-            if (dup) continue;
-            kept.push_back(k);
+        for (const size_t k : kept_apart(p, boxes, nms_iou))
             if (skipped[k] && !twice[k]) {
                 left[k] = 1;  // skipped stays set: no cover is looked for again
                 again = true;
             }
-        }
         if (!again) return;
     }
 }
@@ -365,15 +373,14 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         verifier_ms = sv.ms();
     }
     if (p_.nms_iou >= 1.0) return out;
-    // non-maximum suppression by confidence: most confident first, drop what overlaps a kept one
-    std::stable_sort(out.begin(), out.end(),
-                     [](const CascadeDetection &a, const CascadeDetection &b) { return a.confidence > b.confidence; });
-    std::vector<CascadeDetection> kept;
+    std::vector<float> confidence;
+    std::vector<cv::Rect2f> placed;
     for (const auto &d : out) {
-        bool dup = false;
-        for (const auto &k : kept) dup = dup || box_iou(d.placed, k.placed) >= p_.nms_iou;
-        if (!dup) kept.push_back(d);
+        confidence.push_back(d.confidence);
+        placed.push_back(d.placed);
     }
+    std::vector<CascadeDetection> kept;
+    for (const size_t k : kept_apart(confidence, placed, p_.nms_iou)) kept.push_back(out[k]);
     return kept;
 }
 
