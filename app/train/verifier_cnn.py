@@ -18,7 +18,8 @@ Fit: Adam (beta 0.9, 0.999; the learning rate falls linearly to 0) on the class-
 the smooth-L1 loss of the box output,
     L = sum_i s_i softplus(-y_i f(x_i)) / sum_i s_i + BOX_WEIGHT mean_{i: IoU_i >= 0.3} mean_k huber((d_ik - t_ik) / BOX_SIGMA)
         + decay |W|^2 / 2,   s_i = 1 / n_class(y_i) (0 for a detection left out),  huber(u) = u^2/2 if |u| < 1 else |u| - 1/2,
-batches of `batch`, weights He-initialised from the seed: the same command gives the same file.
+batches of `batch`, weights He-initialised from the seed: the same command on the same samples gives the same
+file (tests/test_cascade_verifier_cnn.py); the shipped file's own fit is in its model card (docs/detection.md).
 The images the HOG verifier held out (every 15th from the 13th of the training folders: the 5th of each
 five of its every-3rd images) are held out here too, and the share of other boxes passed at the
 thresholds keeping 0.8 / 0.9 / 0.95 of their vehicles is logged, for both verifiers on the same boxes.
