@@ -58,15 +58,19 @@ def _starts_without_lanes(name: str, sections_json: str = "{}") -> list[float]:
 
 def test_without_lane_markings_vehicles_start_only_on_the_road_ahead():
     """congestion_no_markings: no lane markings, so no lane model for most of the run. A vehicle starts only within
-    2.5 lane widths (2 lanes beside the ego lane, 9 m) of the ego path. Measured: confirmed tracks on nothing on 93
-    frames (those started where the lane stage took the barriers' and vehicles' edges for lanes); with the gate as
-    wide as the detectors' scan (4 lanes beside), the bushes beyond the barriers (12-15 m beside the path) start
-    vehicles and the count is 192."""
+    2.5 lane widths (2 lanes beside the ego lane, 9 m) of the ego path. Measured: confirmed tracks on nothing on 85
+    frames (those started where the lane stage took the barriers' and vehicles' edges for lanes). The shipped
+    verifier scores the bushes beyond the barriers (12-15 m beside the path) under phd.birth_min_appearance (0.9);
+    with that bar at 0.5 they reach it, and then the lane gate alone keeps every start within 9 m (measured 8.9 m),
+    while a gate as wide as the detectors' scan (4 lanes beside) lets them start vehicles 15 m beside the path."""
     lateral = _starts_without_lanes("congestion_no_markings")
     assert lateral and max(abs(x) for x in lateral) <= 2.5 * 3.6 + 0.5, lateral
     assert _frames_on_nothing("congestion_no_markings") <= 110
+    weak = _starts_without_lanes("congestion_no_markings", json.dumps({"phd": {"birth_min_appearance": 0.5}}))
+    assert max(abs(x) for x in weak) <= 2.5 * 3.6 + 0.5, weak
     # as wide as the detectors' scan (4 lanes beside): the roadside starts vehicles again
-    wide = _starts_without_lanes("congestion_no_markings", json.dumps({"phd": {"birth_lanes_beside": 4}}))
+    wide = _starts_without_lanes("congestion_no_markings",
+                                 json.dumps({"phd": {"birth_lanes_beside": 4, "birth_min_appearance": 0.5}}))
     assert max(abs(x) for x in wide) > 2.5 * 3.6 + 0.5, "nothing started beside the road: the test no longer tests it"
 
 

@@ -13,7 +13,8 @@ void VehicleUkfParams::bind(ParamMap &m) {
     m.add("accel_sigma_lateral_mps2", accel_sigma_lateral_mps2, 0.01, 50.0,
           "m/s^2; white-acceleration process noise across (lane changes)");
     m.add("init_rate_sigma_mps", init_rate_sigma_mps, 0.1, 100.0,
-          "m/s; 1-sigma of a new vehicle's relative velocity (unknown until it has been seen to move)");
+          "m/s; 1-sigma of a new vehicle's relative velocity (unknown until it has been seen to move): a car stopped "
+          "ahead closes at the ego speed, 28 m/s at 100 km/h");
     m.add("init_row_sigma_px", init_row_sigma_px, 0.1, 50.0,
           "px; 1-sigma of a new vehicle's contact row and column; the first range sigma is Z^2/(fy h) times it");
 }

@@ -25,7 +25,7 @@ struct VehicleUkfParams {
     UkfParams sigma;                   // alpha, beta, kappa
     double accel_sigma_range_mps2 = 1.5;    // m/s^2; white-acceleration noise along the range
     double accel_sigma_lateral_mps2 = 1.5;  // m/s^2; ... across
-    double init_rate_sigma_mps = 10.0;      // m/s; 1-sigma of a new vehicle's relative velocity
+    double init_rate_sigma_mps = 20.0;      // m/s; 1-sigma of a new vehicle's relative velocity
     double init_row_sigma_px = 2.0;         // px; 1-sigma of the first contact row (sets the first range sigma)
 
     void bind(ParamMap &m);
