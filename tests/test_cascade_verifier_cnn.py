@@ -596,7 +596,7 @@ def test_boxes_the_suppression_drops_anyway_need_no_second_look():
     """`cascade.lazy_rejudge` (default): a believed box overlapping one already judged twice and still more confident
     gets no second look, since the suppression drops it whatever that look says. The default preset's detections
     on the first 20 validation images are bit for bit those of judging every believed box again (on the 800 dev
-    images 6 differ, where a box's second step would have moved it off the box that covers it; docs/detection.md)."""
+    images 3 differ, where a box's second step would have moved it off the box that covers it; docs/detection.md)."""
     from app.eval.detector_points import scored_images
     from app.eval.tusimple_boxes import load_entries, tusimple_config
 
