@@ -58,6 +58,30 @@ def test_headway_detect_writes_the_detection_stages_boxes_and_scores(preset):
     assert found >= len(paths)   # the stage finds vehicles on these images: the comparison compares something
 
 
+def test_headway_detect_on_the_recordings_camera_writes_what_headway_eval_scores(tmp_path):
+    """The figures the docs give for `headway detect` on the TuSimple images are `headway eval`'s (its detection
+    stage on the recordings' camera); `headway detect --config app/eval/data/tusimple_camera.yaml --min-score 0`
+    writes those very detections, box and score, in their order; without the camera file (the default camera
+    scaled to the images) it finds others."""
+    from app.eval.tusimple_boxes import TUSIMPLE_CAMERA_FILE, evaluate
+    from tests.test_cli import headway
+
+    n = 6
+    scored = []
+    evaluate(str(data_path("tusimple", "supp")), preset="default", limit=n,
+             on_image=lambda e, gray, r: scored.append(r.rows()))
+    paths = [str(p) for p in _validation_images(n)]
+    runs = {}
+    for name, extra in (("camera", ["--config", str(TUSIMPLE_CAMERA_FILE)]), ("default", [])):
+        r = headway("detect", *paths, "--out", str(tmp_path / f"{name}.json"), "--min-score", "0", *extra)
+        assert r.returncode == 0, r.stderr
+        runs[name] = json.loads((tmp_path / f"{name}.json").read_text())
+    assert len(runs["camera"]) == len(scored) == n
+    assert all(_same(e["bbox"], dets) for e, dets in zip(runs["camera"], scored))
+    assert sum(len(d) for d in scored) >= n
+    assert not all(_same(e["bbox"], dets) for e, dets in zip(runs["default"], scored))
+
+
 def test_a_tracked_pipeline_reports_its_detections_on_full_detection_frames():
     """The default preset tracking a rendered drive: on a frame with full_detection, FrameResult.detections is a list
     of (left, top, right, bottom, score) 5-tuples of floats, boxes inside the frame and scores in [0, 1] (vehicles

@@ -209,13 +209,14 @@ def test_image_bench_times_the_network_and_its_verifier_apart(tmp_path):
 def test_the_shipped_network_scores_on_the_validation_split_what_its_card_says():
     """docs/detection.md ("The proposals part"): the shipped network with the CNN verifier, `pipeline: {detectors:
     [proposals]}`, on the 600 validation images (boxes >= 40 px, IoU 0.5) at the operating point chosen on held-out
-    training images (score >= 0.23): recall 0.716, precision 0.908; every detection kept: recall 0.817."""
+    training images (score >= 0.21), on the recordings' camera: recall 0.721, precision 0.915; every detection kept:
+    recall 0.808."""
     from app.eval.detector_points import composition_config, scored_images, summary
     from app.eval.tusimple_boxes import load_entries
 
     folder = data_path("tusimple", "supp")
     entries = load_entries(str(folder))
     assert len(entries) == 600
-    r = summary(entries, scored_images(str(folder), entries, composition_config(["proposals"])), at=0.23)
-    assert r["at"]["recall"] == pytest.approx(0.716, abs=0.01) and r["at"]["precision"] == pytest.approx(0.908, abs=0.01)
-    assert r["every_detection"]["recall"] == pytest.approx(0.817, abs=0.01)
+    r = summary(entries, scored_images(str(folder), entries, composition_config(["proposals"])), at=0.21)
+    assert r["at"]["recall"] == pytest.approx(0.721, abs=0.01) and r["at"]["precision"] == pytest.approx(0.915, abs=0.01)
+    assert r["every_detection"]["recall"] == pytest.approx(0.808, abs=0.01)

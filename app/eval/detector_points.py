@@ -1,7 +1,8 @@
-"""A composition of detector parts on annotated single images, as `headway detect` runs it: the configuration's
-pipeline `{detectors: [...], tracker: kalman}`, one pipeline per image size with the camera scaled to it
-(detect_images.image_pipeline), each image through the core's single-image stage "detect"; scored as `headway eval`
-scores the TuSimple validation split (boxes >= 40 px, IoU 0.5; app/eval/tusimple_boxes.py).
+"""A composition of detector parts on annotated TuSimple images, as `headway detect --config
+app/eval/data/tusimple_camera.yaml` runs it: the configuration's pipeline `{detectors: [...], tracker: kalman}` on the
+recordings' camera, one pipeline per image size with the camera scaled to it (detect_images.image_pipeline), each
+image through the core's single-image stage "detect"; scored as `headway eval` scores the TuSimple validation split
+(boxes >= 40 px, IoU 0.5; app/eval/tusimple_boxes.py).
 
 The operating point is chosen on held-out training images, never on the validation split: `--choose` gives the
 lowest score (0.01 apart) whose precision reaches the asked one there; `--at` reports the validation split at a
@@ -22,14 +23,15 @@ import yaml
 
 from app import config as configuration
 from app.detect_images import image_pipeline, read_usable
-from app.eval.tusimple_boxes import band_counts, load_entries, operating_curve, recall_at_precision
+from app.eval.tusimple_boxes import band_counts, load_entries, operating_curve, recall_at_precision, tusimple_config
 
 THRESHOLDS = [i / 100 for i in range(100)]
 
 
 def composition_config(detectors: list[str], sets: Optional[list[str]] = None) -> dict:
-    """The default configuration with pipeline {detectors, tracker: kalman} and each `section.key=value` of `sets`
-    (value read as YAML, a string key's as it is: "off" stays "off")."""
+    """The default configuration on the TuSimple recordings' camera (app/eval/data/tusimple_camera.yaml, as `headway
+    eval` scores them) with pipeline {detectors, tracker: kalman} and each `section.key=value` of `sets` (value read
+    as YAML, a string key's as it is: "off" stays "off")."""
     over: dict = {"pipeline": {"detectors": detectors, "tracker": "kalman"}}
     for s in sets or []:
         key, sep, value = s.partition("=")
@@ -38,7 +40,7 @@ def composition_config(detectors: list[str], sets: Optional[list[str]] = None) -
             raise ValueError(f"--set {s!r}: give SECTION.KEY=VALUE, e.g. proposals.verifier=off")
         typed = configuration.schema().get(section, {}).get(name, {}).get("type") != "str"
         over.setdefault(section, {})[name] = yaml.safe_load(value) if typed else value
-    return configuration.load(None, over)
+    return tusimple_config(configuration.load(None, over))
 
 
 def scored_images(folder: str, entries: list[dict], cfg: dict, progress=None) -> list[list[tuple]]:

@@ -17,23 +17,23 @@ from app import config as configuration
 from app.core import Pipeline
 from app.detect_images import operating_point
 from app.eval.matching import match
+from app.safe_yaml import load_yaml
 
 BANDS = ((0, 20), (20, 40), (40, 80), (80, 10_000))
 
-# The TuSimple vehicle images come with one calibration (train_clip1/calibration.txt). Its pitch is
-# not given: the annotated boxes' bottom rows reach zero width at row 344, 2.6 deg above the principal
-# point, so the camera looks down by about that much.
-TUSIMPLE_CAMERA = {"width": 1280, "height": 720, "fx": 714.1526, "fy": 710.3725, "cx": 675.5754, "cy": 376.2563,
-                   "height_m": 1.80, "pitch_deg": 2.6}
+# The camera of the TuSimple vehicle images and train_clip1, as a configuration file a user hands `headway detect`
+# (--config), so that its detections are the ones scored here.
+TUSIMPLE_CAMERA_FILE = Path(__file__).resolve().parent / "data" / "tusimple_camera.yaml"
+TUSIMPLE_CAMERA = load_yaml(TUSIMPLE_CAMERA_FILE.read_text())["camera"]
+TUSIMPLE_HOOD_FRAC = TUSIMPLE_CAMERA.pop("hood_frac")
 # The lane sample was taken by another TuSimple car: its ground-truth ego lanes meet at 34 % of the image
 # height, 10.5 deg above the principal point's row.
 TUSIMPLE_LANE_PITCH_DEG = 10.5
 
 
 def tusimple_config(cfg: dict, pitch_deg: float = TUSIMPLE_CAMERA["pitch_deg"]) -> dict:
-    """`cfg` set up for the TuSimple recordings: their camera, and the bonnet in the bottom 8 % masked."""
-    cfg["camera"].update(TUSIMPLE_CAMERA, pitch_deg=pitch_deg)
-    cfg["camera"]["hood_frac"] = 0.08
+    """`cfg` set up for the TuSimple recordings: their camera (TUSIMPLE_CAMERA_FILE), the bonnet masked."""
+    cfg["camera"].update(TUSIMPLE_CAMERA, pitch_deg=pitch_deg, hood_frac=TUSIMPLE_HOOD_FRAC)
     return cfg
 
 
