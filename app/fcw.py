@@ -57,6 +57,10 @@ FCW_SCHEMA = {
     "min_threat_s": _key(0.1, "s; a threat must last this long (3 frames at 30 fps) before it warns or "
                               "pre-warns: one noisy frame never sounds the buzzer nor lights the display",
                          0.0, 2.0),
+    "hold_without_ttc_s": _key(1.0, "s; while the lead's TTC is refused as a bad estimate (max_closing_margin_mps), "
+                                    "a level already raised holds this long: no estimate is not an all-clear (a "
+                                    "scale TTC 15 % short of a stopped car at 100 km/h would otherwise end the "
+                                    "warning 1.5 s before contact)", 0.0, 5.0),
 }
 
 
@@ -77,6 +81,7 @@ class FcwParams:
     use_accel: bool = FCW_SCHEMA["use_accel"]["default"]
     max_closing_margin_mps: float = FCW_SCHEMA["max_closing_margin_mps"]["default"]
     min_threat_s: float = FCW_SCHEMA["min_threat_s"]["default"]
+    hold_without_ttc_s: float = FCW_SCHEMA["hold_without_ttc_s"]["default"]
 
     @classmethod
     def from_config(cls, section: dict) -> "FcwParams":
@@ -134,6 +139,7 @@ class FcwStateMachine:
         self._last_warning_end = -math.inf
         self._threat_since: Optional[float] = None
         self._pre_since: Optional[float] = None
+        self._refused_since: Optional[float] = None  # first step of the current run of refused TTCs
 
     def _accel(self, lead: Lead) -> float:
         """Relative acceleration that makes things worse (< 0: closing speeds up), else 0."""
@@ -175,10 +181,13 @@ class FcwStateMachine:
             self._lead_id = None if lead is None else lead.id
             self._lead_since = None if lead is None else t_s
         ttc, source = self._ttc(lead) if lead else (None, None)
+        refused = False
         if ttc is not None and ego.speed_mps is not None and lead.range_m is not None and ttc > 0:
             closing = max(0.0, lead.range_m - self.ego_front_m) / ttc
             if closing > ego.speed_mps + p.max_closing_margin_mps:
                 ttc, source = None, None  # physically impossible for traffic ahead: a bad estimate
+                refused = True
+        self._refused_since = (self._refused_since if self._refused_since is not None else t_s) if refused else None
         a_req = self._required_decel(lead) if lead else None
         seen_s = t_s - self._lead_since if self._lead_since is not None else 0.0
 
@@ -192,6 +201,9 @@ class FcwStateMachine:
                 threat = PREWARNING
         if a_req is not None and a_req >= p.decel_warning_mps2:
             threat = WARNING
+        # A refused TTC tells nothing about the threat: the level already raised holds for a while.
+        if refused and t_s - self._refused_since <= p.hold_without_ttc_s + 1e-9:
+            threat = max(threat, self.level)
 
         # A warning-level threat must persist for min_threat_s before it counts, and so must any threat
         # before the display shows a pre-warning (a far car's noisy TTC flickers below 4 s for a frame).

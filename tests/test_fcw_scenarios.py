@@ -18,6 +18,8 @@ def test_ncap_scenario_warns_before_required_ttc(scenario):
     assert r["true_ttc_s"] is not None and r["true_ttc_s"] >= r["required_ttc_s"], (
         f"{scenario}: warned at true TTC {r['true_ttc_s']:.2f} s, required >= {r['required_ttc_s']} s")
     assert r["ttc_used_s"] is not None and 0 < r["ttc_used_s"] <= 3.5
+    # and, the driver not braking, it stays on while the true TTC is below the required one (down to 0.5 s)
+    assert not r["dropped_at_ttc_s"], f"{scenario}: the warning ended at true TTC {r['dropped_at_ttc_s']} s"
 
 
 @pytest.mark.parametrize("scenario", NO_WARNING)

@@ -149,6 +149,8 @@ def markdown(reports: list[dict], folders: Optional[list[str]] = None) -> str:
                     cells.append(("pass" if x["pass"] else "FAIL") + f", {x['warnings']} warnings")
                 else:
                     m = "no warning" if x.get("margin_s") is None else f"{x['margin_s']:+.2f} s"
+                    if x.get("dropped_at_ttc_s"):
+                        m += f", ended at true TTC {x['dropped_at_ttc_s'][0]:.2f} s"
                     cells.append(("" if x["pass"] else "FAIL ") + m)
             rows.append((name, cells))
         out += _table("scenario", presets, rows)

@@ -1,6 +1,7 @@
 """FCW over the synthetic scenarios through the whole stack (core, supervisor, CAN): when the first
-warning came, with which TTC, and how much margin that leaves to the US NCAP FCW requirement; and the
-false warnings where none is expected. The CAN output is decoded with cantools, as the car would."""
+warning came, with which TTC, and how much margin that leaves to the US NCAP FCW requirement; whether the warning,
+once the true TTC is below that requirement, stays on to the end (the driver has not braked); and the false
+warnings where none is expected. The CAN output is decoded with cantools, as the car would."""
 from __future__ import annotations
 
 import tempfile
@@ -22,6 +23,9 @@ REQUIRED_TTC_S = {
     "lead_braking_0p3g": 2.4,
     "slower_lead": 2.0,
 }
+# Once a warning is due it must stay on down to this true TTC; nearer, no reaction changes the outcome, and the
+# vehicle fills the image (a warning ending 0.02-0.15 s before contact is not counted).
+LAST_USEFUL_TTC_S = 0.5
 NO_WARNING = ("steady_following", "adjacent_passing", "cut_out_stopped_car", "overpass_shadow", "dense_traffic",
               "empty_road", "cut_in", "lane_change", "overtaking_from_side")
 
@@ -30,6 +34,11 @@ def true_ttc(truth: list[dict]) -> Optional[float]:
     """TTC to the ego front of the most urgent vehicle in the ego lane (None if nobody is closing)."""
     ttcs = [v["ttc_s"] for v in truth if v["lane"] == 0 and v["ttc_s"] is not None]
     return min(ttcs) if ttcs else None
+
+
+def _true_ttc_at(truth_ttc: list[tuple[float, Optional[float]]], t: float) -> Optional[float]:
+    """The true TTC of the frame nearest to time t."""
+    return min(truth_ttc, key=lambda x: abs(x[0] - t))[1]
 
 
 def warnings_in_can_log(path: str) -> list[tuple[float, int, Optional[float]]]:
@@ -73,13 +82,17 @@ def evaluate(name: str, config_path: Optional[str] = None, preset: Optional[str]
            "ttc_used_s": None, "true_ttc_s": None}
     if warnings:
         t, ttc_used = warnings[0]
-        nearest = min(truth_ttc, key=lambda x: abs(x[0] - t))
-        out.update(first_warning_t_s=round(t, 3), ttc_used_s=ttc_used, true_ttc_s=nearest[1])
+        out.update(first_warning_t_s=round(t, 3), ttc_used_s=ttc_used, true_ttc_s=_true_ttc_at(truth_ttc, t))
     req = REQUIRED_TTC_S.get(name)
     if req is not None:
         out["required_ttc_s"] = req
         out["margin_s"] = None if out["true_ttc_s"] is None else out["true_ttc_s"] - req
-        out["pass"] = out["margin_s"] is not None and out["margin_s"] >= 0
+        # the warning ending while the true TTC is below the required one: the buzzer stops as the car closes in
+        out["dropped_at_ttc_s"] = [
+            ttc for ttc in (_true_ttc_at(truth_ttc, t) for (t, level, _), (_, before, _) in zip(changes[1:], changes)
+                            if before == FcwLevel.WARNING and level < FcwLevel.WARNING)
+            if ttc is not None and LAST_USEFUL_TTC_S <= ttc < req]
+        out["pass"] = out["margin_s"] is not None and out["margin_s"] >= 0 and not out["dropped_at_ttc_s"]
     else:
         out["pass"] = not warnings
     return out
