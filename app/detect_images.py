@@ -72,10 +72,11 @@ def image_entry(path: str, detections, min_score: float) -> dict:
 
 def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progress: bool = False,
                   bad: Optional[list[str]] = None, preset: Optional[str] = None,
-                  min_score: Optional[float] = None) -> list[dict]:
+                  min_score: Optional[float] = None, notes: Optional[list[str]] = None) -> list[dict]:
     """One entry per usable image, with the detections scoring at least `min_score` (None: the preset's
     OPERATING_POINT). Images that cannot be used go to ``bad`` ("path: why") when it is given; without it
-    the first one raises DetectError."""
+    the first one raises DetectError. Each image size the configured camera is scaled to gives a line in ``notes``
+    (the detections depend on the camera: which rows can hold a vehicle of each size)."""
     base = detector_config(config_path, preset)
     if min_score is None:
         min_score = operating_point(base)
@@ -95,6 +96,12 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # one pipeline per image size, camera scaled to it
                 pipes[size] = image_pipeline(base, *size)
+                cam = (base["camera"]["width"], base["camera"]["height"])
+                if notes is not None and size != cam:
+                    notes.append(f"{size[0]}x{size[1]} images: the {'configured' if config_path else 'default'} "
+                                 f"camera ({cam[0]}x{cam[1]}) scaled to them; for the figures of docs/detection.md "
+                                 f"give --config with the images' own camera (TuSimple's: "
+                                 f"app/eval/data/tusimple_camera.yaml)")
             out.append(image_entry(path, pipes[size].detect(gray).rows(), min_score))
     finally:
         for p in pipes.values():
@@ -106,7 +113,8 @@ def add_parser(subparsers) -> None:
     s = subparsers.add_parser("detect", help="single-image vehicle detection to JSON")
     s.add_argument("images", nargs="+", help="image files")
     s.add_argument("--out", required=True, help="output JSON file")
-    s.add_argument("--config", help="configuration YAML")
+    s.add_argument("--config", help="configuration YAML; its camera should be the images' (default: Headway's "
+                                    "640x480 camera, scaled to the images' size)")
     s.add_argument("--preset", choices=configuration.single_image_presets(),
                    help=f"the preset whose detection stage runs (default: the configuration's, `{configuration.default_preset()}`)")
     s.add_argument("--min-score", type=float, default=None,
@@ -119,11 +127,15 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     check_outputs({"--out": args.out}, {**numbered("input", args.images), "--config": args.config})
     bad: list[str] = []
-    result = detect_images(args.images, args.config, bad=bad, preset=args.preset, min_score=args.min_score)
+    notes: list[str] = []
+    result = detect_images(args.images, args.config, bad=bad, preset=args.preset, min_score=args.min_score,
+                           notes=notes)
     if not result and bad:
         raise DetectError(bad[0] if len(bad) == 1 else f"none of the {len(bad)} images can be used: " + "; ".join(bad[:5]))
     Path(args.out).write_text(json.dumps(result, indent=1))
     print(f"{len(result)} images, {sum(len(e['bbox']) for e in result)} vehicles -> {args.out}")
+    for line in notes:
+        print(f"headway: note: {line}", file=sys.stderr)
     for line in bad:
         print(f"headway: skipped {line}", file=sys.stderr)
     return 1 if bad else 0

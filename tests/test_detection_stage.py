@@ -62,7 +62,8 @@ def test_headway_detect_on_the_recordings_camera_writes_what_headway_eval_scores
     """The figures the docs give for `headway detect` on the TuSimple images are `headway eval`'s (its detection
     stage on the recordings' camera); `headway detect --config app/eval/data/tusimple_camera.yaml --min-score 0`
     writes those very detections, box and score, in their order; without the camera file (the default camera
-    scaled to the images) it finds others."""
+    scaled to the images) it finds others, and says on stderr that it scaled the camera and how to give the
+    images' own."""
     from app.eval.tusimple_boxes import TUSIMPLE_CAMERA_FILE, evaluate
     from tests.test_cli import headway
 
@@ -76,6 +77,8 @@ def test_headway_detect_on_the_recordings_camera_writes_what_headway_eval_scores
         r = headway("detect", *paths, "--out", str(tmp_path / f"{name}.json"), "--min-score", "0", *extra)
         assert r.returncode == 0, r.stderr
         runs[name] = json.loads((tmp_path / f"{name}.json").read_text())
+        scaled = "1280x720 images: the default camera (640x480) scaled to them" in r.stderr
+        assert scaled == (name == "default") and ("tusimple_camera.yaml" in r.stderr) == scaled, r.stderr
     assert len(runs["camera"]) == len(scored) == n
     assert all(_same(e["bbox"], dets) for e, dets in zip(runs["camera"], scored))
     assert sum(len(d) for d in scored) >= n
