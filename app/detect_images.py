@@ -56,6 +56,17 @@ def read_usable(path: str) -> tuple:
     return (None, why) if why else (gray, "")
 
 
+def scaled_camera_note(base: dict, size: tuple[int, int], configured: bool) -> Optional[str]:
+    """What a user is told when images of `size` get the configuration's camera scaled to them (None: its own size):
+    the detections depend on the camera (which rows can hold a vehicle of each size)."""
+    cam = (base["camera"]["width"], base["camera"]["height"])
+    if size == cam:
+        return None
+    return (f"{size[0]}x{size[1]} images: the {'configured' if configured else 'default'} camera ({cam[0]}x{cam[1]}) "
+            f"scaled to them; for the figures of docs/detection.md give --config with the images' own camera "
+            f"(TuSimple's: app/eval/data/tusimple_camera.yaml)")
+
+
 def image_pipeline(base: dict, width: int, height: int) -> Pipeline:
     """The pipeline that detects in images of this size: the configuration with its camera scaled to them."""
     cfg = dict(base)
@@ -96,12 +107,9 @@ def detect_images(paths: Iterable[str], config_path: Optional[str] = None, progr
             size = (gray.shape[1], gray.shape[0])
             if size not in pipes:  # one pipeline per image size, camera scaled to it
                 pipes[size] = image_pipeline(base, *size)
-                cam = (base["camera"]["width"], base["camera"]["height"])
-                if notes is not None and size != cam:
-                    notes.append(f"{size[0]}x{size[1]} images: the {'configured' if config_path else 'default'} "
-                                 f"camera ({cam[0]}x{cam[1]}) scaled to them; for the figures of docs/detection.md "
-                                 f"give --config with the images' own camera (TuSimple's: "
-                                 f"app/eval/data/tusimple_camera.yaml)")
+                note = scaled_camera_note(base, size, config_path is not None)
+                if note and notes is not None:
+                    notes.append(note)
             out.append(image_entry(path, pipes[size].detect(gray).rows(), min_score))
     finally:
         for p in pipes.values():

@@ -133,6 +133,8 @@ def test_image_bench_times_headway_detect_part_by_part(tmp_path):
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
     assert rep["preset"] == "default" and rep["images"] == 6 and rep["frame_sizes"] == ["1280x720"]
+    # the default camera scaled to the images is said, as `headway detect` says it
+    assert len(rep["notes"]) == 1 and "default camera (640x480) scaled" in rep["notes"][0]
     parts = rep["stages"]["image"]
     detection = ["lanes", "cascade", "verifier", "hypotheses", "verify", "fuse"]
     assert list(parts) == ["read", *detection, "core", "total"]

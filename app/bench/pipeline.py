@@ -26,7 +26,8 @@ from app import config as configuration
 from app.bench import particles
 from app.can import CanSession
 from app.core import EndOfStream, Pipeline, monotonic_s
-from app.detect_images import detector_config, image_entry, image_pipeline, operating_point, read_usable
+from app.detect_images import (detector_config, image_entry, image_pipeline, operating_point, read_usable,
+                                scaled_camera_note)
 from app.recording import natural_key
 from app.sim import load_scenario, render
 from app.supervisor.stack import Stack
@@ -142,6 +143,7 @@ def run_image_bench(sources: Sequence[str], preset: Optional[str] = None, config
     pipes: dict[tuple[int, int], Pipeline] = {}
     times: dict[str, list[float]] = {}
     skipped: list[str] = []
+    notes: list[str] = []
     try:
         for rep in range(repeats):
             for path in paths:
@@ -155,6 +157,9 @@ def run_image_bench(sources: Sequence[str], preset: Optional[str] = None, config
                 size = (gray.shape[1], gray.shape[0])
                 if size not in pipes:  # a new size: its pipeline, warmed up (the models loaded) untimed
                     pipes[size] = image_pipeline(base, *size)
+                    note = scaled_camera_note(base, size, config_path is not None)
+                    if note:
+                        notes.append(note)
                     pipes[size].detect(gray)
                     t0 = time.perf_counter()
                     gray, _ = read_usable(path)
@@ -170,7 +175,7 @@ def run_image_bench(sources: Sequence[str], preset: Optional[str] = None, config
             p.close()
     if "total" not in times:
         raise BenchError("--images: none of the images can be used: " + "; ".join(skipped[:5]))
-    return {"preset": base["pipeline"]["preset"], "images": len(times["total"]), "skipped": skipped,
+    return {"preset": base["pipeline"]["preset"], "images": len(times["total"]), "skipped": skipped, "notes": notes,
             "frame_sizes": sorted(f"{w}x{h}" for w, h in pipes),
             "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
             "stages": {"image": {name: _stats(v) for name, v in times.items()}}}
@@ -183,6 +188,7 @@ def format_image_table(report: dict) -> str:
     for name, s in report["stages"]["image"].items():
         lines.append(f"| {name} | {s['n']} | {s['median_ms']:.3f} | {s['p99_ms']:.3f} |")
     lines += [f"skipped {line}" for line in report["skipped"]]
+    lines += [f"note: {line}" for line in report.get("notes", [])]
     return "\n".join(lines)
 
 
