@@ -57,10 +57,11 @@ FCW_SCHEMA = {
     "min_threat_s": _key(0.1, "s; a threat must last this long (3 frames at 30 fps) before it warns or "
                               "pre-warns: one noisy frame never sounds the buzzer nor lights the display",
                          0.0, 2.0),
-    "hold_without_ttc_s": _key(1.0, "s; while the lead's TTC is refused as a bad estimate (max_closing_margin_mps), "
-                                    "a level already raised holds this long: no estimate is not an all-clear (a "
-                                    "scale TTC 15 % short of a stopped car at 100 km/h would otherwise end the "
-                                    "warning 1.5 s before contact)", 0.0, 5.0),
+    "hold_without_ttc_s": _key(1.0, "s; while the lead's TTC is unknown (refused as a bad estimate, "
+                                    "max_closing_margin_mps, or not measured: the range rate not settled and no "
+                                    "scale change fitted), a level already raised holds this long: no estimate is "
+                                    "not an all-clear (a scale TTC 15 % short of a stopped car at 100 km/h would "
+                                    "otherwise end the warning 1.5 s before contact)", 0.0, 5.0),
 }
 
 
@@ -139,7 +140,7 @@ class FcwStateMachine:
         self._last_warning_end = -math.inf
         self._threat_since: Optional[float] = None
         self._pre_since: Optional[float] = None
-        self._refused_since: Optional[float] = None  # first step of the current run of refused TTCs
+        self._unknown_since: Optional[float] = None  # first step of the current run without a TTC
 
     def _accel(self, lead: Lead) -> float:
         """Relative acceleration that makes things worse (< 0: closing speeds up), else 0."""
@@ -187,7 +188,9 @@ class FcwStateMachine:
             if closing > ego.speed_mps + p.max_closing_margin_mps:
                 ttc, source = None, None  # physically impossible for traffic ahead: a bad estimate
                 refused = True
-        self._refused_since = (self._refused_since if self._refused_since is not None else t_s) if refused else None
+        # no TTC and nothing that says "not closing" (a settled range rate does)
+        unknown = refused or (lead is not None and ttc is None and lead.range_rate_mps is None)
+        self._unknown_since = (self._unknown_since if self._unknown_since is not None else t_s) if unknown else None
         a_req = self._required_decel(lead) if lead else None
         seen_s = t_s - self._lead_since if self._lead_since is not None else 0.0
 
@@ -201,8 +204,8 @@ class FcwStateMachine:
                 threat = PREWARNING
         if a_req is not None and a_req >= p.decel_warning_mps2:
             threat = WARNING
-        # A refused TTC tells nothing about the threat: the level already raised holds for a while.
-        if refused and t_s - self._refused_since <= p.hold_without_ttc_s + 1e-9:
+        # An unknown TTC tells nothing about the threat: the level already raised holds for a while.
+        if unknown and t_s - self._unknown_since <= p.hold_without_ttc_s + 1e-9:
             threat = max(threat, self.level)
 
         # A warning-level threat must persist for min_threat_s before it counts, and so must any threat

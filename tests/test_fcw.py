@@ -90,30 +90,33 @@ def test_implausible_closing_speed_is_ignored():
     assert all(o.level == NONE for o in outs)
 
 
-def test_a_refused_ttc_does_not_end_a_warning():
-    """A stopped car at 100 km/h (27.8 m/s): the warning is on when the scale TTC comes out 15 % short for a few
-    frames, implying 32 m/s closing, and is refused as a bad estimate. No estimate is not an all-clear: the warning
-    holds through those frames (hold_without_ttc_s), and ends only when a valid TTC is above 3.0 s + hysteresis or
-    the refusals outlast hold_without_ttc_s."""
+@pytest.mark.parametrize("gap_kind", ["refused", "unmeasured"])
+def test_an_unknown_ttc_does_not_end_a_warning(gap_kind):
+    """A stopped car at 100 km/h (27.8 m/s), the range rate not settled yet: the warning is on when for a few frames
+    the scale TTC comes out 15 % short, implying 32 m/s of closing, and is refused as a bad estimate ("refused"), or
+    is not measured at all (the scale fit restarting, "unmeasured"). No estimate is not an all-clear: the warning
+    holds through those frames (hold_without_ttc_s), and is no longer held when the gap outlasts
+    hold_without_ttc_s."""
     v = 27.8
 
-    def run(refused_s: float) -> list:
+    def run(gap_s: float) -> list:
         fcw = FcwStateMachine(ego_front_m=FRONT)
         out = []
         for i in range(150):
             t = i / 30
             gap = 100.0 - v * t
-            bad = 2.0 <= t < 2.0 + refused_s
-            ttc = gap / v * (0.85 if bad else 1.0)
+            ttc = gap / v
+            if 2.0 <= t < 2.0 + gap_s:
+                ttc = 0.85 * ttc if gap_kind == "refused" else None
             out.append((t, gap / v, fcw.step(t, Lead(4, gap + FRONT, None, None, ttc), EgoState(speed_mps=v))))
         return out
 
     seq = run(0.3)
-    refused = [o for t, _, o in seq if 2.0 <= t < 2.3]
-    assert refused and all(o.ttc_used_s is None for o in refused)   # the estimate is refused ...
+    unknown = [o for t, _, o in seq if 2.0 <= t < 2.3]
+    assert unknown and all(o.ttc_used_s is None for o in unknown)   # no TTC in those frames ...
     t_warn = next(t for t, _, o in seq if o.level == WARNING)
     assert t_warn < 2.0 and all(o.level == WARNING for t, _, o in seq if t >= t_warn)   # ... the warning holds
-    # refused for longer than hold_without_ttc_s (1 s): the level is no longer held
+    # unknown for longer than hold_without_ttc_s (1 s): the level is no longer held
     long = run(1.5)
     assert any(o.level < WARNING for t, _, o in long if 3.1 <= t < 3.5)
 
