@@ -20,6 +20,11 @@ def test_ncap_scenario_warns_before_required_ttc(scenario):
     assert r["ttc_used_s"] is not None and 0 < r["ttc_used_s"] <= 3.5
     # and, the driver not braking, it stays on while the true TTC is below the required one (down to 0.5 s)
     assert not r["dropped_at_ttc_s"], f"{scenario}: the warning ended at true TTC {r['dropped_at_ttc_s']} s"
+    # the TTC it decides on, against the true one while that is 1-5 s: known on most of those frames (1.5 s and
+    # more at 30 fps), biased by at most 30 % (measured: -1 % to +24 %, the far stopped car at 100 km/h read late)
+    # and within 60 % on nine frames in ten (measured 11-54 %)
+    acc = r["ttc_accuracy"]
+    assert acc["frames"] >= 45 and abs(acc["median"]) <= 0.30 and acc["p90_abs"] <= 0.60, acc
 
 
 @pytest.mark.parametrize("scenario", NO_WARNING)

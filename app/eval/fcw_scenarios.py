@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Optional
 
 import can
+import numpy as np
 
 from app.can import headway_database
 from app.contracts.fcw_level import FcwLevel
@@ -26,6 +27,9 @@ REQUIRED_TTC_S = {
 # Once a warning is due it must stay on down to this true TTC; nearer, no reaction changes the outcome, and the
 # vehicle fills the image (a warning ending 0.02-0.15 s before contact is not counted).
 LAST_USEFUL_TTC_S = 0.5
+# The TTC the FCW used is compared with the true one on the frames whose true TTC lies in this range (s): from the
+# pre-warning's 4 s and a second more, down to the last second, where the vehicle fills the image.
+TTC_ACCURACY_RANGE_S = (1.0, 5.0)
 NO_WARNING = ("steady_following", "adjacent_passing", "cut_out_stopped_car", "overpass_shadow", "dense_traffic",
               "empty_road", "cut_in", "lane_change", "overtaking_from_side")
 
@@ -34,6 +38,15 @@ def true_ttc(truth: list[dict]) -> Optional[float]:
     """TTC to the ego front of the most urgent vehicle in the ego lane (None if nobody is closing)."""
     ttcs = [v["ttc_s"] for v in truth if v["lane"] == 0 and v["ttc_s"] is not None]
     return min(ttcs) if ttcs else None
+
+
+def _ttc_accuracy(errors: list[float]) -> Optional[dict]:
+    """The relative errors of the TTC the FCW used: how many frames had one, their median (its bias: > 0 reads
+    late) and the 90th percentile of their size."""
+    if not errors:
+        return None
+    e = np.array(errors)
+    return {"frames": len(e), "median": round(float(np.median(e)), 4), "p90_abs": round(float(np.percentile(np.abs(e), 90)), 4)}
 
 
 def _true_ttc_at(truth_ttc: list[tuple[float, Optional[float]]], t: float) -> Optional[float]:
@@ -67,9 +80,13 @@ def evaluate(name: str, config_path: Optional[str] = None, preset: Optional[str]
     """`preset`: the pipeline preset to run (None: the configuration's); `vehicle_look`: "real" or "plain" instead of
     the scenario's own (docs/sim.md)."""
     truth_ttc: list[tuple[float, Optional[float]]] = []
+    ttc_errors: list[float] = []   # (TTC the FCW used - true TTC) / true TTC, true TTC within TTC_ACCURACY_RANGE_S
 
     def on_result(r, decision, truth):
         truth_ttc.append((r.t_s, true_ttc(truth)))
+        lo, hi = TTC_ACCURACY_RANGE_S
+        if truth_ttc[-1][1] is not None and lo <= truth_ttc[-1][1] <= hi and decision.ttc_used_s is not None:
+            ttc_errors.append(decision.ttc_used_s / truth_ttc[-1][1] - 1.0)
 
     with tempfile.TemporaryDirectory() as tmp:
         can_out = str(Path(tmp) / "out.log")
@@ -77,7 +94,7 @@ def evaluate(name: str, config_path: Optional[str] = None, preset: Optional[str]
                             overrides={"pipeline": {"preset": preset}} if preset else None, vehicle_look=vehicle_look)
         changes = warnings_in_can_log(can_out)
     warnings = [(t, ttc) for t, level, ttc in changes if level == FcwLevel.WARNING]
-    out = {"scenario": name, "frames": s.frames, "warnings": len(warnings),
+    out = {"scenario": name, "frames": s.frames, "warnings": len(warnings), "ttc_accuracy": _ttc_accuracy(ttc_errors),
            "prewarnings": sum(1 for _, level, _ in changes if level == FcwLevel.PREWARNING), "first_warning_t_s": None,
            "ttc_used_s": None, "true_ttc_s": None}
     if warnings:

@@ -104,7 +104,8 @@ def markdown(report: dict) -> str:
     if fc:
         out += ["### Forward-collision warning through the whole stack (CAN output decoded with cantools)", "",
                 "| scenario | first warning at t | TTC used | true TTC then | required | margin | warnings | "
-                "pre-warnings | verdict |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+                "pre-warnings | verdict | TTC used vs true (true TTC 1-5 s): frames, median error / p90 absolute error |",
+                "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: |"]
         for r in fc:
             req = r.get("required_ttc_s")
             verdict = "pass" if r["pass"] else "FAIL"
@@ -114,8 +115,11 @@ def markdown(report: dict) -> str:
                 verdict += " (the warning ended at true TTC " + ", ".join(f"{x:.2f}" for x in r["dropped_at_ttc_s"]) + " s)"
             t_first = "none" if r["first_warning_t_s"] is None else f"{r['first_warning_t_s']:.2f} s"
             margin = "-" if r.get("margin_s") is None else f"{r['margin_s']:+.2f} s"
+            acc = r.get("ttc_accuracy")
+            acc = "-" if not acc else f"{acc['frames']}: {acc['median']:+.1%} / {acc['p90_abs']:.1%}"
             out.append(f"| {r['scenario']} | {t_first} | {_f(r['ttc_used_s'], 2)} | {_f(r['true_ttc_s'], 2)} | "
-                       f"{'-' if req is None else req} | {margin} | {r['warnings']} | {r['prewarnings']} | {verdict} |")
+                       f"{'-' if req is None else req} | {margin} | {r['warnings']} | {r['prewarnings']} | {verdict} "
+                       f"| {acc} |")
         out.append("")
     rv = report.get("real_fcw")
     if rv:
