@@ -46,7 +46,8 @@ def _ttc_accuracy(errors: list[float]) -> Optional[dict]:
     if not errors:
         return None
     e = np.array(errors)
-    return {"frames": len(e), "median": round(float(np.median(e)), 4), "p90_abs": round(float(np.percentile(np.abs(e), 90)), 4)}
+    return {"frames": len(e), "median": round(float(np.median(e)), 4),
+            "p90_abs": round(float(np.percentile(np.abs(e), 90)), 4)}
 
 
 def _true_ttc_at(truth_ttc: list[tuple[float, Optional[float]]], t: float) -> Optional[float]:
@@ -83,10 +84,11 @@ def evaluate(name: str, config_path: Optional[str] = None, preset: Optional[str]
     ttc_errors: list[float] = []   # (TTC the FCW used - true TTC) / true TTC, true TTC within TTC_ACCURACY_RANGE_S
 
     def on_result(r, decision, truth):
-        truth_ttc.append((r.t_s, true_ttc(truth)))
+        ttc = true_ttc(truth)
+        truth_ttc.append((r.t_s, ttc))
         lo, hi = TTC_ACCURACY_RANGE_S
-        if truth_ttc[-1][1] is not None and lo <= truth_ttc[-1][1] <= hi and decision.ttc_used_s is not None:
-            ttc_errors.append(decision.ttc_used_s / truth_ttc[-1][1] - 1.0)
+        if ttc is not None and lo <= ttc <= hi and decision.ttc_used_s is not None:
+            ttc_errors.append(decision.ttc_used_s / ttc - 1.0)
 
     with tempfile.TemporaryDirectory() as tmp:
         can_out = str(Path(tmp) / "out.log")

@@ -112,7 +112,8 @@ def markdown(report: dict) -> str:
             if req is None:
                 verdict += " (no warning expected)" if not r["warnings"] else " (false warning)"
             elif r.get("dropped_at_ttc_s"):
-                verdict += " (the warning ended at true TTC " + ", ".join(f"{x:.2f}" for x in r["dropped_at_ttc_s"]) + " s)"
+                ended = ", ".join(f"{x:.2f}" for x in r["dropped_at_ttc_s"])
+                verdict += f" (the warning ended at true TTC {ended} s)"
             t_first = "none" if r["first_warning_t_s"] is None else f"{r['first_warning_t_s']:.2f} s"
             margin = "-" if r.get("margin_s") is None else f"{r['margin_s']:+.2f} s"
             acc = r.get("ttc_accuracy")
