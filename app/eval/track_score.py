@@ -3,8 +3,10 @@ errors and how soon each true vehicle was confirmed. Shared by the synthetic sui
 the fleet's drives with truth (`headway fleet`).
 
 Truth: vehicles within `max_range_m` whose box is at least `min_visible` visible (when the truth says;
-a boxes-only truth counts every box). Other vehicles are "don't care": a confirmed track on one of them
-is neither a hit nor a false positive.
+a boxes-only truth counts every box). Other vehicles are "don't care": a confirmed track that matches no
+true vehicle and lies more than half inside a don't-care vehicle's box is neither a hit nor a false
+positive (the KITTI tracking benchmark's rule for its DontCare regions: a car 100 m ahead, boxed a few
+pixels too wide by a detector whose smallest window is larger than the car, is still that car).
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ from typing import Optional
 import motmetrics as mm
 import numpy as np
 
-from app.eval.matching import iou_matrix, match
+from app.eval.matching import inside_matrix, iou_matrix, match
 
 
 def _box(v: dict) -> list[float]:
@@ -41,10 +43,10 @@ class TrackScorer:
         dont_care = [v for v in truth_all if not self.is_truth(v)]
         # drop tracks that sit on a don't-care vehicle and on no real one
         if dont_care and tracks:
-            dc = iou_matrix([t.box for t in tracks], [_box(v) for v in dont_care])
+            dc = inside_matrix([t.box for t in tracks], [_box(v) for v in dont_care])
             gt = iou_matrix([t.box for t in tracks], [_box(v) for v in truth])
             tracks = [t for i, t in enumerate(tracks)
-                      if not (dc[i].max(initial=0) >= 0.5 and gt[i].max(initial=0) < 0.5)]
+                      if not (dc[i].max(initial=0) > 0.5 and gt[i].max(initial=0) < 0.5)]
         for v in truth_all:
             if v.get("visible_fraction", 1.0) >= 0.5 and v["id"] not in self.first_half_visible:
                 self.first_half_visible[v["id"]] = frame

@@ -37,15 +37,16 @@ double slope(const std::deque<std::pair<double, double>> &pts, double &std_error
 } // namespace
 
 double TrackKinematics::scale_fit(const TrackState &tr, State &s, double t_s, double range_m, double &scale_se) const {
-    if (tr.box.width > 1.f) {
-        const double lw = std::log(double(tr.box.width));
+    const double width = double(tr.box.width) - p_.scale_margin_px;  // the vehicle's rear, without the margin
+    if (width > 1.0) {
+        const double lw = std::log(width);
         // A width step no vehicle can make in one frame (closing at scale_jump_closing_mps at this range, plus
         // scale_jump_px of edge noise) is the box changing, not the vehicle: the window restarts after it. Fitted
         // through, one 20 % step on a car 51 m ahead (TME tme08, the detector's box taking in its flank) read as
         // closing at 24 m/s, TTC 1.9 s, while the range said 8 m/s.
         if (!s.log_w.empty() && std::isfinite(range_m) && range_m > 0.0) {
             const double dt = std::max(0.0, t_s - s.log_w.back().first);
-            const double limit = p_.scale_jump_closing_mps * dt / range_m + p_.scale_jump_px / double(tr.box.width);
+            const double limit = p_.scale_jump_closing_mps * dt / range_m + p_.scale_jump_px / width;
             if (std::fabs(lw - s.log_w.back().second) > limit) s.log_w.clear();
         }
         s.log_w.emplace_back(t_s, lw);

@@ -40,6 +40,7 @@ struct KinematicsParams {
     bool scale_rate_fusion = false;  // the scale change also updates the range filter's rate
     double scale_jump_closing_mps = 40.0;  // a faster width change between frames restarts the scale fit
     double scale_jump_px = 4.0;            // edge noise allowed on top of it
+    double scale_margin_px = 3.0;          // the box's width beyond the vehicle's, taken off before the fit
 
     void bind(ParamMap &m) {
         m.add("jerk_sigma_mps3", jerk_sigma_mps3, 0.01, 100.0,
@@ -60,6 +61,10 @@ struct KinematicsParams {
               "scale_jump_px) restarts the scale-change fit (docs/tracking.md)");
         m.add("scale_jump_px", scale_jump_px, 0.0, 100.0,
               "px; edge noise of the box width allowed on top of scale_jump_closing_mps before the scale fit restarts");
+        m.add("scale_margin_px", scale_margin_px, 0.0, 50.0,
+              "px; how much wider than the vehicle's rear the detector's box is (the margin its training boxes "
+              "were drawn with), taken off the width before the scale fit: a constant margin makes the scale TTC "
+              "too long by margin / width (docs/tracking.md)");
         m.add("scale_rate_fusion", scale_rate_fusion,
               "the box's scale change also measures the range rate (dZ/dt = -Z d(ln w)/dt) in the range filter "
               "(docs/tracking.md)");

@@ -10,8 +10,8 @@ namespace {
 
 // A car `range_m` ahead whose box widens from `w0` to `w1` px over 12 frames at 30 fps, the tracker giving
 // `rate` +- `sigma` m/s; returns the last frame's track.
-hw::TrackState grow(double range_m, float w0, float w1, float rate, float sigma) {
-    hw::KinematicsParams p;
+hw::TrackState grow(double range_m, float w0, float w1, float rate, float sigma,
+                    const hw::KinematicsParams &p = hw::KinematicsParams{}) {
     hw::TrackKinematics kin(p, hw::CameraParams{});
     hw::TrackState out;
     for (int k = 0; k < p.scale_window; ++k) {
@@ -48,13 +48,36 @@ TEST_CASE("a far box's growth that the unsettled rate denies gives no scale TTC"
     // the same growth with no rate from the tracker: the scale TTC stands in
     const hw::TrackState alone = grow(77.0, 18.f, 21.f, NAN, NAN);
     REQUIRE(std::isfinite(alone.ttc_scale_s));
-    const double scale_rate = std::log(21.0 / 18.0) / (11.0 / 30.0);  // d(ln w)/dt
+    const double m = hw::KinematicsParams{}.scale_margin_px;  // the box's margin, off the width before the fit
+    const double scale_rate = std::log((21.0 - m) / (18.0 - m)) / (11.0 / 30.0);  // d(ln w)/dt of the vehicle
     CHECK(alone.ttc_scale_s == doctest::Approx((77.0 - 2.0) / 77.0 / scale_rate).epsilon(0.01));
 }
 
 TEST_CASE("a stopped car closing at 28 m/s keeps its scale TTC while the UKF's rate still lags") {
-    // stopped_lead_100kmh at 2.8 s: 72 m ahead, the box 19.4 -> 22.4 px in 0.37 s, the UKF at -7.1 +- 6.1 m/s
-    const hw::TrackState tr = grow(72.6, 19.4f, 22.4f, -7.1f, 6.1f);
+    // stopped_lead_100kmh at 2.8 s: 72 m ahead, the vehicle 19.4 -> 22.4 px wide in 0.37 s (28.5 m/s of closing),
+    // the UKF at -7.1 +- 6.1 m/s
+    hw::KinematicsParams vehicle_width;  // the widths are the vehicle's own: no margin to take off
+    vehicle_width.scale_margin_px = 0.0;
+    const hw::TrackState tr = grow(72.6, 19.4f, 22.4f, -7.1f, 6.1f, vehicle_width);
     REQUIRE(std::isfinite(tr.ttc_scale_s));
     CHECK(tr.ttc_scale_s < 3.0f);
+}
+
+TEST_CASE("the box's margin beyond the vehicle is taken off before the scale fit") {
+    // A car 2.0 m wide, 70 m ahead, closing at 27.8 m/s (a stopped car at 100 km/h) seen with fx 1000: 28.6 px
+    // wide, and 12 frames later (0.37 s) 59.8 m ahead and 33.4 px wide; the detector boxes it 3 px wider
+    // (docs/tracking.md).
+    const double fx = 1000.0, w_m = 2.0, z0 = 70.0, v = 27.8, z1 = z0 - v * 11.0 / 30.0;
+    const float w0 = float(fx * w_m / z0), w1 = float(fx * w_m / z1);
+    hw::KinematicsParams with_margin, no_margin;
+    with_margin.scale_margin_px = 3.0;
+    no_margin.scale_margin_px = 0.0;
+    const hw::TrackState vehicle = grow(z1, w0, w1, NAN, NAN, no_margin);  // the vehicle's own width
+    REQUIRE(std::isfinite(vehicle.ttc_scale_s));
+    CHECK(vehicle.ttc_scale_s == doctest::Approx((z1 - 2.0) / v).epsilon(0.1));  // the window's lag: < 10 %
+    const hw::TrackState corrected = grow(z1, w0 + 3.f, w1 + 3.f, NAN, NAN, with_margin);
+    CHECK(corrected.ttc_scale_s == doctest::Approx(vehicle.ttc_scale_s).epsilon(0.01));
+    const hw::TrackState raw = grow(z1, w0 + 3.f, w1 + 3.f, NAN, NAN, no_margin);
+    REQUIRE(std::isfinite(raw.ttc_scale_s));
+    CHECK(raw.ttc_scale_s > 1.08 * vehicle.ttc_scale_s);  // too long by about margin / width: a later warning
 }
