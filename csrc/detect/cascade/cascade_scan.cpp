@@ -172,14 +172,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         double windows;  // windows the band holds at step_px: what its scan costs
     };
     std::vector<Band> bands;
-    // window sizes: the model's own times scale_factor^k, k from the smallest_window_px one (k < 0: the band
-    // enlarged) up to max_window_frac of the image
-    std::vector<double> sizes;
-    for (double f = 1.0 / p_.scale_factor; p_.smallest_window_px > 0.0 && win_.height * f >= p_.smallest_window_px;
-         f /= p_.scale_factor)
-        sizes.insert(sizes.begin(), f);
-    for (double f = 1.0; win_.height * f <= max_h; f *= p_.scale_factor) sizes.push_back(f);
-    for (const double f : sizes) {
+    for (double f = 1.0; win_.height * f <= max_h; f *= p_.scale_factor) {
         const double hs = win_.height * f, ws = win_.width * f;
         if (hs < p_.min_window_px) continue;
         // rows where the window's bottom may lie (flat road, vehicle heights H_min..H_max)
@@ -253,7 +246,7 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                 roi = padded;
         const cv::Size sz(int(std::lround(roi.cols / f)), int(std::lround(roi.rows / f)));
         if (sz.width <= win_.width || sz.height <= win_.height) return;
-        if (f != 1.0) cv::resize(roi, band, sz, 0, 0, cv::INTER_LINEAR);
+        if (f > 1.0) cv::resize(roi, band, sz, 0, 0, cv::INTER_LINEAR);
         else band = roi;
         if (cc_) {  // the reference: OpenCV's own scan at scale 1 (step 2)
             rects.clear(); levels.clear(); weights.clear();

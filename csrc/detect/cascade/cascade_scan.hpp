@@ -48,7 +48,6 @@ struct CascadeParams {
     double scale_factor = 1.12;         // ratio of successive window sizes
     double max_window_frac = 0.6;       // largest window height as a fraction of the image height
     double min_window_px = 0.0;         // px; smaller window sizes are not scanned (0: from the model's own)
-    double smallest_window_px = 0.0;    // px; window heights below the model's own down to this, on the band enlarged
     int step_px = 2;                    // px in the resized band between windows (OpenCV's own step is 2)
     int threads = 2;                    // threads the scan's sizes and the verifier's crops are shared among; 1 = caller
                                         // (base/worker_pool.hpp)
@@ -91,10 +90,6 @@ struct CascadeParams {
         m.add("min_window_px", min_window_px, 0.0, 1000.0,
               "px of the image; window sizes below this height are not scanned (0 = all, from the model's own "
               "20 px): smaller vehicles are not wanted, and the smallest sizes are the costliest to scan");
-        m.add("smallest_window_px", smallest_window_px, 0.0, 1000.0,
-              "px of the image; window heights below the model's own (20 px) down to this are scanned too, on the "
-              "band enlarged, so that a vehicle smaller than the model's window gets a box of its size (0 = none, "
-              "docs/detection.md)");
         m.add("step_px", step_px, 1, 8, "px of the resized band between windows; 2 as OpenCV's detectMultiScale");
         m.add("threads", threads, 1, 16,
               "threads the stage runs on (window sizes and verifier crops shared, the same results as one thread), "
