@@ -32,7 +32,8 @@ def markdown(report: dict) -> str:
     syn = report.get("synthetic")
     if syn:
         o = syn["overall"]
-        out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5)", "",
+        out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5; a track more than half "
+                "on another vehicle is not counted)", "",
                 "| scenario | precision | recall | MOTA | IDF1 | id switches | fragments |",
                 "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
         for name, m in syn["per_scenario"].items():
