@@ -6,12 +6,12 @@ box's width of the box's centre and 0.5-1.3 box widths apart, searched in the bo
 Only boxes with no other box beside them (the box widened by half its width each side) are measured, so that a
 neighbour's edge is not taken for a side.
 
-Run on TuSimple's annotated boxes it measures the margin the annotators drew around each car, which the learned
-detector reproduces (its boxes sit on TuSimple's within a pixel, docs/tracking.md). Run on the synthetic world's
-truth boxes, which are the drawn rear faces exactly (docs/sim.md), it measures the method's own bias. The scale TTC
-takes the margin off the width (`kinematics.scale_margin_px`).
+Run on TuSimple's annotated boxes it measures the margin the annotators drew around each car; `--detector` shows
+how the default preset's detections (at their operating point, on the recordings' camera) sit on those boxes. Run
+on the synthetic world's truth boxes, which are the drawn rear faces exactly (docs/sim.md), it measures the method's
+own bias. The scale TTC takes the margin off the width (`kinematics.scale_margin_px`, docs/tracking.md).
 
-    python -m app.eval.box_margin --images ~/.cache/headway/tusimple-train --every 10 --from 1
+    python -m app.eval.box_margin --images ~/.cache/headway/tusimple-train --every 10 --from 1 [--detector]
     python -m app.eval.box_margin --scenarios steady_following,dense_traffic,lead_braking_0p3g
 """
 from __future__ import annotations
@@ -114,6 +114,26 @@ def synthetic_images(scenarios: Sequence[str], every: int = 5):
             yield f.image, [b if keep else (b[0], b[1], b[0], b[1]) for b, keep in zip(boxes, measured)]
 
 
+def detector_offsets(folder: str, entries: list[dict], min_iou: float = 0.3) -> list[tuple[float, float]]:
+    """(annotated box height, detected width - annotated width) of each annotated box the default preset's detection
+    stage matches (IoU >= min_iou) at its operating point, on the recordings' camera (as `headway eval` scores)."""
+    from app import config as configuration
+    from app.detect_images import operating_point
+    from app.eval.detector_points import scored_images
+    from app.eval.matching import match
+    from app.eval.tusimple_boxes import tusimple_config
+
+    cfg = tusimple_config(configuration.load(None, {"pipeline": {"preset": "default"}}))
+    at = operating_point(cfg)
+    out = []
+    for e, found in zip(entries, scored_images(folder, entries, cfg)):
+        gt = [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
+        det = [d[:4] for d in found if d[4] >= at]
+        for i, j, _ in match(gt, det, min_iou):
+            out.append((gt[i][3] - gt[i][1], (det[j][2] - det[j][0]) - (gt[i][2] - gt[i][0])))
+    return out
+
+
 def main(argv: Optional[list[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     src = p.add_mutually_exclusive_group(required=True)
@@ -121,6 +141,8 @@ def main(argv: Optional[list[str]] = None) -> int:
     src.add_argument("--scenarios", help="synthetic scenarios, comma-separated: their exact truth boxes")
     p.add_argument("--every", type=int, default=1, help="with --images: only images k with k %% EVERY == FROM")
     p.add_argument("--from", dest="start", type=int, default=0)
+    p.add_argument("--detector", action="store_true",
+                   help="with --images: the default preset's detected width minus the annotated width instead")
     a = p.parse_args(argv)
     if a.every < 1 or not 0 <= a.start < a.every:
         print(f"box_margin: --every {a.every} --from {a.start}: give EVERY >= 1 and 0 <= FROM < EVERY", file=sys.stderr)
@@ -130,10 +152,15 @@ def main(argv: Optional[list[str]] = None) -> int:
             print(f"box_margin: {a.images} holds no annotation.json (TuSimple format); give the folder "
                   f"`../shared/tools/tusimple-train` wrote, or ../shared/data/tusimple/supp", file=sys.stderr)
             return 2
-        rows = margins(tusimple_images(a.images, a.every, a.start))
+        if a.detector:
+            entries = json.loads((Path(a.images) / "annotation.json").read_text())
+            rows = detector_offsets(a.images, [e for k, e in enumerate(entries) if k % a.every == a.start])
+        else:
+            rows = margins(tusimple_images(a.images, a.every, a.start))
     else:
         rows = margins(synthetic_images([s.strip() for s in a.scenarios.split(",") if s.strip()]))
-    print("| box height px | boxes | margin px: median | q25 | q75 |")
+    what = "detected - annotated width px" if a.detector else "margin px"
+    print(f"| box height px | boxes | {what}: median | q25 | q75 |")
     print("| --- | ---: | ---: | ---: | ---: |")
     for b in by_band(rows):
         print(f"| {b['band']} | {b['n']} | {b['median_px']:+.1f} | {b['q25_px']:+.1f} | {b['q75_px']:+.1f} |")
