@@ -33,7 +33,7 @@ def markdown(report: dict) -> str:
     if syn:
         o = syn["overall"]
         out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5; a track more than half "
-                "on another vehicle is not counted)", "",
+                "on a vehicle not scored counts neither way)", "",
                 "| scenario | precision | recall | MOTA | IDF1 | id switches | fragments |",
                 "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
         for name, m in syn["per_scenario"].items():
