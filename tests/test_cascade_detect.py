@@ -350,4 +350,3 @@ def test_a_process_forked_after_the_workers_started_detects_alone_and_exits():
         assert sum(len(r) for r in expected) > 3
     finally:
         pipe.__exit__(None, None, None)
-
