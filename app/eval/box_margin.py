@@ -17,13 +17,19 @@ own bias. The scale TTC takes the margin off the width (`kinematics.scale_margin
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Iterable, Optional, Sequence
 
 import cv2
 import numpy as np
+
+from app import config as configuration
+from app.detect_images import operating_point
+from app.eval.detector_points import scored_images
+from app.eval.matching import match
+from app.eval.tusimple_boxes import entry_boxes, load_entries, tusimple_config
+from app.sim import load_scenario, render
 
 BANDS = ((10, 15), (15, 20), (20, 30), (30, 40), (40, 60), (60, 100))  # box heights, px
 
@@ -59,13 +65,14 @@ def _alone(boxes: list[Sequence[float]], i: int) -> bool:
                    for j, o in enumerate(boxes))
 
 
-def margins(images: Iterable[tuple[np.ndarray, list[Sequence[float]]]]) -> list[tuple[float, float]]:
-    """(box height, box width - side span) of every measurable box alone in its image."""
+def margins(images: Iterable[tuple[np.ndarray, list[Sequence[float]], list[bool]]]) -> list[tuple[float, float]]:
+    """(box height, box width - side span) of every box measured (its flag set) and alone in its image; every box
+    of the image counts as a neighbour."""
     out = []
-    for gray, boxes in images:
+    for gray, boxes, measured in images:
         for i, box in enumerate(boxes):
             h = box[3] - box[1]
-            if not BANDS[0][0] <= h < BANDS[-1][1] or not _alone(boxes, i):
+            if not measured[i] or not BANDS[0][0] <= h < BANDS[-1][1] or not _alone(boxes, i):
                 continue
             span = side_span(gray, box)
             if span is not None:
@@ -86,48 +93,36 @@ def by_band(rows: list[tuple[float, float]]) -> list[dict]:
     return out
 
 
-def tusimple_images(folder: str, every: int = 1, start: int = 0):
-    """(gray image, annotated boxes) of the TuSimple-format folder's images k with k % every == start."""
-    entries = json.loads((Path(folder) / "annotation.json").read_text())
-    for k, e in enumerate(entries):
-        if k % every != start:
-            continue
+def tusimple_images(folder: str, entries: list[dict]):
+    """(gray image, annotated boxes, all measured) of each of the TuSimple-format folder's `entries`."""
+    for e in entries:
         gray = cv2.imread(str(Path(folder) / e["file_name"]), cv2.IMREAD_GRAYSCALE)
         if gray is None:
             raise FileNotFoundError(f"{Path(folder) / e['file_name']}: not readable as an image")
-        yield gray, [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
+        boxes = entry_boxes(e)
+        yield gray, boxes, [True] * len(boxes)
 
 
 def synthetic_images(scenarios: Sequence[str], every: int = 5):
-    """(frame, truth boxes of the cars and vans wholly visible) of every `every`-th frame of each scenario. Other
-    vehicles are left out of the measured boxes but still count as neighbours."""
-    from app.sim import load_scenario, render
-
+    """(frame, truth boxes, measured) of every `every`-th frame of each scenario: the cars and vans wholly visible and
+    inside the image are measured; every vehicle is a neighbour."""
     for name in scenarios:
         for f in render(load_scenario(name)):
             if f.index % every:
                 continue
-            boxes = [v["box"] for v in f.truth]
-            measured = [v["kind"] != "truck" and v.get("visible_fraction", 1.0) >= 0.95
-                        and v["box"][0] >= 0 and v["box"][2] <= f.image.shape[1] for v in f.truth]
-            # a measured box's neighbours are every vehicle; a box not measured is made too small to be measured
-            yield f.image, [b if keep else (b[0], b[1], b[0], b[1]) for b, keep in zip(boxes, measured)]
+            yield f.image, [v["box"] for v in f.truth], [
+                v["kind"] != "truck" and v.get("visible_fraction", 1.0) >= 0.95 and v["box"][0] >= 0
+                and v["box"][2] <= f.image.shape[1] for v in f.truth]
 
 
 def detector_offsets(folder: str, entries: list[dict], min_iou: float = 0.3) -> list[tuple[float, float]]:
     """(annotated box height, detected width - annotated width) of each annotated box the default preset's detection
     stage matches (IoU >= min_iou) at its operating point, on the recordings' camera (as `headway eval` scores)."""
-    from app import config as configuration
-    from app.detect_images import operating_point
-    from app.eval.detector_points import scored_images
-    from app.eval.matching import match
-    from app.eval.tusimple_boxes import tusimple_config
-
     cfg = tusimple_config(configuration.load(None, {"pipeline": {"preset": "default"}}))
     at = operating_point(cfg)
     out = []
     for e, found in zip(entries, scored_images(folder, entries, cfg)):
-        gt = [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
+        gt = entry_boxes(e)
         det = [d[:4] for d in found if d[4] >= at]
         for i, j, _ in match(gt, det, min_iou):
             out.append((gt[i][3] - gt[i][1], (det[j][2] - det[j][0]) - (gt[i][2] - gt[i][0])))
@@ -152,11 +147,8 @@ def main(argv: Optional[list[str]] = None) -> int:
             print(f"box_margin: {a.images} holds no annotation.json (TuSimple format); give the folder "
                   f"`../shared/tools/tusimple-train` wrote, or ../shared/data/tusimple/supp", file=sys.stderr)
             return 2
-        if a.detector:
-            entries = json.loads((Path(a.images) / "annotation.json").read_text())
-            rows = detector_offsets(a.images, [e for k, e in enumerate(entries) if k % a.every == a.start])
-        else:
-            rows = margins(tusimple_images(a.images, a.every, a.start))
+        entries = [e for k, e in enumerate(load_entries(a.images)) if k % a.every == a.start]
+        rows = detector_offsets(a.images, entries) if a.detector else margins(tusimple_images(a.images, entries))
     else:
         rows = margins(synthetic_images([s.strip() for s in a.scenarios.split(",") if s.strip()]))
     what = "detected - annotated width px" if a.detector else "margin px"

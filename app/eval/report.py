@@ -163,7 +163,7 @@ def evaluate(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/
 
             def keep(e, gray, r):
                 if shown[0] < examples and e["bbox"]:
-                    truth = [{"box": (b["left"], b["top"], b["right"], b["bottom"])} for b in e["bbox"]]
+                    truth = [{"box": b} for b in tusimple_boxes.entry_boxes(e)]
                     cv2.imwrite(str(out / "examples" / f"tusimple_{Path(e['file_name']).stem}.jpg"),
                                 annotate_detections(gray, r.boxes, truth))
                     shown[0] += 1

@@ -44,6 +44,11 @@ def _band(h: float) -> str:
     return "?"
 
 
+def entry_boxes(entry: dict) -> list[tuple[float, float, float, float]]:
+    """The annotated boxes (left, top, right, bottom) of one TuSimple-format entry."""
+    return [(b["left"], b["top"], b["right"], b["bottom"]) for b in entry["bbox"]]
+
+
 def band_counts(entries: list[dict], detections: list[list[tuple]]) -> dict:
     """Per band and pooled: ground truth, matched, false positives, recall and precision.
 
@@ -54,7 +59,7 @@ def band_counts(entries: list[dict], detections: list[list[tuple]]) -> dict:
         counts.setdefault(band, {"tp": 0, "fp": 0, "fn": 0, "gt": 0})[key] += 1
 
     for e, det in zip(entries, detections):
-        gt = [(b["left"], b["top"], b["right"], b["bottom"]) for b in e["bbox"]]
+        gt = entry_boxes(e)
         pairs = match(gt, det)
         matched_gt = {i for i, _, _ in pairs}
         matched_det = {j for _, j, _ in pairs}
