@@ -43,7 +43,7 @@ def test_tme_motorway_alignment_leaves_less_than_no_alignment():
     """tme08: with the brightness change between the frames taken out (photometric.hpp), the aligned road
     differs far less than the unaligned one. Measured on these 15 windows: median 2.53 against 5.44 gray
     levels (45 windows: 2.56 against 5.47); with the brightness change left in the aligned residual is 8.02,
-    above the unaligned one, which is what the old measure reported."""
+    above the unaligned one."""
     frames, _ = road_motion.read_tme(data_path("tme", "tme08"))
     cam = road_motion.fit_horizon(road_motion.tme_camera(data_path("tme", "calibration.ini")), frames)
     cfg = {"camera": {**cam, "hood_frac": road_motion.HOOD["tme08"]}, "pipeline": {"preset": "parallax"}}

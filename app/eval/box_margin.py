@@ -118,7 +118,7 @@ def synthetic_images(scenarios: Sequence[str], every: int = 5):
 def detector_offsets(folder: str, entries: list[dict], min_iou: float = 0.3) -> list[tuple[float, float]]:
     """(annotated box height, detected width - annotated width) of each annotated box the default preset's detection
     stage matches (IoU >= min_iou) at its operating point, on the recordings' camera (as `headway eval` scores)."""
-    cfg = tusimple_config(configuration.load(None, {"pipeline": {"preset": "default"}}))
+    cfg = tusimple_config(configuration.load(None, {"pipeline": {"preset": configuration.default_preset()}}))
     at = operating_point(cfg)
     out = []
     for e, found in zip(entries, scored_images(folder, entries, cfg)):
