@@ -8,7 +8,7 @@
 set -euo pipefail
 cd "$(dirname "$(readlink -f "$0")")"
 
-APT_PACKAGES=(g++ pkg-config libopencv-dev libeigen3-dev nlohmann-json3-dev doctest-dev python3-dev python3-venv libffi-dev systemd)
+APT_PACKAGES=(g++ pkg-config libopencv-dev libjpeg-dev libeigen3-dev nlohmann-json3-dev doctest-dev python3-dev python3-venv libffi-dev systemd)
 VENV=.venv
 
 missing=()

@@ -37,6 +37,9 @@ CXXFLAGS = ["-std=c++17", "-O3", "-fPIC", "-Wall", "-Wextra", "-Wno-unused-param
 CPP_TESTS = ROOT / "tests" / "cpp"
 TESTS_BUILD = BUILD / "cpp_tests"
 TESTS_BINARY = TESTS_BUILD / "headway_cpp_tests"
+# Linked beside OpenCV: the image folder source decodes JPEGs with libjpeg itself to count its warnings
+# (csrc/capture/jpeg_decode.cpp; Debian's libjpeg-dev).
+EXTRA_LIBS = ["jpeg"]
 
 
 def pkg_config(*args: str) -> list[str]:
@@ -121,7 +124,7 @@ def make_ffibuilder(objects: list[Path]) -> cffi.FFI:
         source_extension=".cpp",
         include_dirs=[str(CSRC)],
         extra_objects=[str(o) for o in objects],
-        libraries=libs + ["stdc++"],
+        libraries=libs + EXTRA_LIBS + ["stdc++"],
         library_dirs=libdirs,
         extra_compile_args=["-O2", "-g0"],
     )
@@ -164,7 +167,8 @@ def build_tests(jobs: int = 2) -> Path:
     objects = core + tests
     if TESTS_BINARY.exists() and TESTS_BINARY.stat().st_mtime >= max(o.stat().st_mtime for o in objects):
         return TESTS_BINARY
-    cmd = ["g++", "-o", str(TESTS_BINARY), *map(str, objects), *pkg_config("--libs"), "-pthread"]
+    cmd = ["g++", "-o", str(TESTS_BINARY), *map(str, objects), *pkg_config("--libs"),
+           *(f"-l{lib}" for lib in EXTRA_LIBS), "-pthread"]
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:
         raise SystemExit("linking the C++ unit tests failed:\n" + r.stderr)

@@ -128,3 +128,44 @@ def test_the_services_video_source_marks_concealed_frames_and_the_status_counts_
     assert not why, why
     st = read_status(str(tmp_path / "status.json"))
     assert st["state"] == "stopped" and st["decode_errors"]["concealed"] == len(concealed["bad"])
+
+
+def test_the_services_folder_source_skips_a_bit_flipped_jpeg_and_the_status_counts_it(tmp_path, capfd):
+    from app.core import EndOfStream, Pipeline
+    from app.supervisor.status_file import read_status
+    from tests.test_config_service_fuzz import run_service
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(300):   # more than the service runs: it is stopped, not ended
+        cv2.imwrite(str(folder / f"{i:03d}.jpg"), noise(i))
+    bit_flipped_jpeg(folder / "003.jpg", random.Random(40))
+    python_side = open_recording(folder, fps=10)
+    assert sum(1 for _ in python_side.frames()) == 299
+    assert [s.split(": ", 1)[0] for s in python_side.skipped] == ["003.jpg"]
+    cam = {"width": 320, "height": 240, "fx": 300.0, "fy": 300.0, "cx": 160.0, "cy": 120.0}
+    with Pipeline({"camera": cam, "pipeline": {"preset": "thesis"}}) as pipe:
+        pipe.start({"kind": "folder", "path": str(folder), "fps": 10.0})
+        frames = []
+        try:
+            while True:
+                r = pipe.pop(timeout_s=10)
+                assert r is not None, pipe.health()
+                frames.append(r)
+        except EndOfStream:
+            pass
+        health = pipe.health()
+    # a folder's frame number is the file's place in name order: 003.jpg is the one left out
+    assert [r.frame for r in frames] == [i for i in range(300) if i != 3]
+    assert [(r.frame, sorted(r.events)) for r in frames if r.events] == [(4, ["decode_error"])]
+    assert health["decode_errors"] == 1 and health["source_state"] == "ended"
+    assert "Corrupt JPEG" not in capfd.readouterr().err   # counted, not printed past us
+    cfg = tmp_path / "service.yaml"
+    cfg.write_text(f"camera: {{width: 320, height: 240, fx: 300, fy: 300, cx: 160, cy: 120}}\n"
+                   f"source: {{kind: folder, path: {folder}, fps: 10}}\n"
+                   f"can: {{interface: virtual, channel: dec-{id(cfg)}}}\n"
+                   f"service: {{status_file: {tmp_path / 'status.json'}}}\n")
+    served, why = run_service(cfg)
+    assert not why, why
+    st = read_status(str(tmp_path / "status.json"))
+    assert served >= 50 and st["state"] == "stopped" and st["decode_errors"] == {"skipped": 1, "concealed": 0}

@@ -1,6 +1,7 @@
 #include "capture/image_folder_source.hpp"
 
 #include "base/errors.hpp"
+#include "capture/jpeg_decode.hpp"
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -14,13 +15,19 @@ namespace hw {
 
 namespace fs = std::filesystem;
 
+static std::string lower_extension(const std::string &path) {
+    std::string ext = fs::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
+
+static bool is_jpeg_extension(const std::string &ext) { return ext == ".jpg" || ext == ".jpeg"; }
+
 // libjpeg and libpng decode a file cut short (a copy interrupted, a card pulled) into an image whose lower
 // part is grey, and imread reports success: a wrong frame, silently. A whole JPEG ends with its end-of-image
 // marker (FF D9, within its last 1024 bytes as JPEG_TAIL_BYTES allows) and a whole PNG with its IEND chunk; the same
 // rule as app/recording.py's truncation() for the Python readers.
-static bool cut_short(const std::vector<uchar> &data, const std::string &path) {
-    std::string ext = fs::path(path).extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+static bool cut_short(const std::vector<uchar> &data, const std::string &ext) {
     const size_t n = data.size();
     auto has_tail = [&](const char *marker, size_t len, size_t tail) {
         const size_t from = n > tail ? n - tail : 0;
@@ -28,7 +35,7 @@ static bool cut_short(const std::vector<uchar> &data, const std::string &path) {
             if (std::equal(marker, marker + len, reinterpret_cast<const char *>(data.data()) + i)) return true;
         return false;
     };
-    if (ext == ".jpg" || ext == ".jpeg") return n < 4 || !has_tail("\xff\xd9", 2, 1024);
+    if (is_jpeg_extension(ext)) return n < 4 || !has_tail("\xff\xd9", 2, 1024);
     if (ext == ".png") return n < 8 || !has_tail("IEND", 4, 32);
     return false;
 }
@@ -79,8 +86,18 @@ ReadStatus ImageFolderSource::read(Frame &out) {
     std::ifstream in(files_[i], std::ios::binary);
     std::vector<uchar> data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     if (!in.good() && !in.eof()) return ReadStatus::DecodeError;
-    if (data.empty() || cut_short(data, files_[i])) return ReadStatus::DecodeError;
-    cv::Mat img = cv::imdecode(data, cv::IMREAD_GRAYSCALE);
+    const std::string ext = lower_extension(files_[i]);
+    if (data.empty() || cut_short(data, ext)) return ReadStatus::DecodeError;
+    cv::Mat img;
+    if (is_jpeg_extension(ext)) {
+        // libjpeg decodes corrupt data into grey blocks and only warns: a warned file is skipped, as the
+        // Python readers skip it (app/recording.py's read_image)
+        JpegDecode jpeg = decode_jpeg_gray(data);
+        if (jpeg.warnings > 0) return ReadStatus::DecodeError;
+        img = jpeg.gray;
+    } else {
+        img = cv::imdecode(data, cv::IMREAD_GRAYSCALE);
+    }
     if (img.empty()) return ReadStatus::DecodeError;
     if (img.cols != size_.width || img.rows != size_.height) return ReadStatus::SizeChanged;
     out.gray = img;
