@@ -25,7 +25,7 @@ import numpy as np
 import yaml
 
 from app import calibrate_drive
-from app.output_files import check_outputs, numbered
+from app.output_files import check_outputs, numbered, write_whole
 
 MIN_VIEWS = 3
 # Photos a pixel or two larger than the first are the same camera (Udacity's camera_cal has 1281x721
@@ -155,7 +155,7 @@ def write_yaml(cal: Calibration, out: str | Path) -> None:
     text = (f"# headway calibrate: {len(cal.used)} views, RMS reprojection error {cal.rms_px:.3f} px\n"
             "# the mounting (height_m, pitch_deg, yaw_deg) is not measured by a chessboard: set it separately\n")
     text += yaml.safe_dump({"camera": cal.camera_section()}, sort_keys=False)
-    Path(out).write_text(text)
+    write_whole(out, text)
 
 
 def add_parser(subparsers) -> None:

@@ -13,6 +13,7 @@ from typing import Optional
 
 import yaml
 
+from app.output_files import write_whole
 from app.replay import replay_recording
 from app.safe_yaml import load_yaml
 
@@ -56,7 +57,7 @@ def write_config(est: dict, out: str, config_path: Optional[str], clip: str) -> 
             f"state {est['state']}\n"
             f"# pitch {est['pitch_deg']:.2f} +- {est['pitch_sigma_deg']:.2f} deg, yaw {est['yaw_deg']:.2f} +- "
             f"{est['yaw_sigma_deg']:.2f} deg, height {est['height_m']:.3f} +- {est['height_sigma_m']:.3f} m\n")
-    Path(out).write_text(head + yaml.safe_dump(cfg, sort_keys=False))
+    write_whole(out, head + yaml.safe_dump(cfg, sort_keys=False))
 
 
 def main(args) -> int:

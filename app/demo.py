@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 
 from app.eval.matching import iou_matrix
-from app.output_files import check_outputs, folder_outputs
+from app.output_files import check_outputs, folder_outputs, write_whole, written_whole
 from app.replay import replay_scenario
 from app.sim.sprites import patches_problem
 
@@ -34,7 +34,6 @@ def run(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     counts = {"truth": 0, "found": 0}
-    truth_f = open(out / "truth.jsonl", "w")
 
     def on_result(r, decision, truth):
         truth_f.write(json.dumps({"frame": r.frame, "t": r.t_s, "vehicles": truth}) + "\n")
@@ -49,14 +48,15 @@ def run(args) -> int:
     problem = patches_problem()
     if problem:
         print(f"warning: {problem}; the demo draws plain vehicles")
-    with truth_f:
+    # the truth, as the replay's own outputs, is renamed into place only once the replay completed
+    with written_whole(str(out / "truth.jsonl")) as truth_tmp, open(truth_tmp, "w") as truth_f:
         s = replay_scenario(args.scenario, config_path=args.config, out_video=str(out / "annotated.mp4"),
                             tracks_path=str(out / "tracks.jsonl"), can_out=str(out / "can_out.log"),
                             on_result=on_result, vehicle_look="plain" if problem else None)
     recall = counts["found"] / counts["truth"] if counts["truth"] else float("nan")
     summary = s.text() + (f"\n  vehicles within 60 m tracked (IoU >= 0.5): {counts['found']} of "
                           f"{counts['truth']} vehicle-frames ({recall:.0%})")
-    (out / "summary.txt").write_text(summary + "\n")
+    write_whole(out / "summary.txt", summary + "\n")
     print(summary)
     print(f"\nDemo written to {out.resolve()}/ ({', '.join(WRITTEN)})")
     return 0

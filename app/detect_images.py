@@ -18,7 +18,7 @@ from typing import Iterable, Optional
 
 from app import config as configuration
 from app.core import Pipeline
-from app.output_files import check_outputs, numbered
+from app.output_files import check_outputs, numbered, write_whole
 from app.recording import read_image
 
 
@@ -140,7 +140,7 @@ def run(args) -> int:
                            notes=notes)
     if not result and bad:
         raise DetectError(bad[0] if len(bad) == 1 else f"none of the {len(bad)} images can be used: " + "; ".join(bad[:5]))
-    Path(args.out).write_text(json.dumps(result, indent=1))
+    write_whole(args.out, json.dumps(result, indent=1))
     print(f"{len(result)} images, {sum(len(e['bbox']) for e in result)} vehicles -> {args.out}")
     for line in notes:
         print(f"headway: note: {line}", file=sys.stderr)

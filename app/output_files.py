@@ -3,14 +3,17 @@
 ``check_outputs`` refuses, before anything is opened, an output path that is one of the command's inputs
 (the same path, a hard or symbolic link to it, or the same file under another name) or another output:
 opening it for writing would truncate the input first. ``written_whole`` gives the writer a temporary
-file beside the output (same folder, so the rename stays on one file system; same suffix, so writers that
-choose the format by it, OpenCV's and python-can's, choose the right one) and renames it into place only
-when the work completed; a run that fails leaves the previous output as it was and no partial file.
+file beside the output (same folder, so the rename stays on one file system; same suffixes, so writers that
+choose the format by them, OpenCV's, python-can's and NumPy's, choose the right one) and renames it into
+place only when the work completed; a run that fails leaves the previous output as it was and no partial
+file. ``write_whole`` does that for a text written at once, ``folder_written_whole`` for a folder of files
+(frames, example images) that is one output.
 """
 from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 from pathlib import Path
 from typing import Iterable, Iterator, Mapping, Optional
 
@@ -61,9 +64,12 @@ def folder_outputs(option: str, folder: Optional[str], names: Iterable[str]) -> 
 
 
 def partial_path(path: str) -> Path:
-    """The temporary file an output is written to before it is renamed into place."""
+    """The temporary file an output is written to before it is renamed into place: hidden, the writing
+    process in its name, every suffix kept (``x.yml.gz`` -> ``.x.partial-PID.yml.gz``)."""
     p = Path(path)
-    return p.with_name(f".{p.stem}.partial-{os.getpid()}{p.suffix}")
+    suffixes = "".join(p.suffixes)
+    base = p.name[:len(p.name) - len(suffixes)] if suffixes else p.name
+    return p.with_name(f".{base}.partial-{os.getpid()}{suffixes}")
 
 
 @contextlib.contextmanager
@@ -81,3 +87,30 @@ def written_whole(path: Optional[str]) -> Iterator[Optional[str]]:
         raise
     if tmp.exists():
         os.replace(tmp, path)
+
+
+def write_whole(path: str | Path, text: str) -> None:
+    """``text`` into ``path``, which changes only once the whole text is written."""
+    with written_whole(str(path)) as tmp:
+        Path(tmp).write_text(text)
+
+
+@contextlib.contextmanager
+def folder_written_whole(path: str | Path) -> Iterator[str]:
+    """A new empty folder to fill in place of the folder ``path``: it replaces ``path`` (and all that was in
+    it) when the block ends without an error, and is removed when it raises."""
+    final = Path(path)
+    tmp = partial_path(str(final))
+    shutil.rmtree(tmp, ignore_errors=True)   # left by a process of the same id that was killed
+    tmp.mkdir(parents=True)
+    try:
+        yield str(tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    # a folder cannot be renamed over one that holds files: the old one is moved aside, then removed
+    old = final.with_name(f".{final.name}.old-{os.getpid()}")
+    if final.exists():
+        os.replace(final, old)
+    os.replace(tmp, final)
+    shutil.rmtree(old, ignore_errors=True)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import can
 
+from app.output_files import write_whole
 from app.recording import open_recording
 
 REPO = Path(__file__).resolve().parents[2]  # the checkout: app/bench/soak.py
@@ -138,7 +139,7 @@ def main(argv=None) -> int:
     args = a.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="headway-soak-") as tmp:
         rep = soak(args.clip, args.minutes, args.every_s, Path(tmp), args.fps, args.sections)
-    Path(args.out).write_text(json.dumps(rep, indent=1))
+    write_whole(args.out, json.dumps(rep, indent=1))
     print(json.dumps({k: v for k, v in rep.items() if k != "samples"}, indent=1))
     return 0
 

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from app.eval.tusimple_boxes import band_counts, load_entries, operating_curve, recall_at_precision
+from app.output_files import write_whole
 
 INPUT = 416
 STRIDES = (8, 16, 32)
@@ -198,7 +199,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         print(f"cnn_reference: {e}", file=sys.stderr)
         return 2
     if a.json:
-        Path(a.json).write_text(json.dumps(r, indent=1))
+        write_whole(a.json, json.dumps(r, indent=1))
     print(markdown(r))
     return 0
 

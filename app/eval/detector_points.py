@@ -24,6 +24,7 @@ import yaml
 from app import config as configuration
 from app.detect_images import image_pipeline, read_usable
 from app.eval.tusimple_boxes import band_counts, load_entries, operating_curve, recall_at_precision, tusimple_config
+from app.output_files import write_whole
 
 THRESHOLDS = [i / 100 for i in range(100)]
 
@@ -106,7 +107,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         r["chosen"] = lowest_at_precision(r["curve_ge40"], a.choose)
     r.update(detectors=a.detectors, sets=a.set, folder=a.images, every=a.every, start=a.start)
     if a.json:
-        Path(a.json).write_text(json.dumps(r, indent=1))
+        write_whole(a.json, json.dumps(r, indent=1))
     print(json.dumps({k: v for k, v in r.items() if k != "curve_ge40"}, indent=1))
     return 0
 

@@ -19,6 +19,7 @@ import yaml
 from app import config as configuration
 from app.eval.matching import match
 from app.eval.synthetic import RANGE_BANDS, evaluate_scenario, summarize
+from app.output_files import write_whole
 from app.sim import list_scenarios
 
 
@@ -87,8 +88,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     report["set"] = a.set
     text = json.dumps(report, indent=1)
     if a.out:
-        with open(a.out, "w") as fh:
-            fh.write(text)
+        write_whole(a.out, text)
     print(text)
     return 0
 

@@ -2,6 +2,7 @@
 table and a few annotated example images into one folder."""
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import sys
@@ -19,7 +20,7 @@ from app.eval import (compare, fcw_scenarios, lane_clips, lanes_sample, range_cl
 from app.eval import results_doc
 from app.eval.compare import figure as _f
 from app.fleet.engine import map_ordered
-from app.output_files import check_outputs, folder_outputs
+from app.output_files import check_outputs, folder_outputs, folder_written_whole, write_whole, written_whole
 
 PARTS = ("synthetic", "tusimple", "lanes", "range", "fcw", "road_motion", "real_fcw", "cost")
 # What one preset's run writes into its folder, and what several presets' comparison adds beside their folders.
@@ -146,8 +147,26 @@ def evaluate(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/
     if workers is not None or scheduler is not None:
         mapper = functools.partial(map_ordered, scheduler=scheduler, workers=workers)
     out = Path(out_dir)
-    (out / "examples").mkdir(parents=True, exist_ok=True)
-    data = Path(data_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with contextlib.ExitStack() as stack:
+        # every output is written beside its place and renamed into it once the whole evaluation is done: an
+        # evaluation that fails leaves the folder's previous report, predictions and examples as they were
+        examples_dir = Path(stack.enter_context(folder_written_whole(out / "examples")))
+
+        def beside(name: str) -> str:
+            return stack.enter_context(written_whole(str(out / name)))
+
+        report = _measure(preset, parts, Path(data_dir), config_path, scenarios, examples, mapper, examples_dir,
+                          beside)
+        Path(beside("report.json")).write_text(json.dumps(report, indent=1, default=str))
+        Path(beside("report.md")).write_text(markdown(report) + "\n")
+    return report
+
+
+def _measure(preset: str, parts, data: Path, config_path: Optional[str], scenarios: Optional[list[str]],
+             examples: int, mapper, examples_dir: Path, beside) -> dict:
+    """The report of `evaluate`: up to `examples` annotated images of each kind into `examples_dir`, the lane
+    predictions to the path `beside(name)` gives for the file's name."""
     report: dict = {"preset": preset, "skipped": {}}
 
     def say(msg: str) -> None:
@@ -164,7 +183,7 @@ def evaluate(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/
             def keep(e, gray, r):
                 if shown[0] < examples and e["bbox"]:
                     truth = [{"box": b} for b in tusimple_boxes.entry_boxes(e)]
-                    cv2.imwrite(str(out / "examples" / f"tusimple_{Path(e['file_name']).stem}.jpg"),
+                    cv2.imwrite(str(examples_dir / f"tusimple_{Path(e['file_name']).stem}.jpg"),
                                 annotate_detections(gray, r.boxes, truth))
                     shown[0] += 1
 
@@ -187,21 +206,21 @@ def evaluate(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/
                     for x, y in zip(lane, lab["h_samples"]):
                         if x >= 0:
                             cv2.circle(img, (int(round(x)), int(y)), max(2, img.shape[1] // 400), (0, 0, 255), -1)
-                cv2.imwrite(str(out / "examples" / f"{prefix}_{name}.jpg"), img)
+                cv2.imwrite(str(examples_dir / f"{prefix}_{name}.jpg"), img)
             return keep
 
         sample = data / "tusimple" / "lane_sample"
         if sample.exists():
             say("lane sample")
             report["lanes"] = lanes_sample.evaluate(str(sample), config_path, on_image=lane_example("lanes"),
-                                                    predictions_out=str(out / "lanes_sample_pred.json"))
+                                                    predictions_out=beside("lanes_sample_pred.json"))
         else:
             report["skipped"]["lanes"] = f"{sample} not found"
         clips = data / "tusimple" / "lane_clips"
         if clips.exists():
             say("lane clips")
             report["lane_clips"] = lane_clips.evaluate(str(clips), config_path, preset,
-                                                       predictions_out=str(out / "lane_clips_pred.json"),
+                                                       predictions_out=beside("lane_clips_pred.json"),
                                                        on_clip=lane_example("lane_clip"))
         else:
             report["skipped"]["lane_clips"] = f"{clips} not found"
@@ -235,8 +254,6 @@ def evaluate(preset: str, out_dir: str, parts=PARTS, data_dir: str = "../shared/
         bench = run_bench("dense_traffic", preset, 640, 480, repeats=1, config_path=config_path, fps=0)
         report["cost"] = {"frame_size": bench["frame_size"], "frames": bench["frames"], "machine": bench["machine"],
                           "total": bench["stages"]["all"]["total"]}
-    (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
-    (out / "report.md").write_text(markdown(report) + "\n")
     return report
 
 
@@ -256,7 +273,7 @@ def presets_of(arg: str) -> list[str]:
 def _write_document(path: str, presets: list[str], parts: tuple, args, scenarios, sections: list[str],
                     started: float) -> None:
     cmd = results_doc.command(presets, parts, PARTS, path, args.data, args.config, scenarios)
-    Path(path).write_text(results_doc.document(cmd, sections, time.monotonic() - started))
+    write_whole(path, results_doc.document(cmd, sections, time.monotonic() - started))
     print(f"document: {Path(path).resolve()}")
 
 
@@ -310,8 +327,8 @@ def run(args) -> int:
     text = compare.markdown(reports, folders=[str(out / p) for p in presets] if doc else presets)
     if doc:
         _write_document(doc, presets, parts, args, scenarios, [text] + [markdown(r) for r in reports], started)
-    (out / "compare.md").write_text(text)
-    (out / "compare.json").write_text(json.dumps({"presets": presets, "parts": list(parts),
+    write_whole(out / "compare.md", text)
+    write_whole(out / "compare.json", json.dumps({"presets": presets, "parts": list(parts),
                                                   "reports": [f"{p}/report.json" for p in presets]}, indent=1))
     print(text, end="")
     print(f"\nreport: {out.resolve()}/compare.md, and each preset's in {out.resolve()}/PRESET/")

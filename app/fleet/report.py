@@ -3,11 +3,11 @@ and the drives that failed with their one-line error. Written as ``OUT/report.js
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Optional
 
 from app.eval.track_score import detection_metrics
+from app.output_files import write_whole
 
 
 def _f(x, nd: int = 3) -> str:
@@ -66,17 +66,11 @@ def markdown(report: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def write(report: dict, out: str | Path) -> tuple[Path, Path]:
     out = Path(out)
     js, md = out / "report.json", out / "report.md"
-    _write_atomic(js, json.dumps(report, indent=1, sort_keys=True) + "\n")
-    _write_atomic(md, markdown(report))
+    write_whole(js, json.dumps(report, indent=1, sort_keys=True) + "\n")
+    write_whole(md, markdown(report))
     return js, md
 
 

@@ -12,6 +12,7 @@ import subprocess
 from pathlib import Path
 
 from app import config as configuration
+from app.output_files import write_whole
 
 REPO = Path(__file__).resolve().parent.parent.parent
 UNITS = REPO / "systemd"
@@ -35,13 +36,14 @@ def install(root: Path, bench: bool = False, enable: bool = True) -> list[str]:
         files["headway-vcan0.network"] = etc / "systemd" / "network" / "80-headway-vcan0.network"
     for name, dest in files.items():
         dest.parent.mkdir(parents=True, exist_ok=True)
-        dest.write_text(render_unit((UNITS / name).read_text(), bitrate=cfg["can"]["bitrate"]))
+        write_whole(dest, render_unit((UNITS / name).read_text(), bitrate=cfg["can"]["bitrate"]))
         done.append(f"wrote {dest}")
     if not config_path.exists():
         config_path.parent.mkdir(parents=True, exist_ok=True)
         text = configuration.default_yaml().replace("  interface: virtual", "  interface: socketcan")
         text = text.replace("  channel: vcan0", "  channel: can0")
-        config_path.write_text(text)
+        # whole or not at all: a configuration cut short would be kept by every later install
+        write_whole(config_path, text)
         done.append(f"wrote {config_path} (edit the camera: and can: sections for your car)")
     else:
         done.append(f"kept {config_path}")

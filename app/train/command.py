@@ -3,9 +3,12 @@ own parameters, and its run. The trainers themselves (app/train/cascade/, propos
 know nothing of the command line."""
 from __future__ import annotations
 
+import contextlib
+from typing import Callable, Iterator
+
 from app import config as configuration
 from app.eval.tusimple_boxes import tusimple_config
-from app.output_files import check_outputs, numbered
+from app.output_files import check_outputs, numbered, written_whole
 from app.train import proposals, verifier, verifier_cnn
 from app.train.cascade import TrainParams, train
 
@@ -149,11 +152,8 @@ def run_cascade(args) -> int:
     if not 0 <= p.min_aspect < p.max_aspect:
         raise ValueError(f"--min-aspect {p.min_aspect:g} --max-aspect {p.max_aspect:g}: give 0 <= min < max (box "
                          f"width / height)")
-    log = _line_logger(args.log)
-    try:
-        train(args.data, args.out, p, log=log)
-    finally:
-        log.close()
+    with _line_logger(args.log) as log:
+        train(args.data, args.out, p, log=log, written=written_whole)
     return 0
 
 
@@ -163,13 +163,10 @@ def run_proposals(args) -> int:
     if args.epochs < 1 or args.batch < 1 or args.threads < 1 or args.input_width < 16:
         raise ValueError(f"--epochs {args.epochs} --batch {args.batch} --threads {args.threads} --input-width "
                          f"{args.input_width}: give at least 1 epoch, 1 image a batch, 1 thread and 16 px")
-    log = _line_logger(args.log)
-    try:
+    with _line_logger(args.log) as log:
         proposals.train(args.data, args.out, epochs=args.epochs, seed=args.seed, input_width=args.input_width,
                         batch=args.batch, lr=args.lr, subcells=args.subcells, cache=args.cache, limit=args.limit, log=log,
                         threads=args.threads)
-    finally:
-        log.close()
     return 0
 
 
@@ -178,32 +175,27 @@ def run_verifier(args) -> int:
     _keep_inputs(args)
     cfg = configuration.load(args.config) if args.config else tusimple_config(configuration.load(None))
     if args.out.endswith(".onnx"):
-        log = _line_logger(args.log)
-        try:
+        with _line_logger(args.log) as log:
             verifier_cnn.train(args.data, args.cascade, args.out, cfg, every=args.every or 1, channels=args.channels,
                                hidden=args.hidden, epochs=args.epochs or 6, decay=args.decay, seed=args.seed,
                                cache=args.cache, compare_hog=args.compare_hog, log=log, box=not args.no_box,
                                near=args.near, margin=args.margin, neg_share=args.neg_share)
-        finally:
-            log.close()
         return 0
     verifier.train(args.data, args.cascade, args.out, cfg, every=args.every or 4, hidden=args.hidden,
                    epochs=args.epochs or 12, decay=args.decay, seed=args.seed)
     return 0
 
 
-class _line_logger:
-    """Prints a training log line and, with a path, also appends it to that file as it comes."""
+@contextlib.contextmanager
+def _line_logger(path: str | None) -> Iterator[Callable[[str], None]]:
+    """A log that prints each training line and, with a path, also writes it to a file beside `path` that
+    replaces it once the training completed (written_whole): a training that fails or is stopped leaves the
+    previous log, its own lines are on stdout."""
+    with written_whole(path) as tmp, (open(tmp, "w") if tmp else contextlib.nullcontext()) as fh:
+        def log(line: str) -> None:
+            print(line, flush=True)
+            if fh:
+                fh.write(line + "\n")
+                fh.flush()   # the file beside `path` can be followed while a long training runs
 
-    def __init__(self, path: str | None):
-        self.fh = open(path, "w") if path else None
-
-    def __call__(self, line: str) -> None:
-        print(line, flush=True)
-        if self.fh:
-            self.fh.write(line + "\n")
-            self.fh.flush()
-
-    def close(self) -> None:
-        if self.fh:
-            self.fh.close()
+        yield log

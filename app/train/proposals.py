@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from app.output_files import written_whole
 from app.train import proposals_onnx as po
 from app.train.cascade.samples import iou, load_folders, read_gray
 
@@ -93,8 +94,10 @@ def load_images(folders: list[str], input_width: int, cache: str | None = None, 
     images = np.stack(imgs)
     if cache:
         Path(cache).parent.mkdir(parents=True, exist_ok=True)
-        np.savez(cache, images=images, boxes=np.concatenate(boxes), counts=np.array([len(b) for b in boxes]),
-                 scale=scale, key=np.array(key))
+        # whole or not at all: the next run would read a cache cut short; to a file, NumPy adds no .npz to the name
+        with written_whole(cache) as tmp, open(tmp, "wb") as f:
+            np.savez(f, images=images, boxes=np.concatenate(boxes), counts=np.array([len(b) for b in boxes]),
+                     scale=scale, key=np.array(key))
     return images, boxes, float(scale)
 
 
@@ -298,15 +301,19 @@ def train(folders: list[str], out: str, epochs: int = 5, seed: int = 0, input_wi
         f"{seed}; {sum(len(boxes[k]) for k in fit_i)} boxes fitted; images {(time.perf_counter() - t0) / 60:.1f} min")
     t1 = time.perf_counter()
 
+    def save(params, doc: str) -> None:   # renamed over `out` once whole: a stopped write leaves the last one
+        with written_whole(out) as tmp:
+            po.save_onnx(params, tmp, doc=doc)
+
     def on_epoch(ep, params, loss, secs, parts):   # the ONNX after every epoch: a stopped run leaves the last one
-        po.save_onnx(params, out, doc=f"headway train proposals --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
+        save(params, f"headway train proposals --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
         rec, peaks = held_out_recall(out, images[held_i], [boxes[k] for k in held_i], scale, po.stride_of(params))
         log(f"epoch {ep + 1}/{epochs}: loss {loss:.4f} ({parts}), held-out boxes >= 40 px a peak >= 0.05 covers at "
             f"IoU 0.5: {rec:.3f}, {peaks:.1f} peaks an image, {secs:.0f} s")
 
     params = fit(images[fit_i], [boxes[k] for k in fit_i], epochs, seed, batch, lr, width=width, blocks=blocks,
                  width8=width8, blocks8=blocks8, subcells=subcells, on_epoch=on_epoch)
-    po.save_onnx(params, out, doc=f"headway train proposals --out {Path(out).name}, seed {seed}, {epochs} epochs")
+    save(params, f"headway train proposals --out {Path(out).name}, seed {seed}, {epochs} epochs")
     log(f"fit {(time.perf_counter() - t1) / 60:.1f} min, total {(time.perf_counter() - t0) / 60:.1f} min -> {out} "
         f"({Path(out).stat().st_size / 1024:.0f} KiB)")
     return params

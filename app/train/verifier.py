@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from app import config as configuration
 from app.core import Pipeline
+from app.output_files import written_whole
 from app.train.cascade.samples import iou, load_folders, read_gray
 
 HOG_WIN = (64, 40)   # px: the cascade's aspect 1.5 (1.6 here: HOG needs multiples of 8), a 40 px box at 1:1
@@ -191,7 +192,8 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
     s = m.logit(x[held])
     acc_pos, acc_neg = float((s[y[held] > 0] > 0).mean()), float((s[y[held] < 0] <= 0).mean())
     m = fit_mlp(x, y, hidden, epochs, decay, seed)
-    m.save(out)
+    with written_whole(out) as tmp:   # same suffixes: OpenCV writes .yml.gz as gzipped YAML
+        m.save(tmp)
     log(f"verifier: {n} images (every {every}th), {int((y > 0).sum())} vehicle and {int((y < 0).sum())} other "
         f"boxes (mirrors included), HOG {HOG_WIN[0]}x{HOG_WIN[1]} ({x.shape[1]} values), {hidden} hidden units, "
         f"{epochs} epochs, decay {decay:g}, seed {seed}; held-out fifth of the images: {acc_pos:.3f} of vehicles "

@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from app.output_files import written_whole
 from app.train import verifier_onnx as vo
 from app.train.cascade.samples import load_folders, read_gray
 from app.train.verifier import box_features, cascade_detections, fit_mlp, geometry_features, hog, iou
@@ -92,7 +93,9 @@ def samples(folders: list[str], cascade_xml: str, every: int, cfg: dict, cache: 
              matched=np.concatenate(matched), key=np.array(key))
     if cache:
         Path(cache).parent.mkdir(parents=True, exist_ok=True)
-        np.savez(cache, **d)
+        # whole or not at all: the next run would read a cache cut short; to a file, NumPy adds no .npz to the name
+        with written_whole(cache) as tmp, open(tmp, "wb") as f:
+            np.savez(f, **d)
     return d
 
 
@@ -298,7 +301,8 @@ def train(folders: list[str], cascade_xml: str, out: str, cfg: dict, every: int 
     def on_epoch(ep, params, loss, secs):   # the ONNX after every epoch: a stopped run leaves the last one
         if box:
             params["crop_margin"] = np.float32([margin])
-        vo.save_onnx(params, out, doc=f"headway train verifier --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
+        with written_whole(out) as tmp:   # renamed over `out` once whole: a stopped write leaves the last epoch's
+            vo.save_onnx(params, tmp, doc=f"headway train verifier --out {Path(out).name}, seed {seed}, epoch {ep + 1}")
         ph, dh = predict_onnx(out, d["crops"][held], d["extra"][held])
         log(f"epoch {ep + 1}/{epochs}: loss {loss:.4f}, held-out others passed at {'/'.join(map(str, KEEP))} of "
             f"vehicles: " + " / ".join(f"{v:.3f}" for v in passed_at(ph, y[held])) + "; of those with IoU < 0.3 "

@@ -5,12 +5,13 @@ cascade XML. Deterministic for a given seed and data.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass
-from typing import Callable
+from typing import Callable, ContextManager
 
 import numpy as np
 from tqdm import tqdm
@@ -44,7 +45,12 @@ class TrainParams:
     scan_band: tuple = ()
 
 
-def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str], None] = print) -> Cascade:
+def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str], None] = print,
+          written: Callable[[str], ContextManager[str]] = contextlib.nullcontext) -> Cascade:
+    """The cascade trained on `folders`, written after every stage through `written(out_xml)`: a context
+    giving the path to write, put in place when its block ends (the command's is output_files.written_whole,
+    a file renamed over `out_xml` once whole; the default writes `out_xml` itself, keeping this package free
+    of the rest of Headway)."""
     rng = np.random.default_rng(p.seed)
     t_start = time.perf_counter()
     items = load_folders(folders)
@@ -112,7 +118,8 @@ def train(folders: list[str], out_xml: str, p: TrainParams, log: Callable[[str],
                                              p.booster)
             cascade.stages.append(stage)
             fa_rate *= fa
-            cascade.save(fs, out_xml)
+            with written(out_xml) as path:
+                cascade.save(fs, path)
             log(f"stage {s:2d}: {len(stage.features):3d} stumps, hit rate {hit:.4f}, false alarm {fa:.4f}, "
                 f"{int((y > 0).sum())} positives ({accepted.mean():.3f} of the pool still accepted), "
                 f"{int((y < 0).sum())} negatives ({ratio_txt}), {time.perf_counter() - t0:.1f} s")
