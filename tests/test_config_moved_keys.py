@@ -1,5 +1,6 @@
 """Keys that moved (to one shared definition: the hood line in the camera section, lane widths in the road
-section, the vehicles' width, height and aspects in the vehicle_shape section; or renamed: fuse.cue_weight) and presets that were removed: an old key or preset is refused with an
+section, the vehicles' width, height and aspects in the vehicle_shape section, the shadow edge's thresholds in the
+shadow_edge section; or renamed: fuse.cue_weight) and presets that were removed: an old key or preset is refused with an
 error naming what replaces it, by the configuration loader and by the core alike; the one key reaches the stages
 that read it. Keys and sections that were removed without a replacement are unknown keys."""
 from __future__ import annotations
@@ -37,6 +38,9 @@ MOVED = {
     "verify.top_max_aspect": "vehicle_shape.max_aspect",
     "parallax.max_aspect": "vehicle_shape.max_aspect",
     "fuse.thesis_weight": "fuse.cue_weight",
+    "shadow.grad_rel": "shadow_edge.grad_rel",
+    "shadow.min_step_gray": "shadow_edge.min_step_gray",
+    "shadow.dark_rel": "shadow_edge.dark_rel",
 }
 
 # Removed preset -> what to use instead (a preset, or the composition as configuration YAML).

@@ -7,8 +7,10 @@
 //         "cascade", "cascade", [](const CascadeParams &p, const SectionLookup &c) { return std::make_unique<...>(p); });
 //
 // names the part, its section and struct (registered with it: register_section) and its factory, which may read
-// other sections through `c` (the camera, the road). The core's parts registry (core/parts.cpp) builds a
-// pipeline's parts from these, and the configuration's choices list them.
+// the pipeline's sections (the camera, the road) and shared units' sections (verify, vehicle_shape) through `c`,
+// never another part's: what two parts both need is a unit's section that both read
+// (tests/cpp/core/test_part_sections.cpp). The core's parts registry (core/parts.cpp) builds a pipeline's parts
+// from these, and the configuration's choices list them.
 #pragma once
 
 #include "base/sections.hpp"
@@ -23,6 +25,7 @@ namespace hw {
 template <class Part> struct PartType {
     std::function<std::unique_ptr<Part>(const SectionLookup &)> make;
     bool needs_road_motion = false;  // a detector that compares two frames (the road-motion stage runs for it)
+    std::string section;             // its configuration section (its subsections' owner)
 };
 
 // The registry of one role. A function-local static: registrars in other object files run in any order.
@@ -40,7 +43,7 @@ bool register_part(const char *name, const char *section, Make make, bool needs_
     register_section<P>(section);
     const std::string s = section;
     r[name] = {[make, s](const SectionLookup &c) -> std::unique_ptr<Part> { return make(c.get<P>(s), c); },
-               needs_road_motion};
+               needs_road_motion, s};
     return true;
 }
 

@@ -62,6 +62,9 @@ constexpr MovedKey kMovedKeys[] = {
     {"verify", "top_max_aspect", "vehicle_shape.max_aspect"},
     {"parallax", "max_aspect", "vehicle_shape.max_aspect"},
     {"fuse", "thesis_weight", "fuse.cue_weight"},
+    {"shadow", "grad_rel", "shadow_edge.grad_rel"},
+    {"shadow", "min_step_gray", "shadow_edge.min_step_gray"},
+    {"shadow", "dark_rel", "shadow_edge.dark_rel"},
 };
 
 void reject_moved_keys(const json &root) {

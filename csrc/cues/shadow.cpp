@@ -1,5 +1,6 @@
 #include "cues/shadow.hpp"
 
+#include "base/sections.hpp"
 #include "cues/edge_projection.hpp"
 
 #include <opencv2/imgproc.hpp>
@@ -193,7 +194,7 @@ float dark_share(const cv::Mat &gray, const RoadPrior &road, int y, int xa, int 
 // its dark side goes on past the ends of each piece. Such a piece is no vehicle's bottom edge.
 bool part_of_band(const cv::Mat &gray, const RoadPrior &road, const Edge &e, const ShadowParams &p) {
     const int reach = std::max(3, int(0.5f * road.expected_width(e.y_bottom)));
-    const int dark = int(p.dark_rel * e.road_gray);
+    const int dark = int(p.edge.dark_rel * e.road_gray);
     const float left = dark_share(gray, road, e.y_bottom, e.x1 - reach, e.x1 - 1, dark);
     const float right = dark_share(gray, road, e.y_bottom, e.x2 + 1, e.x2 + reach, dark);
     if (left < 0.f && right < 0.f) return false;  // nothing scanned beside it: cannot tell
@@ -212,7 +213,7 @@ enum class Above : char {
 };
 
 Above above_shadow(const cv::Mat &gray, const Edge &e, int x, int rows, int max_dark, const ShadowParams &p) {
-    const int dark = int(p.dark_rel * e.road_gray);
+    const int dark = int(p.edge.dark_rel * e.road_gray);
     // The band's lowest dark row in this column: the edge's runs lie on rows up to merge_rows apart.
     int y = e.y_bottom - 1;
     while (y > e.y_bottom - 2 - p.merge_rows && y > 0 && gray.at<uint8_t>(y, x) > dark) --y;
@@ -315,7 +316,7 @@ std::vector<Edge> one_per_vehicle(std::vector<Edge> edges, const RoadPrior &road
 
 } // namespace
 
-ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p) {
+ShadowThresholds shadow_thresholds(float road_gray, const ShadowEdgeParams &p) {
     // A step of s gray levels between the rows above and below gives a 3x3 Sobel response of 4 s.
     const double step = std::max(p.min_step_gray, p.grad_rel * road_gray);
     return {int(std::ceil(4.0 * step)), int(std::floor(p.dark_rel * road_gray))};
@@ -337,7 +338,7 @@ std::vector<ShadowHypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneM
     const RoadLevels levels(gray, road, p.level_bands, p.level_columns);
     std::vector<ShadowThresholds> thr;
     for (size_t c = 0; c < size_t(p.level_bands * p.level_columns); ++c)
-        thr.push_back(shadow_thresholds(levels.level(c), p));
+        thr.push_back(shadow_thresholds(levels.level(c), p.edge));
 
     // Gy = d/dy of the scanned rows (positive where the road below is brighter than above).
     const cv::Rect band(xmin, road.y_top, xmax - xmin + 1, road.y_bottom - road.y_top);
@@ -386,5 +387,12 @@ std::vector<ShadowHypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneM
     if (int(out.size()) > p.max_hypotheses) out.resize(size_t(p.max_hypotheses));
     return out;
 }
+
+namespace {
+
+// Its section, read by the shadow detector and the Kalman tracker's ROI search (base/sections.hpp).
+const bool registered = register_section<ShadowEdgeParams>("shadow_edge");
+
+} // namespace
 
 } // namespace hw

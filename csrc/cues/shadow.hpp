@@ -8,7 +8,8 @@
 // Where the thesis used one fixed gradient threshold (and names that as its weakness), the
 // thresholds here follow the road's own gray level, measured in every frame in cells of the road
 // area (bands of rows x thirds across): an edge pixel needs a step of at least grad_rel times the
-// local road level, and the pixel above it must be darker than dark_rel times that level. A dark band
+// local road level, and the pixel above it must be darker than dark_rel times that level (section
+// shadow_edge, shared with the Kalman tracker's ROI search). A dark band
 // much wider than a vehicle (an overpass or tree shadow across the road) is dropped here, also when
 // lane markings break it into vehicle-sized pieces (its dark side goes on past their ends); an edge
 // moderately wider than a vehicle (a long shadow at low sun) is kept for verification to find the
@@ -25,17 +26,35 @@
 
 namespace hw {
 
+// What a shadow edge is on a road of a given gray level: section "shadow_edge", read by the shadow detector's scan
+// and by the Kalman tracker's search for a tracked vehicle's bottom edge (track/kalman/roi_search.hpp), so that
+// the tracker re-finds its vehicles by the edges the detector finds them by.
+struct ShadowEdgeParams {
+    double grad_rel = 0.12;         // minimal bright-to-dark step as a fraction of the road level
+    double min_step_gray = 6.0;     // gray levels; floor of that step for very dark roads
+    double dark_rel = 0.5;          // the shadow side must be darker than this fraction of the road level
+
+    void bind(ParamMap &m) {
+        m.add("grad_rel", grad_rel, 0.01, 1.0,
+              "fraction of the local road gray level; smallest bright-to-dark step that is a shadow edge; "
+              "adapts the thesis's fixed threshold to the illumination of each frame and region");
+        m.add("min_step_gray", min_step_gray, 0.0, 100.0,
+              "gray levels; floor of the step threshold on very dark roads (sensor noise)");
+        m.add("dark_rel", dark_rel, 0.1, 1.0,
+              "fraction of the local road gray level; the pixel above a shadow edge must be darker than this (a "
+              "shadow is darker than the road, a marking's end is not; docs/detection.md)");
+    }
+};
+
 struct ShadowParams {
     RoadPriorParams road;           // scan area and expected vehicle width (keys in this section)
+    ShadowEdgeParams edge;          // section "shadow_edge", taken by share
     int min_run_px = 12;            // px; shortest shadow run kept (thesis: 10-15)
     double min_width_frac = 0.3;    // shortest merged edge as a fraction of the expected width
     double max_width_ratio = 3.0;   // merged edges wider than this many expected widths are dropped
     int merge_rows = 2;             // px; runs whose rows differ by at most this are merged (thesis: 2)
     int gap_px = 2;                 // px; gaps of at most this many non-edge pixels inside a run
     double join_gap_frac = 0.25;    // edges at one height with a gap below this many widths are joined
-    double grad_rel = 0.12;         // minimal bright-to-dark step as a fraction of the road level
-    double min_step_gray = 6.0;     // gray levels; floor of that step for very dark roads
-    double dark_rel = 0.5;          // the shadow side must be darker than this fraction of the road level
     int level_bands = 8;            // row bands for the road level
     int level_columns = 3;          // cells across the road per band
     double band_dark_frac = 0.5;    // dark share beside both ends that marks a piece of a band across the road
@@ -48,7 +67,10 @@ struct ShadowParams {
     double beside_reach = 0.8;      // with one end cut, the edge reaches this many expected widths from it
     int max_hypotheses = 48;        // cap per frame (strongest kept), bounds the verification cost
 
-    void share(const SectionLookup &c) { road.share(c); }
+    void share(const SectionLookup &c) {
+        road.share(c);
+        edge = c.get<ShadowEdgeParams>("shadow_edge");
+    }
     void bind(ParamMap &m) {
         road.bind(m);
         m.add("min_run_px", min_run_px, 1, 200,
@@ -67,14 +89,6 @@ struct ShadowParams {
         m.add("join_gap_frac", join_gap_frac, 0.0, 1.0,
               "expected vehicle widths; edges at the same height separated by less than this are one "
               "shadow broken at the wheels; 0.25 stays below the gap between cars in adjacent lanes");
-        m.add("grad_rel", grad_rel, 0.01, 1.0,
-              "fraction of the local road gray level; smallest bright-to-dark step that is a shadow edge; "
-              "adapts the thesis's fixed threshold to the illumination of each frame and region");
-        m.add("min_step_gray", min_step_gray, 0.0, 100.0,
-              "gray levels; floor of the step threshold on very dark roads (sensor noise)");
-        m.add("dark_rel", dark_rel, 0.1, 1.0,
-              "fraction of the local road gray level; the pixel above a shadow edge must be darker than this (a "
-              "shadow is darker than the road, a marking's end is not; docs/detection.md)");
         m.add("level_bands", level_bands, 1, 64,
               "row bands in which the road gray level is measured; the level changes with range");
         m.add("level_columns", level_columns, 1, 16,
@@ -122,7 +136,7 @@ struct ShadowThresholds {
     int grad = 0;
     int dark = 0;
 };
-ShadowThresholds shadow_thresholds(float road_gray, const ShadowParams &p);
+ShadowThresholds shadow_thresholds(float road_gray, const ShadowEdgeParams &p);
 
 std::vector<ShadowHypothesis> shadow_hypotheses(const cv::Mat &gray, const LaneModel &lanes,
                                           const CameraParams &cam, const ShadowParams &p);

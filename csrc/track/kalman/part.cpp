@@ -375,10 +375,13 @@ void KalmanTracker::step(const FrameContext &ctx, DetectionStage &detectors, std
 
 namespace {
 
-// The part, its configuration section and its factory (base/part_registry.hpp).
+// The part, its configuration section and its factory (base/part_registry.hpp). The ROI search takes shared units'
+// sections (shadow_edge, verify) and the pipeline's, none of a detector part's: it runs with any detectors.
 const bool registered = register_part<Tracker, KalmanBoxParams>(
     "kalman", "kalman", [](const KalmanBoxParams &p, const SectionLookup &c) {
-        return std::make_unique<KalmanTracker>(p, RoiSearch(c.get<ShadowParams>("shadow"), c.get<VerifyParams>("verify")));
+        return std::make_unique<KalmanTracker>(
+            p, RoiSearch(c.get<ShadowEdgeParams>("shadow_edge"), c.get<VerifyParams>("verify"),
+                         c.get<RoadParams>("road"), c.get<VehicleShapeParams>("vehicle_shape")));
     });
 
 } // namespace

@@ -1,7 +1,6 @@
 #include "track/kalman/roi_search.hpp"
 
 #include "cues/edge_projection.hpp"
-#include "cues/road_prior.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -25,7 +24,7 @@ float road_gray_below(const cv::Mat &gray, float x1, float y1, float x2) {
     return float(v[v.size() / 2]);
 }
 
-RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const ShadowParams &shadow,
+RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const ShadowEdgeParams &edge,
                           const VerifyParams &verify, const RoiSearchParams &p) {
     CV_Assert(!gray.empty() && gray.type() == CV_8UC1);
     RoiMeasurement m;
@@ -36,7 +35,7 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
     // Road level under the predicted bottom, for the adaptive thresholds of the shadow stage.
     float road = road_gray_below(gray, pred.x1, pred.y1 + pred.gate_y, pred.x2);
     if (!std::isfinite(road)) return m;
-    const ShadowThresholds thr = shadow_thresholds(road, shadow);
+    const ShadowThresholds thr = shadow_thresholds(road, edge);
 
     // Bottom: rows within the gate; the shadow-edge profile of the inner 70 % of the columns (away
     // from neighbours) minus the weaker of two strips beside the vehicle. A shadow edge that runs on
@@ -89,8 +88,15 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
     return m;
 }
 
+RoiSearch::RoiSearch(const ShadowEdgeParams &edge, const VerifyParams &verify, const RoadParams &road,
+                     const VehicleShapeParams &shape)
+    : edge_(edge), verify_(verify) {
+    prior_.road = road;
+    prior_.shape = shape;
+}
+
 float RoiSearch::expected_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam) const {
-    return expected_vehicle_width(y, size, lanes, cam, shadow_.road);
+    return expected_vehicle_width(y, size, lanes, cam, prior_);
 }
 
 } // namespace hw

@@ -9,8 +9,11 @@
 // and a width close to the predicted one.
 #pragma once
 
+#include "cues/road_prior.hpp"
 #include "cues/shadow.hpp"
 #include "cues/verify.hpp"
+#include "geometry/road_params.hpp"
+#include "geometry/vehicle_shape.hpp"
 
 namespace hw {
 
@@ -34,25 +37,30 @@ struct RoiMeasurement {
     float road_gray = kNaN;
 };
 
-RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const ShadowParams &shadow,
+// edge: what a shadow edge is (the bottom); verify: the ROI around it and the side threshold (margin_px,
+// margin_frac, roi_height_frac, side_rel, side_min_gray).
+RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const ShadowEdgeParams &edge,
                           const VerifyParams &verify, const RoiSearchParams &p);
 
-// The search above as the Kalman tracker is handed it: with the shadow detector's edge settings and the verifier's
-// side rule (the tracker re-finds its vehicles by the edges the detector found them by), and the width a vehicle
-// has at a row (the shadow detector's road prior).
+// The search above as the Kalman tracker is handed it, from shared units' sections only: the shadow edge
+// (section shadow_edge) and the verification's side rule (section verify) that the shadow detector uses too, so
+// the tracker re-finds its vehicles by the edges the detector finds them by; and the width a vehicle has at a row
+// (the road prior's, from sections road and vehicle_shape).
 class RoiSearch {
 public:
-    RoiSearch(const ShadowParams &shadow, const VerifyParams &verify) : shadow_(shadow), verify_(verify) {}
+    RoiSearch(const ShadowEdgeParams &edge, const VerifyParams &verify, const RoadParams &road,
+              const VehicleShapeParams &shape);
     RoiMeasurement search(const cv::Mat &gray, const RoiPrediction &pred, const RoiSearchParams &p) const {
-        return search_roi(gray, pred, shadow_, verify_, p);
+        return search_roi(gray, pred, edge_, verify_, p);
     }
     // Expected image width of a vehicle whose bottom is at row y (0 when no vehicle stands there).
     float expected_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam) const;
-    double vehicle_width_m() const { return shadow_.road.shape.width_m; }  // m (section vehicle_shape)
+    double vehicle_width_m() const { return prior_.shape.width_m; }  // m (section vehicle_shape)
 
 private:
-    ShadowParams shadow_;
+    ShadowEdgeParams edge_;
     VerifyParams verify_;
+    RoadPriorParams prior_;  // its lane and vehicle widths (expected_vehicle_width reads nothing else of it)
 };
 
 // Gray level of the road right below a bottom edge (median of a strip under [x1, x2]); NaN if the
