@@ -301,7 +301,7 @@ def error_line(message: object, path: Optional[Union[str, Path]] = None, limit: 
         named = next((m.group(1) for m in _KEY_PATH.finditer(text) if m.group(1) in lines), None)
         if named is None:   # an unknown or misplaced section: its own line (its name may be quoted cut short)
             first = text.split(":", 1)[0]
-            named = next((k for k in lines if "." not in k and (k == first or first.endswith("...")
+            named = next((k for k in lines if "." not in k and (text.startswith(f"{k}: ") or first.endswith("...")
                                                                   and k.startswith(first[:-3]))), None)
         line = f"line {lines[named]}: " if named and not text.startswith("line ") else ""
         where = f"{short_path(name)}: {line}"

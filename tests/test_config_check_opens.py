@@ -109,6 +109,8 @@ def test_limits_name_their_line(tmp_path, capsys):
     assert rc == 2 and "line 3: a value cannot be read" in one_line(err)
     rc, err = check(capsys, tmp_path, "camera:\n  fx: 700\n" + "x" * 300 + ":\n")
     assert rc == 2 and "c.yaml: line 3: xxxx" in one_line(err) and "unknown section" in err
+    rc, err = check(capsys, tmp_path, "camera:\n  fx: 700\n:can:\n  interface: virtual\n")  # a colon in the name
+    assert rc == 2 and "c.yaml: line 3: :can: unknown section" in one_line(err)
     (tmp_path / "folder.yaml").mkdir()
     rc = cli.main(["config", "check", str(tmp_path / "folder.yaml")])
     assert rc == 2 and "is a folder, not a configuration file" in one_line(capsys.readouterr().err)
