@@ -74,8 +74,8 @@ void reject_moved_keys(const json &root) {
                               " (one definition for every stage); set " + m.to + " instead");
 }
 
-// The preset's own keys (core/parts.cpp) fill in what the configuration leaves out: {"merge":
-// {"min_appearance": 0.9}} for cascade_shadow_phd unless the configuration sets merge.min_appearance. A
+// The preset's own keys (core/parts.cpp) fill in what the configuration leaves out: {"kinematics":
+// {"box_margin_px": 1.5}} for default unless the configuration sets kinematics.box_margin_px. A
 // section given as something other than a mapping is left for read_section to report.
 void fill_preset_keys(json &root) {
     std::string preset = PipelineParams{}.preset;

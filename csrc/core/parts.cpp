@@ -21,16 +21,23 @@ struct Preset {
     nlohmann::json keys = nlohmann::json::object();
 };
 
+// TuSimple's annotation margin, 2-3 px for boxes 10-30 px high and 3-5 px at 30-60 px: 1.5 px + 0.06 x height.
+nlohmann::json learned_box_margin() {
+    return {{"kinematics", {{"box_margin_px", 1.5}, {"box_margin_frac", 0.06}}}};
+}
+
 // The named compositions: Headway's own (default) and the three seed papers' methods as they describe them.
 // Other compositions are made with pipeline.detectors / pipeline.tracker.
 const std::map<std::string, Preset> &presets() {
     static const std::map<std::string, Preset> r{
         // The learned detector (the cascade's proposals judged by the CNN verifier) as the primary source, the
         // shadow detector's verified bottom edges as a cue (detect/fuse_hypotheses.hpp); tracked by phd.
-        {"default", {{{"cascade", "shadow"}, "phd"}}},
+        // The learned detector's boxes carry its training boxes' margin beyond the vehicle's sides; the tracked
+        // vehicles are reported without it (geometry/track_kinematics.hpp, docs/tracking.md).
+        {"default", {{{"cascade", "shadow"}, "phd"}, learned_box_margin()}},
         {"thesis", {{{"shadow"}, "kalman"}}},      // shadows + vertical edges + Kalman
         {"parallax", {{{"parallax"}, "particles"}}},  // road homography + aligned difference + particle filter (paper 000)
-        {"paper004", {{{"cascade"}, "phd"}}},      // Haar cascade + GM-PHD features + UKF (paper 004)
+        {"paper004", {{{"cascade"}, "phd"}, learned_box_margin()}},  // Haar cascade + GM-PHD features + UKF (paper 004)
         {"none", {{{}, ""}}},                      // lanes only
     };
     return r;

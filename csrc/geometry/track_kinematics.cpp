@@ -181,6 +181,20 @@ void TrackKinematics::update(std::vector<TrackState> &tracks, double horizon_row
     }
     for (auto it = state_.begin(); it != state_.end();)
         it = seen.count(it->first) ? std::next(it) : state_.erase(it);
+    // The tracked vehicles' boxes reported as the vehicles' sides: the learned detector draws its boxes as
+    // TuSimple's annotators did, 2-3 px wider than the car for boxes 10-30 px high and 3-5 px at 30-60 px
+    // (docs/tracking.md). After the scale fit (which takes its own constant scale_margin_px) and the range,
+    // whose bottom centre the symmetric cut leaves where it was. Single-image detections (id < 0) stay as found.
+    if (p_.box_margin_px > 0.0 || p_.box_margin_frac > 0.0) {
+        for (auto &tr : tracks) {
+            if (tr.id < 0) continue;
+            const float cut = float(p_.box_margin_px + p_.box_margin_frac * tr.box.height);
+            if (tr.box.width > 2.0f * cut) {
+                tr.box.x += 0.5f * cut;
+                tr.box.width -= cut;
+            }
+        }
+    }
 }
 
 } // namespace hw

@@ -41,6 +41,8 @@ struct KinematicsParams {
     double scale_jump_closing_mps = 40.0;  // a faster width change between frames restarts the scale fit
     double scale_jump_px = 4.0;            // edge noise allowed on top of it
     double scale_margin_px = 3.0;          // the box's width beyond the vehicle's, taken off before the fit
+    double box_margin_px = 0.0;            // a tracked box's reported sides: its width less this
+    double box_margin_frac = 0.0;          // and this share of its height (the detector's margin), half each side
 
     void bind(ParamMap &m) {
         m.add("jerk_sigma_mps3", jerk_sigma_mps3, 0.01, 100.0,
@@ -65,6 +67,11 @@ struct KinematicsParams {
               "px; how much wider than the vehicle's rear the detector's box is (the margin its training boxes "
               "were drawn with), taken off the width before the scale fit: a constant margin makes the scale TTC "
               "too long by margin / width (docs/tracking.md)");
+        m.add("box_margin_px", box_margin_px, 0.0, 50.0,
+              "px; a tracked vehicle's box is reported box_margin_px + box_margin_frac x its height narrower, half "
+              "off each side: the margin a learned detector's boxes carry beyond the vehicle's sides (docs/tracking.md)");
+        m.add("box_margin_frac", box_margin_frac, 0.0, 0.5,
+              "share of a tracked box's height added to box_margin_px in its reported width (docs/tracking.md)");
         m.add("scale_rate_fusion", scale_rate_fusion,
               "the box's scale change also measures the range rate (dZ/dt = -Z d(ln w)/dt) in the range filter "
               "(docs/tracking.md)");

@@ -81,3 +81,27 @@ TEST_CASE("the box's margin beyond the vehicle is taken off before the scale fit
     REQUIRE(std::isfinite(raw.ttc_scale_s));
     CHECK(raw.ttc_scale_s > 1.08 * vehicle.ttc_scale_s);  // too long by about margin / width: a later warning
 }
+
+TEST_CASE("a tracked box is reported without the detector's margin, the TTCs and a single image's box as before") {
+    hw::KinematicsParams margin;
+    margin.box_margin_px = 1.5;
+    margin.box_margin_frac = 0.06;
+    // a car 20 px high, 26 px wide, 77 m ahead: 1.5 + 0.06 x 20 = 2.7 px off, 1.35 px each side
+    const hw::TrackState plain = grow(77.0, 24.f, 26.f, NAN, NAN);
+    const hw::TrackState cut = grow(77.0, 24.f, 26.f, NAN, NAN, margin);
+    const float h = plain.box.height;
+    CHECK(cut.box.width == doctest::Approx(plain.box.width - (1.5 + 0.06 * h)));
+    CHECK(cut.box.x + 0.5f * cut.box.width == doctest::Approx(plain.box.x + 0.5f * plain.box.width));  // centre kept
+    CHECK(cut.box.y == plain.box.y);
+    CHECK(cut.box.height == plain.box.height);  // the bottom row, which the range reads, kept
+    REQUIRE(std::isfinite(plain.ttc_scale_s));
+    CHECK(cut.ttc_scale_s == plain.ttc_scale_s);  // the scale fit reads the box as detected
+    // a single image's detection (id -1) is reported as the detector found it
+    hw::TrackKinematics kin(margin, hw::CameraParams{});
+    hw::TrackState det;
+    det.id = -1;
+    det.box = cv::Rect2f(300.f, 250.f, 40.f, 30.f);
+    std::vector<hw::TrackState> dets{det};
+    kin.update(dets, 230.0, 0.0);
+    CHECK(dets[0].box == det.box);
+}
