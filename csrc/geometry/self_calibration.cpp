@@ -211,10 +211,9 @@ void SelfCalibration::update(const LaneModel &lanes, double speed_mps, double ya
                         : std::isfinite(last_offset_m_) && dt > 0 &&
                               std::abs(offset_m - last_offset_m_) / dt <= p_.max_lateral_rate_mps;
     last_offset_m_ = offset_m;
-    // A believed model (paint along both ego boundaries) measures the pitch and height in every such frame: a lane
-    // change and a curve move the vanishing column, not its row. Otherwise, as the yaw, only in a steady lane on a
-    // straight road: on an unmarked road the "lanes" are assembled from vehicle sides.
-    if (!p_.from_scratch && !lanes.certain && (!steady_lane || !straight)) return;
+    // From scratch the pitch and height are measured in every such frame (below); otherwise only in a steady lane on
+    // a straight road, as the yaw.
+    if (!p_.from_scratch && (!steady_lane || !straight)) return;
 
     const double pitch = std::atan((cfg_.cy - vh) / cfg_.fy) / kDeg;
     const double yaw = std::atan((cfg_.cx - uvp) / cfg_.fx) / kDeg;

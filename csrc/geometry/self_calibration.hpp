@@ -34,9 +34,7 @@
 // Each parameter is a scalar Kalman filter: random walk (process noise for slow load changes),
 // initialised at the configured value with the prior's sigma; a measurement is used only when
 //   - both ego boundaries were measured this frame (not carried over),
-//   - for the yaw, and for the pitch and height of a lane model not believed (lanes.certain false, not from
-//     scratch; a lane change and a curve move the vanishing column, not its row, but on an unmarked road the
-//     "lanes" are vehicle sides): the car is not changing lanes: the lateral offset in the lane moves slower than
+//   - the car is not changing lanes: the lateral offset in the lane moves slower than
 //     max_lateral_rate_mps (a lane change crosses at ~1 m/s and turns the car against the lane,
 //     which moves the vanishing column by fx * heading),
 //   - the car is not on a curve: the path curvature |yaw rate| / speed (CAN or road motion, when known)
