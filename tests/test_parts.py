@@ -59,7 +59,7 @@ def test_a_preset_is_its_composition(preset, detectors, tracker):
     """A preset is its parts and the keys it sets."""
     by_name = _run("steady_following", {"preset": preset}, 40)
     keys = configuration.presets()[preset]["keys"]
-    assert set(keys) <= {"cascade", "phd", "fuse"}
+    assert set(keys) <= {"cascade", "phd", "fuse", "kinematics"}
     by_parts = _run("steady_following", {"preset": "none", "detectors": detectors, "tracker": tracker}, 40, keys)
     assert _boxes(by_name) == _boxes(by_parts)
     assert [r.stages.keys() for r in by_name] == [r.stages.keys() for r in by_parts]
