@@ -379,9 +379,10 @@ namespace {
 // sections (shadow_edge, verify) and the pipeline's, none of a detector part's: it runs with any detectors.
 const bool registered = register_part<Tracker, KalmanBoxParams>(
     "kalman", "kalman", [](const KalmanBoxParams &p, const SectionLookup &c) {
+        RoadPriorParams prior;
+        prior.share(c);
         return std::make_unique<KalmanTracker>(
-            p, RoiSearch(c.get<ShadowEdgeParams>("shadow_edge"), c.get<VerifyParams>("verify"),
-                         c.get<RoadParams>("road"), c.get<VehicleShapeParams>("vehicle_shape")));
+            p, RoiSearch(c.get<ShadowEdgeParams>("shadow_edge"), c.get<VerifyParams>("verify"), prior));
     });
 
 } // namespace

@@ -88,13 +88,6 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
     return m;
 }
 
-RoiSearch::RoiSearch(const ShadowEdgeParams &edge, const VerifyParams &verify, const RoadParams &road,
-                     const VehicleShapeParams &shape)
-    : edge_(edge), verify_(verify) {
-    prior_.road = road;
-    prior_.shape = shape;
-}
-
 float RoiSearch::expected_width(float y, cv::Size size, const LaneModel &lanes, const CameraParams &cam) const {
     return expected_vehicle_width(y, size, lanes, cam, prior_);
 }

@@ -12,8 +12,6 @@
 #include "cues/road_prior.hpp"
 #include "cues/shadow.hpp"
 #include "cues/verify.hpp"
-#include "geometry/road_params.hpp"
-#include "geometry/vehicle_shape.hpp"
 
 namespace hw {
 
@@ -48,8 +46,9 @@ RoiMeasurement search_roi(const cv::Mat &gray, const RoiPrediction &pred, const 
 // (the road prior's, from sections road and vehicle_shape).
 class RoiSearch {
 public:
-    RoiSearch(const ShadowEdgeParams &edge, const VerifyParams &verify, const RoadParams &road,
-              const VehicleShapeParams &shape);
+    // prior: its lane and vehicle widths, the only fields expected_vehicle_width reads (RoadPriorParams::share)
+    RoiSearch(const ShadowEdgeParams &edge, const VerifyParams &verify, const RoadPriorParams &prior)
+        : edge_(edge), verify_(verify), prior_(prior) {}
     RoiMeasurement search(const cv::Mat &gray, const RoiPrediction &pred, const RoiSearchParams &p) const {
         return search_roi(gray, pred, edge_, verify_, p);
     }
@@ -60,7 +59,7 @@ public:
 private:
     ShadowEdgeParams edge_;
     VerifyParams verify_;
-    RoadPriorParams prior_;  // its lane and vehicle widths (expected_vehicle_width reads nothing else of it)
+    RoadPriorParams prior_;
 };
 
 // Gray level of the road right below a bottom edge (median of a strip under [x1, x2]); NaN if the
