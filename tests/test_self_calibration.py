@@ -214,6 +214,20 @@ def test_pitch_from_scratch_settles_within_the_clip(clips_from_scratch):
     assert all(c["pitch_settled_from_frame"] is not None and c["pitch_settled_from_frame"] <= 11 for c in clips), clips
 
 
+def test_pitch_from_scratch_meets_the_labelled_lanes_vanishing_row(clips_from_scratch):
+    """Against independent truth: where frame 20's labelled ego boundaries meet. On the 7 clips whose labelled
+    boundaries are straight (that row the same from lines through all their points and through the near ones), the
+    pitch found without the pitch given is within 0.3 deg of it on 6 and within 0.5 deg on all (measured 0.03-0.15
+    deg on 6, 0.47 deg on 0313-2/20), and on the whole nearer to it than the estimate with the pitch given (measured
+    mean absolute error 0.13 against 0.27 deg)."""
+    straight = [c for c in clips_from_scratch["clips"] if c["labels_straight"]]
+    assert len(straight) == 7, clips_from_scratch["clips"]
+    scratch = [abs(c["no_pitch"]["pitch_deg"] - c["labelled_pitch_deg"]) for c in straight]
+    given = [abs(c["pitch_given"]["pitch_deg"] - c["labelled_pitch_deg"]) for c in straight]
+    assert sum(e <= 0.3 for e in scratch) >= 6 and max(scratch) <= 0.5, straight
+    assert sum(scratch) < sum(given), (scratch, given)
+
+
 def test_yaw_from_scratch_is_measured_within_20_frames(clips_from_scratch):
     """The yaw likewise, where the car keeps its lane: on 10 of the 12 clips its 1-sigma is under 0.3 deg after 20
     frames (the other two: a lane change or the lane's offset jittering faster than max_lateral_rate_mps)."""

@@ -146,12 +146,46 @@ def synthetic(scenario: str = "calibration_drive", offsets: Optional[dict] = Non
     return synthetic_runs(scenario, [{"offsets": offsets, "enabled": enabled}], preset, max_range_m)[0]
 
 
+def labelled_pitch_deg(label: dict, camera: dict, below_row: float = 0.0) -> Optional[float]:
+    """The pitch at which a TuSimple label's ego boundaries meet: a straight line through each boundary's labelled
+    points below `below_row`, the ego pair the nearest either side of the principal point's column at the image's
+    bottom, and atan((cy - row) / fy) of their crossing. On a straight road it does not depend on `below_row`; on a
+    curve the lines bend with the rows used. None without an ego pair."""
+    rows = np.asarray(label["h_samples"], float)
+    bottom = float(camera["height"] - 1)
+    lines = []  # (column at the bottom row, slope, intercept) of x = slope * row + intercept
+    for lane in label["lanes"]:
+        x = np.asarray(lane, float)
+        keep = (x >= 0) & (rows > below_row)
+        if keep.sum() < 5:
+            continue
+        a, b = np.polyfit(rows[keep], x[keep], 1)
+        lines.append((a * bottom + b, a, b))
+    left = [ln for ln in lines if ln[0] < camera["cx"]]
+    right = [ln for ln in lines if ln[0] >= camera["cx"]]
+    if not left or not right:
+        return None
+    (_, al, bl), (_, ar, br) = max(left), min(right)
+    if al == ar:
+        return None
+    row = (br - bl) / (al - ar)
+    return float(np.degrees(np.arctan((camera["cy"] - row) / camera["fy"])))
+
+
+# The labelled ego boundaries count as straight when the pitch where they meet moves by at most this much between
+# lines fitted through all their points and through those below row 300 (the near half the lane stage fits).
+STRAIGHT_LABEL_DEG = 0.1
+NEAR_ROWS_FROM = 300.0
+
+
 def lane_clips(data: str, within_deg: float = 0.3) -> dict:
     """The 12 real lane clips replayed as `headway replay CLIP --fps 20 --config F` does, twice: F with only what
     TuSimple's calibration.txt holds (intrinsics, 1.80 m height) and the hood line ("no_pitch": calibrated from
     scratch, as every camera section without pitch_deg is), and with the pitch given as well ("pitch_given"). Per
-    run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's estimate at the last frame and, without
-    the pitch, the first frame from which the pitch estimate stays within `within_deg` of its last value."""
+    run, the last frame's TuSimple accuracy / FP / FN; per clip, each run's estimate at the last frame, without the
+    pitch the first frame from which the pitch estimate stays within `within_deg` of its last value, and the pitch
+    where the labelled ego boundaries of frame 20 meet (labelled_pitch_deg, their points below row 300), with whether
+    the labels are straight (STRAIGHT_LABEL_DEG): on a curve that pitch depends on the rows fitted."""
     clips = str(Path(data) / "tusimple" / "lane_clips")
     out: dict = {}
     course: dict = {}
@@ -165,8 +199,13 @@ def lane_clips(data: str, within_deg: float = 0.3) -> dict:
             out[run] = {k: m[k] for k in ("clips", "accuracy", "fp", "fn")}
             out[run]["per_clip"] = {"/".join(x["raw_file"].split("/")[1:3]): {k: x[k] for k in ("accuracy", "fp", "fn")}
                                     for x in m["per_image"]}
+    labels = {"/".join(lab["raw_file"].split("/")[1:3]): lab for lab, _ in clips_eval.clip_folders(clips)}
     per_clip = []
     for clip, scratch in course["no_pitch"].items():
+        labelled = labelled_pitch_deg(labels[clip], TUSIMPLE_CAMERA, NEAR_ROWS_FROM)
+        labelled_all_rows = labelled_pitch_deg(labels[clip], TUSIMPLE_CAMERA)
+        straight = (labelled is not None and labelled_all_rows is not None
+                    and abs(labelled - labelled_all_rows) <= STRAIGHT_LABEL_DEG)
         given = course["pitch_given"][clip][-1]
         last = scratch[-1]
         near = [abs(c["pitch_deg"] - last["pitch_deg"]) <= within_deg for c in scratch]
@@ -177,7 +216,9 @@ def lane_clips(data: str, within_deg: float = 0.3) -> dict:
                          | {"state": last["state"], "updates": last["updates"]},
                          "pitch_given": {k: round(given[k], 3) for k in ("pitch_deg", "yaw_deg", "height_m")}
                          | {"state": given["state"]},
-                         "pitch_diff_deg": round(last["pitch_deg"] - given["pitch_deg"], 3)})
+                         "pitch_diff_deg": round(last["pitch_deg"] - given["pitch_deg"], 3),
+                         "labelled_pitch_deg": None if labelled is None else round(labelled, 3),
+                         "labels_straight": straight})
     out["clips"] = per_clip
     return out
 
