@@ -10,6 +10,9 @@ namespace hw {
 bool on_tracked_vehicle(const cv::Rect2f &b, const std::vector<cv::Rect2f> &tracked, const BirthGateParams &p) {
     const cv::Point2f foot(b.x + 0.5f * b.width, b.y + b.height);
     for (const cv::Rect2f &tb : tracked) {
+        if (p.nearer_below > 0.0 && foot.y - (tb.y + tb.height) > p.nearer_below * tb.height && b.x <= tb.x &&
+            b.x + b.width >= tb.x + tb.width)
+            continue;
         if (box_iou(tb, b) >= float(p.explained_iou)) return true;
         if (foot.x >= tb.x && foot.x <= tb.x + tb.width && foot.y >= tb.y && foot.y <= tb.y + tb.height) return true;
         if (p.beside_overlap >= 1.0) continue;

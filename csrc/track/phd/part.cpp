@@ -62,6 +62,10 @@ void PhdTrackerParams::bind(ParamMap &m) {
     association.bind(m);
     m.add("duplicate_iou", duplicate_iou, 0.0, 1.0,
           "IoU above which two vehicles are the same; the one with fewer detections goes");
+    m.add("nearer_below", nearer_below, 0.0, 10.0,
+          "box heights; a detection standing this much lower than a vehicle's box across its columns is a nearer "
+          "vehicle, not part of it, and may start one; a vehicle almost inside a confirmed nearer one's box goes "
+          "(hidden); 0 = neither");
     m.add("confirm_hits", confirm_hits, 1, 100, "detections (the first included) before a vehicle is confirmed");
     m.add("birth_min_appearance", birth_min_appearance, 0.0, 1.0,
           "score under which a learned detection starts no vehicle but may still re-anchor a tracked one; other "
@@ -388,6 +392,8 @@ void PhdTracker::use_detections(const FrameContext &ctx, const LaneModel &lanes,
     }
     std::vector<cv::Rect2f> tracked;  // each vehicle's box on the detections' frame, and those started from them
     for (size_t k = 0; k < vehicles_.size(); ++k) tracked.push_back(box_then(k));
+    BirthGateParams gate;
+    gate.nearer_below = p_.nearer_below;
     for (size_t i = 0; i < dets.size(); ++i) {
         if (used[i] || dets[i].score < p_.association.high_score) continue;  // a weak detection starts nothing
         const cv::Rect2f &b = dets[i].box;
@@ -402,10 +408,13 @@ void PhdTracker::use_detections(const FrameContext &ctx, const LaneModel &lanes,
         // Its score is the verifier's probability, raised where a cue (a shadow edge) confirmed it
         // (detect/fuse_hypotheses.hpp).
         const bool doubted = std::isfinite(dets[i].appearance) && dets[i].score < p_.birth_min_appearance;
-        if (!doubted && !on_tracked_vehicle(b, tracked, BirthGateParams{}) && start_vehicle(ctx.gray, dets[i], horizon))
+        if (!doubted && !on_tracked_vehicle(b, tracked, gate) && start_vehicle(ctx.gray, dets[i], horizon))
             tracked.push_back(vehicles_.back().box());
     }
 }
+
+// share of a vehicle's box inside a nearer vehicle's for it to be hidden (nearer_below)
+constexpr double kHiddenInside = 0.9;
 
 void PhdTracker::prune(const FrameContext &ctx, double horizon) {
     std::vector<TrackRank> ranks;
@@ -415,6 +424,16 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
         boxes.push_back(v.box());
     }
     std::vector<bool> gone = overlapping_tracks(ranks, boxes, p_.duplicate_iou);
+    // A vehicle (almost) inside the box of a confirmed vehicle standing well below it is behind that one and hidden:
+    // what it still measures there is the nearer vehicle (a track started from a box the image's side cut short).
+    if (p_.nearer_below > 0.0)
+        for (size_t i = 0; i < boxes.size(); ++i)
+            for (size_t j = 0; j < boxes.size() && !gone[i]; ++j) {
+                const cv::Rect2f &b = boxes[i], &u = boxes[j];
+                gone[i] = j != i && !gone[j] && vehicles_[j].confirmed &&
+                          (u.y + u.height) - (b.y + b.height) > p_.nearer_below * b.height &&
+                          (u & b).area() >= kHiddenInside * b.area();
+            }
     // Eq. 12: a vehicle whose features are all lost ends, or first coasts (coast_frames, counted in `coast`): only
     // one the detector has found often and at its last run, and that no nearer vehicle hides (being hidden explains
     // the lost features). One that may not coast is put past its allowance, so it ends below.

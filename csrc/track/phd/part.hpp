@@ -91,6 +91,10 @@ struct PhdTrackerParams {
     double anchor_gain = 0.5;          // share of a matched detection's box taken into width and offsets
     AssociationParams association;     // detections <-> vehicles: Hungarian on IoU, confident ones first
     double duplicate_iou = 0.5;        // two vehicles overlapping this much: the younger goes
+    double nearer_below = 0.5;         // own box heights; a box standing this much lower than a vehicle's, across its
+                                       // columns, is a nearer vehicle in front of it: not part of it at birth, and a
+                                       // vehicle (almost) inside a confirmed nearer one's box is hidden and goes
+                                       // (0 = neither rule)
     int confirm_hits = 2;              // detections before a vehicle is confirmed
     double birth_min_appearance = 0.9;  // a learned detection scoring under this starts no vehicle (it may still
                                         // re-anchor one); others are not affected
