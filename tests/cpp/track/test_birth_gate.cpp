@@ -44,3 +44,20 @@ TEST_CASE("birth gate: the beside rule, when on, takes a detection on the vehicl
     // 10 px lower: bottoms 12 px apart, more than 8: another range
     CHECK_FALSE(on_tracked_vehicle({128, 112, 40, 30}, tracked, p));
 }
+
+TEST_CASE("birth gate: the nearer rule, when on, lets a vehicle in front of a tracked one start") {
+    // a track started from a box the image's side cut short: 57 x 68 px, bottom row 277
+    const std::vector<cv::Rect2f> tracked{{548, 209, 57, 68}};
+    // the whole car, found later: across the track's columns, bottom row 335 (58 px lower, 0.85 of its height);
+    // IoU 0.25 with the short box, so by overlap it is part of the tracked vehicle
+    const cv::Rect2f whole{545, 175, 95, 160};
+    CHECK(on_tracked_vehicle(whole, tracked, BirthGateParams{}));  // off by default
+    BirthGateParams p;
+    p.nearer_below = 0.5;
+    CHECK_FALSE(on_tracked_vehicle(whole, tracked, p));
+    p.nearer_below = 0.9;  // 58 px is under 0.9 of 68: not far enough below
+    CHECK(on_tracked_vehicle(whole, tracked, p));
+    p.nearer_below = 0.5;
+    // as low, but not across the tracked box's columns (its left side 10 px right of the track's): part of it
+    CHECK(on_tracked_vehicle({558, 175, 82, 160}, tracked, p));
+}
