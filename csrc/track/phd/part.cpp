@@ -424,13 +424,15 @@ void PhdTracker::prune(const FrameContext &ctx, double horizon) {
         boxes.push_back(v.box());
     }
     std::vector<bool> gone = overlapping_tracks(ranks, boxes, p_.duplicate_iou);
-    // A vehicle (almost) inside the box of a confirmed vehicle standing well below it is behind that one and hidden:
-    // what it still measures there is the nearer vehicle (a track started from a box the image's side cut short).
+    // A vehicle (almost) inside the box of a confirmed vehicle standing well below it, which the detector found at
+    // its last run, is behind that one and hidden: what it still measures there is the nearer vehicle (a track
+    // started from a box the image's side cut short). A nearer box the detector no longer confirms may be a vehicle
+    // that left the view, its features spreading over what is behind it.
     if (p_.nearer_below > 0.0)
         for (size_t i = 0; i < boxes.size(); ++i)
             for (size_t j = 0; j < boxes.size() && !gone[i]; ++j) {
                 const cv::Rect2f &b = boxes[i], &u = boxes[j];
-                gone[i] = j != i && !gone[j] && vehicles_[j].confirmed &&
+                gone[i] = j != i && !gone[j] && vehicles_[j].confirmed && vehicles_[j].detection_misses == 0 &&
                           (u.y + u.height) - (b.y + b.height) > p_.nearer_below * b.height &&
                           (u & b).area() >= kHiddenInside * b.area();
             }
