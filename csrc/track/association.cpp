@@ -85,7 +85,8 @@ std::vector<int> associate(const cv::Mat_<float> &iou, const std::vector<float> 
     std::vector<int> out(size_t(iou.rows), -1);
     std::vector<int> all(size_t(iou.rows)), high, low;
     for (int i = 0; i < iou.rows; ++i) all[size_t(i)] = i;
-    for (int j = 0; j < iou.cols; ++j) (scores[size_t(j)] >= p.high_score ? high : low).push_back(j);
+    for (int j = 0; j < iou.cols; ++j)
+        if (scores[size_t(j)] >= p.low_score) (scores[size_t(j)] >= p.high_score ? high : low).push_back(j);
     assign(iou, all, high, float(p.match_iou), out);
     std::vector<int> left;
     for (int i = 0; i < iou.rows; ++i)

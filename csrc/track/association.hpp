@@ -4,9 +4,9 @@
 // The tracker gives the IoU of every (track, detection) pair, each track's box predicted to this frame by its
 // motion model. Stage 1 assigns the confident detections (score >= high_score) to the tracks by the Hungarian
 // method, the total IoU the largest, pairs under match_iou not allowed. Stage 2 assigns the weak detections (score <
-// high_score) to the tracks stage 1 left, at IoU >= low_match_iou: a weak detection keeps a vehicle alive
-// (a partly hidden or blurred one scores low) but never starts one, so the tracker starts vehicles only from
-// the confident detections no track took.
+// high_score, and at least low_score) to the tracks stage 1 left, at IoU >= low_match_iou: a weak detection keeps a
+// vehicle alive (a partly hidden or blurred one scores low) but never starts one, so the tracker starts vehicles only
+// from the confident detections no track took.
 #pragma once
 
 #include "base/params.hpp"
@@ -21,6 +21,7 @@ struct AssociationParams {
     double match_iou = 0.3;      // IoU; a confident detection and a track overlapping less are not paired
     double high_score = 0.5;     // score; detections from here are matched first and may start a vehicle
     double low_match_iou = 0.5;  // IoU; a weak detection pairs with a track left over only from here
+    double low_score = 0.1;      // score; a detection under this pairs with nothing (ByteTrack's low threshold)
 
     void bind(ParamMap &m) {
         m.add("match_iou", match_iou, 0.0, 1.0,
@@ -31,6 +32,9 @@ struct AssociationParams {
               "one only keeps a vehicle the confident ones left alive (two-stage association, as ByteTrack)");
         m.add("low_match_iou", low_match_iou, 0.0, 1.0,
               "IoU of a weak detection with a vehicle's predicted box from which they may be paired");
+        m.add("low_score", low_score, 0.0, 1.0,
+              "detection score under which a detection pairs with no vehicle (ByteTrack's low threshold, 0.1): the "
+              "verifier's near-certain non-vehicles keep nothing alive");
     }
 };
 

@@ -55,6 +55,16 @@ TEST_CASE("two-stage association: confident first, a weak detection only keeps a
     CHECK(hw::associate(iou3, {0.2f}, p) == std::vector<int>{0});
 }
 
+TEST_CASE("association: a detection under low_score pairs with no track") {
+    hw::AssociationParams p;  // low_score 0.1, as ByteTrack's low threshold
+    // a 0.01-scored box over a vehicle (the verifier: no vehicle) keeps nothing alive, at any overlap
+    cv::Mat_<float> iou = (cv::Mat_<float>(1, 2) << 0.9, 0.6);
+    CHECK(hw::associate(iou, {0.01f, 0.2f}, p) == std::vector<int>{1});
+    CHECK(hw::associate(iou, {0.01f, 0.05f}, p) == std::vector<int>{-1});
+    p.low_score = 0.0;  // every detection may pair
+    CHECK(hw::associate(iou, {0.01f, 0.05f}, p) == std::vector<int>{0});
+}
+
 TEST_CASE("take_best_unused: in the tracks' order, each takes the unused detection it overlaps most") {
     std::vector<bool> used(3, false);
     // the first track overlaps detection 1 most and takes it, though the second overlaps it more
