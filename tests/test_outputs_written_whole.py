@@ -44,6 +44,19 @@ def previous(folder: Path, *names: str) -> None:
         (folder / name).write_text(f"the previous {name}\n")
 
 
+def refused_on_a_full_disk_then_written(capsys, folder: Path, full_disk, suffix: str, *args: str) -> None:
+    """`headway ARGS` while files ending in `suffix` cannot be written whole: exit 1 naming the full disk, and
+    `folder` as it was; then with room: exit 0."""
+    before = snapshot(folder)
+    full_disk(suffix)
+    rc, err = run(capsys, *args)
+    assert rc == 1 and "No space left on device" in err, err
+    assert snapshot(folder) == before
+    full_disk(None)
+    rc, err = run(capsys, *args)
+    assert rc == 0, err
+
+
 @pytest.fixture
 def full_disk(monkeypatch):
     """`fill(suffix)`: from then on a text written to a file whose name ends in `suffix` stops half-way
@@ -96,14 +109,7 @@ def test_detect_out(capsys, tmp_path, full_disk):
         cv2.imwrite(images[-1], np.full((120, 160), 100, np.uint8))
     out = tmp_path / "detections.json"
     previous(tmp_path, "detections.json")
-    before = snapshot(tmp_path)
-    full_disk(".json")
-    rc, err = run(capsys, "detect", *images, "--out", str(out))
-    assert rc == 1 and "No space left on device" in err, err
-    assert snapshot(tmp_path) == before
-    full_disk(None)
-    rc, err = run(capsys, "detect", *images, "--out", str(out))
-    assert rc == 0, err
+    refused_on_a_full_disk_then_written(capsys, tmp_path, full_disk, ".json", "detect", *images, "--out", str(out))
     assert [e["file_name"] for e in json.loads(out.read_text())] == ["0.png", "1.png"]
 
 
@@ -127,14 +133,7 @@ def test_calibrate_out(capsys, tmp_path, full_disk):
     views = chessboards(tmp_path)
     out = tmp_path / "camera.yaml"
     previous(tmp_path, "camera.yaml")
-    before = snapshot(tmp_path)
-    full_disk(".yaml")
-    rc, err = run(capsys, "calibrate", *views, "--out", str(out))
-    assert rc == 1 and "No space left on device" in err, err
-    assert snapshot(tmp_path) == before
-    full_disk(None)
-    rc, err = run(capsys, "calibrate", *views, "--out", str(out))
-    assert rc == 0, err
+    refused_on_a_full_disk_then_written(capsys, tmp_path, full_disk, ".yaml", "calibrate", *views, "--out", str(out))
     assert yaml.safe_load(out.read_text())["camera"]["width"] == 640
 
 
@@ -208,15 +207,9 @@ def test_eval_out_folder(capsys, tmp_path, full_disk):
     data, out = tmp_path / "data", tmp_path / "report"
     data.mkdir()
     previous(out, "report.json", "report.md", "examples/old.jpg")
-    before = snapshot(tmp_path)
-    args = ("eval", "--parts", "synthetic", "--scenarios", str(scenario), "--data", str(data), "--out", str(out))
-    full_disk(".md")   # report.json is written first: it must not be renamed into place without report.md
-    rc, err = run(capsys, *args)
-    assert rc == 1 and "No space left on device" in err, err
-    assert snapshot(tmp_path) == before
-    full_disk(None)
-    rc, err = run(capsys, *args)
-    assert rc == 0, err
+    # report.json is written first: it must not be renamed into place without report.md
+    refused_on_a_full_disk_then_written(capsys, tmp_path, full_disk, ".md", "eval", "--parts", "synthetic",
+                                        "--scenarios", str(scenario), "--data", str(data), "--out", str(out))
     assert "synthetic" in json.loads((out / "report.json").read_text())
     assert "Synthetic suite" in (out / "report.md").read_text()
     assert sorted(p.name for p in out.iterdir()) == ["examples", "report.json", "report.md"]
