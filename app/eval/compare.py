@@ -54,8 +54,8 @@ def markdown(reports: list[dict], folders: Optional[list[str]] = None) -> str:
     dash = "-"
 
     if any(r.get("synthetic") for r in reports):
-        out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5; a track more than half "
-                "on a vehicle not scored counts neither way)", ""]
+        out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5 of the boxes' parts in "
+                "the image; a track more than half on a vehicle not scored counts neither way)", ""]
         rows = []
         for label, key, nd in (("precision", "precision", 3), ("recall", "recall", 3), ("MOTA", "mota", 3),
                                ("IDF1", "idf1", 3), ("id switches", "id_switches", None),

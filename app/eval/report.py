@@ -33,8 +33,8 @@ def markdown(report: dict) -> str:
     syn = report.get("synthetic")
     if syn:
         o = syn["overall"]
-        out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5; a track more than half "
-                "on a vehicle not scored counts neither way)", "",
+        out += ["### Synthetic suite (vehicles within 60 m, at least half visible; IoU >= 0.5 of the boxes' parts in "
+                "the image; a track more than half on a vehicle not scored counts neither way)", "",
                 "| scenario | precision | recall | MOTA | IDF1 | id switches | fragments |",
                 "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
         for name, m in syn["per_scenario"].items():

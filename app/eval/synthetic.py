@@ -35,7 +35,7 @@ def evaluate_scenario(name: str, preset: str, config_path: Optional[str] = None,
         for f in render(sc):
             pipe.set_ego_motion(f.ego_speed_mps, 0.0)
             r = pipe.process(f.image, f.t_s)
-            score.update(f.index, f.truth, [t for t in r.tracks if t.confirmed])
+            score.update(f.index, f.truth, [t for t in r.tracks if t.confirmed], (r.width, r.height))
             if on_frame:
                 on_frame(f, r)
     return {"scenario": name, "tp": score.tp, "fp": score.fp, "fn": score.fn, "acc": score.acc,

@@ -7,6 +7,10 @@ a boxes-only truth counts every box). Other vehicles are "don't care": a confirm
 true vehicle and lies more than half inside a don't-care vehicle's box is neither a hit nor a false
 positive (the KITTI tracking benchmark's rule for its DontCare regions: a car 100 m ahead, boxed a few
 pixels too wide by a detector whose smallest window is larger than the car, is still that car).
+
+The truth boxes are the vehicles' parts in the image (a vehicle entering or leaving the view is boxed where it is
+seen, as KITTI boxes a truncated car); a track's box is scored the same way, cut to the image when its size is
+given: a track that carries a vehicle's whole width past the image's side is not thereby a false positive.
 """
 from __future__ import annotations
 
@@ -20,6 +24,15 @@ from app.eval.matching import inside_matrix, iou_matrix, match
 
 def _box(v: dict) -> list[float]:
     return v.get("box_clipped") or v["box"]
+
+
+def in_image(box, image_size: Optional[tuple[int, int]]) -> list[float]:
+    """`box` (left, top, right, bottom) cut to an image of `image_size` (width, height); as it is when None."""
+    if image_size is None:
+        return list(box)
+    w, h = image_size
+    return [min(max(float(box[0]), 0.0), w), min(max(float(box[1]), 0.0), h),
+            min(max(float(box[2]), 0.0), w), min(max(float(box[3]), 0.0), h)]
 
 
 class TrackScorer:
@@ -36,21 +49,23 @@ class TrackScorer:
         return (v.get("longitudinal_m", 0.0) <= self.max_range_m
                 and v.get("visible_fraction", 1.0) >= self.min_visible)
 
-    def update(self, frame: int, truth_all: list[dict], tracks: list) -> None:
+    def update(self, frame: int, truth_all: list[dict], tracks: list,
+               image_size: Optional[tuple[int, int]] = None) -> None:
         """One frame: `truth_all` the true vehicles ({"id", "box" or "box_clipped", ...}), `tracks` the
-        confirmed tracks (objects with .id, .box, .range_m)."""
+        confirmed tracks (objects with .id, .box, .range_m), `image_size` the frame's (width, height)."""
         truth = [v for v in truth_all if self.is_truth(v)]
         dont_care = [v for v in truth_all if not self.is_truth(v)]
+        boxes = [in_image(t.box, image_size) for t in tracks]
         # drop tracks that sit on a don't-care vehicle and on no real one
         if dont_care and tracks:
-            dc = inside_matrix([t.box for t in tracks], [_box(v) for v in dont_care])
-            gt = iou_matrix([t.box for t in tracks], [_box(v) for v in truth])
-            tracks = [t for i, t in enumerate(tracks)
-                      if not (dc[i].max(initial=0) > 0.5 and gt[i].max(initial=0) < 0.5)]
+            dc = inside_matrix(boxes, [_box(v) for v in dont_care])
+            gt = iou_matrix(boxes, [_box(v) for v in truth])
+            keep = [i for i in range(len(tracks)) if not (dc[i].max(initial=0) > 0.5 and gt[i].max(initial=0) < 0.5)]
+            tracks, boxes = [tracks[i] for i in keep], [boxes[i] for i in keep]
         for v in truth_all:
             if v.get("visible_fraction", 1.0) >= 0.5 and v["id"] not in self.first_half_visible:
                 self.first_half_visible[v["id"]] = frame
-        pairs = match([_box(v) for v in truth], [t.box for t in tracks])
+        pairs = match([_box(v) for v in truth], boxes)
         self.tp += len(pairs)
         self.fn += len(truth) - len(pairs)
         self.fp += len(tracks) - len(pairs)
@@ -60,7 +75,7 @@ class TrackScorer:
             if rng is not None and "longitudinal_m" in truth[i]:
                 true = truth[i]["longitudinal_m"]
                 self.range_errors.append((true, (rng - true) / true))
-        dist = 1.0 - iou_matrix([_box(v) for v in truth], [t.box for t in tracks])
+        dist = 1.0 - iou_matrix([_box(v) for v in truth], boxes)
         dist[dist > 0.5] = np.nan
         self.acc.update([v["id"] for v in truth], [t.id for t in tracks], dist)
 

@@ -113,12 +113,12 @@ def _replay_into(drive: Drive, folder: Path) -> tuple[dict, Optional[dict], Opti
             return
         confirmed = [t for t in r.tracks if t.confirmed]
         if truth is not None:     # a scenario's own truth
-            scorer.update(r.frame, truth, confirmed)
+            scorer.update(r.frame, truth, confirmed, (r.width, r.height))
             truth_ttc.append((r.t_s, true_ttc(truth)))
         else:
             index = round(r.t_s * drive.fps)
             if index in boxes:    # frames without truth are not scored
-                scorer.update(index, boxes[index], confirmed)
+                scorer.update(index, boxes[index], confirmed, (r.width, r.height))
 
     s = replay(drive.source, config_path=str(cfg_path), fps=drive.fps, tracks_path=str(folder / "tracks.jsonl"),
                can_in=drive.can_in, can_out=str(folder / "can.log"), on_result=on_result, progress=False)
