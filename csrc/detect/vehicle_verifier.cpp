@@ -58,7 +58,7 @@ HogVerifier::HogVerifier(const std::string &path) {
 
 std::vector<float> HogVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                              const std::vector<int> &neighbors, double horizon_row,
-                                             double cam_height_m) const {
+                                             double cam_height_m, const cv::Mat *) const {
     std::vector<float> p(boxes.size());
     for (size_t i = 0; i < boxes.size(); ++i)
         p[i] = probability(gray, boxes[i], neighbors[i], horizon_row, cam_height_m);

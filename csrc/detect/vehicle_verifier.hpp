@@ -33,18 +33,23 @@ class VehicleVerifier {
 public:
     virtual ~VehicleVerifier() = default;
     // Probability that each box (px, clipped to the image), a group of neighbors[i] raw cascade windows,
-    // holds a vehicle; the camera's horizon row (px) and height (m) give the implied vehicle height.
+    // holds a vehicle; the camera's horizon row (px) and height (m) give the implied vehicle height. `integral`:
+    // gray's integral image (cv::integral, CV_32S) for a verifier that uses_integral(), made once by a caller that
+    // judges the same image several times; null: the verifier makes it where it needs it.
     virtual std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                              const std::vector<int> &neighbors, double horizon_row,
-                                             double cam_height_m) const = 0;
+                                             double cam_height_m, const cv::Mat *integral = nullptr) const = 0;
     // probabilities(), and for a verifier with a box output (a CNN trained with one) each box moved onto the
     // vehicle as that output says; a verifier without one leaves the boxes as they are.
     virtual std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes,
-                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m) const {
-        return probabilities(gray, boxes, neighbors, horizon_row, cam_height_m);
+                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
+                                     const cv::Mat *integral = nullptr) const {
+        return probabilities(gray, boxes, neighbors, horizon_row, cam_height_m, integral);
     }
     // true when judge() moves boxes (a box output)
     virtual bool has_box_output() const { return false; }
+    // true when its crops are averaged from the image's integral (the `integral` argument above)
+    virtual bool uses_integral() const { return false; }
     // the threads its network may share the crops among (base/worker_pool.hpp; not owned, null: the calling thread
     // alone); verifiers without one ignore it
     virtual void set_pool(WorkerPool *) {}
@@ -61,8 +66,8 @@ class HogVerifier : public VehicleVerifier {
 public:
     explicit HogVerifier(const std::string &path);  // throws std::invalid_argument naming the file
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
-                                     const std::vector<int> &neighbors, double horizon_row,
-                                     double cam_height_m) const override;
+                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
+                                     const cv::Mat *integral = nullptr) const override;
     float probability(const cv::Mat &gray, const cv::Rect2f &box, int neighbors, double horizon_row,
                       double cam_height_m) const;
 

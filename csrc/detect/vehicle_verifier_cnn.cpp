@@ -51,7 +51,7 @@ CnnVerifier::CnnVerifier(const std::string &path, bool mirrored, double mirror_m
             margin_ = m.at<float>(0);
         }
         cv::Mat offsets;
-        const auto p = run(probe, {cv::Rect2f(10.f, 10.f, 60.f, 40.f)}, {3}, 0.0, 1.5, &offsets);
+        const auto p = run(probe, {cv::Rect2f(10.f, 10.f, 60.f, 40.f)}, {3}, 0.0, 1.5, &offsets, nullptr);
         if (p.size() != 1 || !(p[0] >= 0.f && p[0] <= 1.f)) throw std::runtime_error("no probability");
     } catch (const std::exception &e) {
         throw std::invalid_argument("cascade.verifier: '" + path + "' is not a verifier network (" + form + "): " +
@@ -140,12 +140,15 @@ cv::Mat CnnVerifier::crop(const cv::Mat &gray, const cv::Rect2f &box, double mar
 }
 
 void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
-                        const std::vector<int> &which, const cv::Mat *plain, double horizon_row, double cam_height_m,
-                        float *p, cv::Mat *offsets, cv::Mat *crops_out) const {
+                        const std::vector<int> &which, const cv::Mat *plain, const cv::Mat *integral,
+                        double horizon_row, double cam_height_m, float *p, cv::Mat *offsets, cv::Mat *crops_out) const {
     const int n = int(which.size());
     const int sz[4] = {n, 1, kCropH, kCropW};
-    cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F), ii;
-    if (!plain) cv::integral(gray, ii, CV_32S);  // once for all the crops of the batch (area_cells)
+    cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F), made;
+    if (!plain && !integral) {  // once for all the crops of the batch (area_cells)
+        cv::integral(gray, made, CV_32S);
+        integral = &made;
+    }
     const auto cut = [&](int k0, int k1) {  // each crop on its own: the same values on any thread
         for (int k = k0; k < k1; ++k) {
             const size_t i = size_t(which[size_t(k)]);
@@ -153,7 +156,7 @@ void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxe
             if (plain)  // the crop is centred on the box, so its mirror image is the mirrored image's crop
                 cv::flip(cv::Mat(kCropH, kCropW, CV_32F, const_cast<float *>(plain->ptr<float>(int(i)))), c, 1);
             else
-                crop(gray, boxes[i], margin_, &ii).copyTo(c);
+                crop(gray, boxes[i], margin_, integral).copyTo(c);
             extra.at<float>(k, 0) = float(std::log1p(double(neighbors[i])));
             extra.at<float>(k, 1) = implied_vehicle_height(boxes[i], horizon_row, cam_height_m);
         }
@@ -232,14 +235,15 @@ double CnnVerifier::own_disagreement() const {
 
 std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                      const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
-                                     cv::Mat *offsets) const {
+                                     cv::Mat *offsets, const cv::Mat *integral) const {
     const int n = int(boxes.size());
     if (n == 0) return {};
     std::vector<int> all(static_cast<size_t>(n));
     for (int i = 0; i < n; ++i) all[size_t(i)] = i;
     std::vector<float> p(static_cast<size_t>(n));
     cv::Mat d, crops;
-    batch(gray, boxes, neighbors, all, nullptr, horizon_row, cam_height_m, p.data(), &d, mirrored_ ? &crops : nullptr);
+    batch(gray, boxes, neighbors, all, nullptr, integral, horizon_row, cam_height_m, p.data(), &d,
+          mirrored_ ? &crops : nullptr);
     if (mirrored_) {  // the mirror images of the boxes the plain look gives at least mirror_min_p
         std::vector<int> which;
         for (int i = 0; i < n; ++i)
@@ -248,7 +252,7 @@ std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::R
             std::vector<float> pm(which.size());
             cv::Mat dm;
             // the plain crops flipped (not cut again: the same values, half the cropping)
-            batch(gray, boxes, neighbors, which, &crops, horizon_row, cam_height_m, pm.data(), &dm, nullptr);
+            batch(gray, boxes, neighbors, which, &crops, nullptr, horizon_row, cam_height_m, pm.data(), &dm, nullptr);
             for (size_t k = 0; k < which.size(); ++k) {
                 const int i = which[k];
                 p[size_t(i)] = 0.5f * (p[size_t(i)] + pm[k]);
@@ -268,14 +272,15 @@ std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::R
 
 std::vector<float> CnnVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                               const std::vector<int> &neighbors, double horizon_row,
-                                              double cam_height_m) const {
-    return run(gray, boxes, neighbors, horizon_row, cam_height_m, nullptr);
+                                              double cam_height_m, const cv::Mat *integral) const {
+    return run(gray, boxes, neighbors, horizon_row, cam_height_m, nullptr, integral);
 }
 
 std::vector<float> CnnVerifier::judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes,
-                                      const std::vector<int> &neighbors, double horizon_row, double cam_height_m) const {
+                                      const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
+                                      const cv::Mat *integral) const {
     cv::Mat d;
-    std::vector<float> p = run(gray, boxes, neighbors, horizon_row, cam_height_m, &d);
+    std::vector<float> p = run(gray, boxes, neighbors, horizon_row, cam_height_m, &d, integral);
     for (int i = 0; i < d.rows; ++i) {  // l' = l + d0 w, t' = t + d1 h, r' = r + d2 w, b' = b + d3 h
         cv::Rect2f &b = boxes[size_t(i)];
         const float *o = d.ptr<float>(i);

@@ -45,12 +45,13 @@ public:
     // `dnn`: cv::dnn runs the network (the reference) even where the own forward pass (verifier_net.hpp) could
     explicit CnnVerifier(const std::string &path, bool mirrored = false, double mirror_min_p = 0.0, bool dnn = false);
     std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
-                                     const std::vector<int> &neighbors, double horizon_row,
-                                     double cam_height_m) const override;
+                                     const std::vector<int> &neighbors, double horizon_row, double cam_height_m,
+                                     const cv::Mat *integral = nullptr) const override;
     void set_pool(WorkerPool *pool) override;
     std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
-                             double horizon_row, double cam_height_m) const override;
+                             double horizon_row, double cam_height_m, const cv::Mat *integral = nullptr) const override;
     bool has_box_output() const override { return has_box_; }
+    bool uses_integral() const override { return true; }
     // The standardised crop of one box (kCropH x kCropW, float) widened by `margin` each side, as the network takes it;
     // with the image's integral (CV_32S) a crop inside the image and larger than kCropW x kCropH is averaged from it.
     static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box, double margin, const cv::Mat *integral = nullptr);
@@ -60,12 +61,13 @@ public:
 private:
     // p (n) and, with the box output, offsets (n x 4 float) for the boxes; `offsets` left empty without one
     std::vector<float> run(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
-                           double horizon_row, double cam_height_m, cv::Mat *offsets) const;
-    // one batch through the network: the crops of boxes[which[k]], or with `plain` (the crops of every box, as a
-    // batch without it gives in `crops_out`) those crops mirrored; p[k] and offsets (row k)
+                           double horizon_row, double cam_height_m, cv::Mat *offsets, const cv::Mat *integral) const;
+    // one batch through the network: the crops of boxes[which[k]] (cut with `integral`, gray's, made here when null),
+    // or with `plain` (the crops of every box, as a batch without it gives in `crops_out`) those crops mirrored; p[k]
+    // and offsets (row k)
     void batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
-               const std::vector<int> &which, const cv::Mat *plain, double horizon_row, double cam_height_m, float *p,
-               cv::Mat *offsets, cv::Mat *crops_out) const;
+               const std::vector<int> &which, const cv::Mat *plain, const cv::Mat *integral, double horizon_row,
+               double cam_height_m, float *p, cv::Mat *offsets, cv::Mat *crops_out) const;
 
     // the crops (n, 1, kCropH, kCropW) and extra features (n x 2) through the network: p[n], offsets (n x 4, allocated)
     // with the box output; by the own forward pass unless `dnn` or there is none

@@ -218,6 +218,53 @@ __attribute__((target("avx2,fma"))) void dense_avx2(const float *x, int nin, con
     }
 }
 
+// dense_avx2 for M crops at once (rows of x ldx apart, of h ldh apart; hidden a multiple of 16): each weight row is
+// read once for the M crops instead of once a crop (the layer's ~0.4 MB of weights outgrow the L1 and L2 caches'
+// share a crop gets). Every output is the same sum in the same order as dense_avx2's.
+template <int M>
+__attribute__((target("avx2,fma"))) void dense_rows_avx2(const float *x, size_t ldx, int nin, const float *w,
+                                                          const float *b, int hidden, float *h, size_t ldh) {
+    for (int j0 = 0; j0 < hidden; j0 += 16) {
+        __m256 acc[M][2];
+        for (int c = 0; c < M; ++c) {
+            acc[c][0] = _mm256_loadu_ps(b + j0);
+            acc[c][1] = _mm256_loadu_ps(b + j0 + 8);
+        }
+        for (int i = 0; i < nin; ++i) {
+            const float *wi = w + size_t(i) * hidden + j0;
+            const __m256 w0 = _mm256_loadu_ps(wi), w1 = _mm256_loadu_ps(wi + 8);
+            for (int c = 0; c < M; ++c) {
+                const __m256 a = _mm256_broadcast_ss(x + c * ldx + i);
+                acc[c][0] = _mm256_fmadd_ps(a, w0, acc[c][0]);
+                acc[c][1] = _mm256_fmadd_ps(a, w1, acc[c][1]);
+            }
+        }
+        for (int c = 0; c < M; ++c) {
+            _mm256_storeu_ps(h + c * ldh + j0, _mm256_max_ps(acc[c][0], _mm256_setzero_ps()));
+            _mm256_storeu_ps(h + c * ldh + j0 + 8, _mm256_max_ps(acc[c][1], _mm256_setzero_ps()));
+        }
+    }
+}
+
+constexpr int kDenseGroup = 4;  // crops through the dense layer together (dense_rows_avx2)
+
+// The dense layer for m <= kDenseGroup crops (rows of x ldx apart; h: m rows of `hidden`).
+void dense_group(const float *x, size_t ldx, int m, int nin, const float *w, const float *b, int hidden, float *h,
+                 bool avx2) {
+    if (avx2 && hidden % 16 == 0) {
+        switch (m) {
+        case 4: dense_rows_avx2<4>(x, ldx, nin, w, b, hidden, h, size_t(hidden)); return;
+        case 3: dense_rows_avx2<3>(x, ldx, nin, w, b, hidden, h, size_t(hidden)); return;
+        case 2: dense_rows_avx2<2>(x, ldx, nin, w, b, hidden, h, size_t(hidden)); return;
+        default: break;
+        }
+    }
+    for (int c = 0; c < m; ++c) {
+        if (avx2) dense_avx2(x + c * ldx, nin, w, b, hidden, h + size_t(c) * hidden);
+        else dense_plain(x + c * ldx, nin, w, b, hidden, h + size_t(c) * hidden);
+    }
+}
+
 } // namespace
 
 std::unique_ptr<VerifierNet> VerifierNet::from_dnn(cv::dnn::Net &net, int crop_h, int crop_w) {
@@ -326,7 +373,8 @@ void VerifierNet::run(const float *crops, const float *extra, int n, float *p, f
     }
     std::vector<float> V(vlen), M(mlen);
     const int nflat = hs[3] * ws[3] * conv_[2].cout;
-    std::vector<float> flat(static_cast<size_t>(nflat + 2)), h(static_cast<size_t>(hidden_));
+    const size_t ld = size_t(nflat) + 2;
+    std::vector<float> flats(kDenseGroup * ld), hidden(size_t(kDenseGroup) * hidden_);
     for (int i = 0; i < n; ++i) {
         const float *z = crops + size_t(i) * h_ * w_;
         for (int y = 0; y < h_; ++y) std::copy(z + size_t(y) * w_, z + size_t(y + 1) * w_, &maps[0][size_t(y + 1) * (w_ + 2) + 1]);
@@ -361,21 +409,27 @@ void VerifierNet::run(const float *crops, const float *extra, int n, float *p, f
             }
         }
         const int c3 = conv_[2].cout, ow = ws[3] + 2;
+        float *flat = &flats[size_t(i % kDenseGroup) * ld];
         for (int y = 0; y < hs[3]; ++y)
             std::copy(&maps[3][(size_t(y + 1) * ow + 1) * c3], &maps[3][(size_t(y + 1) * ow + 1 + ws[3]) * c3],
                       &flat[size_t(y) * ws[3] * c3]);
         flat[size_t(nflat)] = extra[2 * i];
         flat[size_t(nflat) + 1] = extra[2 * i + 1];
-        if (avx2) dense_avx2(flat.data(), nflat + 2, dense_w_.data(), dense_b_.data(), hidden_, h.data());
-        else dense_plain(flat.data(), nflat + 2, dense_w_.data(), dense_b_.data(), hidden_, h.data());
-        float logit = out_b_;
-        for (int j = 0; j < hidden_; ++j) logit += out_w_[size_t(j)] * h[size_t(j)];
-        p[i] = 1.f / (1.f + std::exp(-logit));
-        if (box && has_box()) {
-            for (int k = 0; k < 4; ++k) {
-                float d = box_b_[size_t(k)];
-                for (int j = 0; j < hidden_; ++j) d += box_w_[size_t(k) * hidden_ + j] * h[size_t(j)];
-                box[4 * i + k] = d;
+        if (i % kDenseGroup != kDenseGroup - 1 && i != n - 1) continue;
+        // the group's crops through the dense layer together, then each one's outputs
+        const int i0 = i - i % kDenseGroup, m = i - i0 + 1;
+        dense_group(flats.data(), ld, m, nflat + 2, dense_w_.data(), dense_b_.data(), hidden_, hidden.data(), avx2);
+        for (int c = 0; c < m; ++c) {
+            const float *h = &hidden[size_t(c) * hidden_];
+            float logit = out_b_;
+            for (int j = 0; j < hidden_; ++j) logit += out_w_[size_t(j)] * h[j];
+            p[i0 + c] = 1.f / (1.f + std::exp(-logit));
+            if (box && has_box()) {
+                for (int k = 0; k < 4; ++k) {
+                    float d = box_b_[size_t(k)];
+                    for (int j = 0; j < hidden_; ++j) d += box_w_[size_t(k) * hidden_ + j] * h[j];
+                    box[4 * (i0 + c) + k] = d;
+                }
             }
         }
     }

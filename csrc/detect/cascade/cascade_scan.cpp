@@ -335,8 +335,12 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         // The box output places every box: its probability, the suppression and the box reported go by where it
         // is placed.
         const bool refine = p_.refine_boxes && verifier->has_box_output();
-        std::vector<float> p = refine ? verifier->judge(gray, boxes, ns, cam.horizon_row(), hc)
-                                      : verifier->probabilities(gray, boxes, ns, cam.horizon_row(), hc);
+        // the image's integral once for every look (a CNN verifier's crops are averaged from it)
+        cv::Mat ii;
+        if (verifier->uses_integral()) cv::integral(gray, ii, CV_32S);
+        const cv::Mat *integral = ii.empty() ? nullptr : &ii;
+        std::vector<float> p = refine ? verifier->judge(gray, boxes, ns, cam.horizon_row(), hc, integral)
+                                      : verifier->probabilities(gray, boxes, ns, cam.horizon_row(), hc, integral);
         for (auto &b : boxes) b &= image;  // moved past a border: the part in the image (judged, if again, there)
         if (refine && p_.rejudge_refined) {
             // only what the first look believes: the second can only lower a probability (min of the two)
@@ -352,8 +356,9 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
                 // is left)
                 std::vector<cv::Rect2f> moved = second;
                 const std::vector<float> again =
-                    p_.rejudge_move > 0.0 ? verifier->judge(gray, moved, second_n, cam.horizon_row(), hc)
-                                          : verifier->probabilities(gray, second, second_n, cam.horizon_row(), hc);
+                    p_.rejudge_move > 0.0
+                        ? verifier->judge(gray, moved, second_n, cam.horizon_row(), hc, integral)
+                        : verifier->probabilities(gray, second, second_n, cam.horizon_row(), hc, integral);
                 const float s = float(p_.rejudge_move);
                 for (size_t j = 0; j < which.size(); ++j) {
                     p[which[j]] = std::min(p[which[j]], again[j]);

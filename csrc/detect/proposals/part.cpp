@@ -5,6 +5,8 @@
 #include "cues/road_prior.hpp"
 #include "detect/vehicle_verifier.hpp"
 
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <stdexcept>
 
@@ -84,11 +86,14 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
         for (const Hypothesis &h : cand) boxes.push_back(h.box);
         const std::vector<int> n(boxes.size(), p_.verifier_windows);
         const double yc = ctx.camera.horizon_row();  // the horizon the cascade hands the verifier
-        std::vector<float> p = p_.refine_boxes ? verifier_->judge(gray, boxes, n, yc, hc)
-                                               : verifier_->probabilities(gray, boxes, n, yc, hc);
+        cv::Mat ii;  // the image's integral once for every look (a CNN verifier's crops are averaged from it)
+        if (verifier_->uses_integral()) cv::integral(gray, ii, CV_32S);
+        const cv::Mat *integral = ii.empty() ? nullptr : &ii;
+        std::vector<float> p = p_.refine_boxes ? verifier_->judge(gray, boxes, n, yc, hc, integral)
+                                               : verifier_->probabilities(gray, boxes, n, yc, hc, integral);
         for (int look = 1; p_.refine_boxes && look < p_.refine_looks; ++look) {
             for (auto &b : boxes) b &= image;
-            const std::vector<float> again = verifier_->judge(gray, boxes, n, yc, hc);
+            const std::vector<float> again = verifier_->judge(gray, boxes, n, yc, hc, integral);
             for (size_t k = 0; k < p.size(); ++k) p[k] = std::min(p[k], again[k]);
         }
         std::vector<Hypothesis> judged;
