@@ -142,19 +142,21 @@ struct Raw {
 std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const LaneModel &lanes,
                                                       const CameraParams &cam, int slice,
                                                       int slices, StageTimes *times) const {
+    return judge(gray, cam, groups(gray, lanes, cam, slice, slices, times), times);
+}
+
+std::vector<CascadeDetection> CascadeDetector::groups(const cv::Mat &gray, const LaneModel &lanes,
+                                                      const CameraParams &cam, int slice, int slices,
+                                                      StageTimes *times) const {
     CV_Assert(slices >= 1 && slice >= 0 && slice < slices);
     Stopwatch whole;
-    double verifier_ms = 0.0;
-    struct Report {  // on every way out: the call's time, split into the verifier's and the rest
+    struct Report {  // on every way out: the call's time
         StageTimes *times;
         const Stopwatch &whole;
-        const double &verifier_ms;
         ~Report() {
-            if (!times) return;
-            times->add("cascade", float(whole.ms() - verifier_ms));
-            times->add("verifier", float(verifier_ms));
+            if (times) times->add("cascade", float(whole.ms()));
         }
-    } report{times, whole, verifier_ms};
+    } report{times, whole};
     CV_Assert(gray.type() == CV_8UC1);
     const RoadPrior prior = make_road_prior(gray.size(), lanes, cam, p_.road);
     std::vector<Raw> raw;
@@ -320,6 +322,25 @@ std::vector<CascadeDetection> CascadeDetector::detect(const cv::Mat &gray, const
         out.push_back(d);
         if (p_.max_groups > 0 && int(out.size()) >= p_.max_groups) break;  // the seeds come strongest first
     }
+    return out;
+}
+
+std::vector<CascadeDetection> CascadeDetector::judge(const cv::Mat &gray, const CameraParams &cam,
+                                                     std::vector<CascadeDetection> out, StageTimes *times) const {
+    Stopwatch whole;
+    double verifier_ms = 0.0;
+    struct Report {  // on every way out: the call's time, split into the verifier's and the rest
+        StageTimes *times;
+        const Stopwatch &whole;
+        const double &verifier_ms;
+        ~Report() {
+            if (!times) return;
+            times->add("cascade", float(whole.ms() - verifier_ms));
+            times->add("verifier", float(verifier_ms));
+        }
+    } report{times, whole, verifier_ms};
+    const double hc = cam.height_m;
+    const cv::Rect2f image(0.f, 0.f, float(gray.cols), float(gray.rows));
     const VehicleVerifier *verifier = verifier_.get();
     if (verifier) {  // every group of the frame at once (the CNN verifier runs them as one batch)
         Stopwatch sv;

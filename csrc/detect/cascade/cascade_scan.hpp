@@ -179,6 +179,13 @@ public:
                                          StageTimes *times = nullptr) const;
 
 private:
+    // detect()'s two halves: the scan and grouping of the windows (stage "cascade"), then the verifier's looks at the
+    // groups ("verifier") and the suppression ("cascade")
+    std::vector<CascadeDetection> groups(const cv::Mat &gray, const LaneModel &lanes, const CameraParams &cam,
+                                         int slice, int slices, StageTimes *times) const;
+    std::vector<CascadeDetection> judge(const cv::Mat &gray, const CameraParams &cam, std::vector<CascadeDetection> out,
+                                        StageTimes *times) const;
+
     CascadeParams p_;
     std::unique_ptr<HaarCascade> haar_;          // the scan, unless opencv_scan
     std::vector<std::unique_ptr<HaarCascade>> helpers_;  // one more per thread (their scratch is their own)
