@@ -47,7 +47,7 @@ def test_a_track_on_a_scored_vehicle_counts_even_over_a_dont_care_one():
 def test_a_track_is_scored_by_its_part_in_the_image():
     """A car leaving the view on the right, half of it in the 640 px wide image: its truth box is the part in the
     image, and a track carrying the car's whole width past the image's side is that car once cut to the image."""
-    leaving = {"id": 3, "box": [580.0, 200.0, 700.0, 300.0], "box_clipped": [580.0, 200.0, 640.0, 300.0],
+    leaving = {"id": 3, "box": [580.0, 200.0, 700.0, 300.0], "box_clipped": [580.0, 200.0, 639.0, 300.0],
                "longitudinal_m": 8.0, "visible_fraction": 0.5}
     whole = track(1, [582.0, 201.0, 698.0, 300.0])
     assert iou_matrix([whole.box], [leaving["box_clipped"]])[0, 0] < 0.5

@@ -20,6 +20,7 @@ import motmetrics as mm
 import numpy as np
 
 from app.eval.matching import inside_matrix, iou_matrix, match
+from app.sim.truth import clip_to_image
 
 
 def _box(v: dict) -> list[float]:
@@ -27,12 +28,16 @@ def _box(v: dict) -> list[float]:
 
 
 def in_image(box, image_size: Optional[tuple[int, int]]) -> list[float]:
-    """`box` (left, top, right, bottom) cut to an image of `image_size` (width, height); as it is when None."""
+    """`box` cut to an image of `image_size` (width, height) as the truth's boxes are (a box wholly outside: an empty
+    box at the image's edge, which overlaps nothing); as it is when None."""
     if image_size is None:
         return list(box)
     w, h = image_size
-    return [min(max(float(box[0]), 0.0), w), min(max(float(box[1]), 0.0), h),
-            min(max(float(box[2]), 0.0), w), min(max(float(box[3]), 0.0), h)]
+    cut = clip_to_image(box, w, h)
+    if cut is None:
+        x, y = min(max(float(box[0]), 0.0), w - 1.0), min(max(float(box[1]), 0.0), h - 1.0)
+        return [x, y, x, y]
+    return list(cut)
 
 
 class TrackScorer:

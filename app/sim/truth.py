@@ -49,7 +49,7 @@ def frame_truth(state: WorldState, camera: Camera, ego_front_m: float, lane_widt
         local = bend.apply(np.array([[v.x_m, 0.0, v.z_m] for v in ordered]).reshape(-1, 3))
     records = []
     for index, (vehicle, box, n_alone) in enumerate(zip(ordered, boxes, alone), start=1):
-        clipped = _clip(box, camera)
+        clipped = clip_to_image(box, camera.width, camera.height)
         if vehicle.z_m <= MIN_RANGE_M or clipped is None:
             continue
         full_area = (box[2] - box[0]) * (box[3] - box[1])
@@ -75,10 +75,11 @@ def frame_truth(state: WorldState, camera: Camera, ego_front_m: float, lane_widt
     return records[::-1]
 
 
-def _clip(box: tuple[float, float, float, float], camera: Camera) -> tuple[float, ...] | None:
-    """Box clipped to the pixel centres of the image; None when nothing of it is inside."""
-    l, t = max(box[0], 0.0), max(box[1], 0.0)
-    r, b = min(box[2], camera.width - 1.0), min(box[3], camera.height - 1.0)
+def clip_to_image(box, width: int, height: int) -> tuple[float, ...] | None:
+    """Box (left, top, right, bottom) clipped to the pixel centres of a width x height image; None when nothing of it
+    is inside. The truth's `box_clipped`, and what a track's box is scored as (app/eval/track_score.py)."""
+    l, t = max(float(box[0]), 0.0), max(float(box[1]), 0.0)
+    r, b = min(float(box[2]), width - 1.0), min(float(box[3]), height - 1.0)
     return (l, t, r, b) if r > l and b > t else None
 
 

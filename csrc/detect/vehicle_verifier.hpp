@@ -34,8 +34,8 @@ public:
     virtual ~VehicleVerifier() = default;
     // Probability that each box (px, clipped to the image), a group of neighbors[i] raw cascade windows,
     // holds a vehicle; the camera's horizon row (px) and height (m) give the implied vehicle height. `integral`:
-    // gray's integral image (cv::integral, CV_32S) for a verifier that uses_integral(), made once by a caller that
-    // judges the same image several times; null: the verifier makes it where it needs it.
+    // integral_of(gray), made once by a caller that judges the same image several times; null: the verifier makes
+    // it where it needs it.
     virtual std::vector<float> probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,
                                              const std::vector<int> &neighbors, double horizon_row,
                                              double cam_height_m, const cv::Mat *integral = nullptr) const = 0;
@@ -48,8 +48,9 @@ public:
     }
     // true when judge() moves boxes (a box output)
     virtual bool has_box_output() const { return false; }
-    // true when its crops are averaged from the image's integral (the `integral` argument above)
-    virtual bool uses_integral() const { return false; }
+    // What a verifier reads its crops from, for the `integral` argument above: the image's integral (CV_32S) for a
+    // verifier that averages its crops from it, else empty.
+    virtual cv::Mat integral_of(const cv::Mat &) const { return {}; }
     // the threads its network may share the crops among (base/worker_pool.hpp; not owned, null: the calling thread
     // alone); verifiers without one ignore it
     virtual void set_pool(WorkerPool *) {}

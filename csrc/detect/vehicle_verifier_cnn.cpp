@@ -146,7 +146,7 @@ void CnnVerifier::batch(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxe
     const int sz[4] = {n, 1, kCropH, kCropW};
     cv::Mat crops(4, sz, CV_32F), extra(n, 2, CV_32F), made;
     if (!plain && !integral) {  // once for all the crops of the batch (area_cells)
-        cv::integral(gray, made, CV_32S);
+        made = integral_of(gray);
         integral = &made;
     }
     const auto cut = [&](int k0, int k1) {  // each crop on its own: the same values on any thread
@@ -268,6 +268,12 @@ std::vector<float> CnnVerifier::run(const cv::Mat &gray, const std::vector<cv::R
     }
     if (has_box_ && offsets) *offsets = d;
     return p;
+}
+
+cv::Mat CnnVerifier::integral_of(const cv::Mat &gray) const {
+    cv::Mat ii;
+    cv::integral(gray, ii, CV_32S);
+    return ii;
 }
 
 std::vector<float> CnnVerifier::probabilities(const cv::Mat &gray, const std::vector<cv::Rect2f> &boxes,

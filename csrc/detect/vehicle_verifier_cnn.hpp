@@ -51,7 +51,7 @@ public:
     std::vector<float> judge(const cv::Mat &gray, std::vector<cv::Rect2f> &boxes, const std::vector<int> &neighbors,
                              double horizon_row, double cam_height_m, const cv::Mat *integral = nullptr) const override;
     bool has_box_output() const override { return has_box_; }
-    bool uses_integral() const override { return true; }
+    cv::Mat integral_of(const cv::Mat &gray) const override;
     // The standardised crop of one box (kCropH x kCropW, float) widened by `margin` each side, as the network takes it;
     // with the image's integral (CV_32S) a crop inside the image and larger than kCropW x kCropH is averaged from it.
     static cv::Mat crop(const cv::Mat &gray, const cv::Rect2f &box, double margin, const cv::Mat *integral = nullptr);

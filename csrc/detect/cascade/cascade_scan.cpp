@@ -357,8 +357,7 @@ std::vector<CascadeDetection> CascadeDetector::judge(const cv::Mat &gray, const 
         // is placed.
         const bool refine = p_.refine_boxes && verifier->has_box_output();
         // the image's integral once for every look (a CNN verifier's crops are averaged from it)
-        cv::Mat ii;
-        if (verifier->uses_integral()) cv::integral(gray, ii, CV_32S);
+        const cv::Mat ii = verifier->integral_of(gray);
         const cv::Mat *integral = ii.empty() ? nullptr : &ii;
         std::vector<float> p = refine ? verifier->judge(gray, boxes, ns, cam.horizon_row(), hc, integral)
                                       : verifier->probabilities(gray, boxes, ns, cam.horizon_row(), hc, integral);

@@ -5,8 +5,6 @@
 #include "cues/road_prior.hpp"
 #include "detect/vehicle_verifier.hpp"
 
-#include <opencv2/imgproc.hpp>
-
 #include <algorithm>
 #include <stdexcept>
 
@@ -86,8 +84,7 @@ bool ProposalsDetector::detect(const RoadContext &ctx, std::vector<Hypothesis> &
         for (const Hypothesis &h : cand) boxes.push_back(h.box);
         const std::vector<int> n(boxes.size(), p_.verifier_windows);
         const double yc = ctx.camera.horizon_row();  // the horizon the cascade hands the verifier
-        cv::Mat ii;  // the image's integral once for every look (a CNN verifier's crops are averaged from it)
-        if (verifier_->uses_integral()) cv::integral(gray, ii, CV_32S);
+        const cv::Mat ii = verifier_->integral_of(gray);  // once for every look
         const cv::Mat *integral = ii.empty() ? nullptr : &ii;
         std::vector<float> p = p_.refine_boxes ? verifier_->judge(gray, boxes, n, yc, hc, integral)
                                                : verifier_->probabilities(gray, boxes, n, yc, hc, integral);
